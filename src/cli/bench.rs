@@ -1,0 +1,28 @@
+//! `thinfilm bench …`: each benchmark lives in its own file.
+
+use clap::Subcommand;
+
+#[path = "bench_estimate.rs"]
+mod bench_estimate;
+#[path = "bench_optics.rs"]
+mod bench_optics;
+#[path = "bench_render.rs"]
+mod bench_render;
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Single-film evaluations per second (4 wavelengths), f32 and f64.
+    Optics(bench_optics::Args),
+    /// Reproduce the seed's Table 1 on simulated samples; accuracy against time per method.
+    Estimate(bench_estimate::Args),
+    /// Our renders vs Mitsuba 3 references: error against time.
+    Render(bench_render::Args),
+}
+
+pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
+    match cmd {
+        BenchCommand::Optics(a) => bench_optics::run(a),
+        BenchCommand::Estimate(a) => bench_estimate::run(a),
+        BenchCommand::Render(a) => bench_render::run(a),
+    }
+}

@@ -1,0 +1,8 @@
+//! `thinfilm compare` (not yet built).
+
+#[derive(clap::Args, Debug)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`compare` is not built yet")
+}

@@ -1,0 +1,8 @@
+//! `thinfilm estimate` (not yet built).
+
+#[derive(clap::Args, Debug)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`estimate` is not built yet")
+}

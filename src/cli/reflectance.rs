@@ -1,0 +1,8 @@
+//! `thinfilm reflectance` (not yet built).
+
+#[derive(clap::Args, Debug)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`reflectance` is not built yet")
+}

@@ -12,6 +12,7 @@
 pub mod color;
 pub mod rgb2spec;
 pub mod sampled;
+pub mod table_csv;
 
 pub use color::*;
 pub use rgb2spec::{

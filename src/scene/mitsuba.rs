@@ -743,7 +743,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 }
                 _ => return Err(self.unknown_element(c, &Self::describe(node))),
             };
-            if list.iter().any(|p: &Prop| p.name == name) {
+            // Unnamed nested objects ("<bsdf>") are checked by the plugin that takes them.
+            if !name.starts_with('<') && list.iter().any(|p: &Prop| p.name == name) {
                 return Err(self.err(c, format!("parameter '{name}' given twice")));
             }
             list.push(Prop {

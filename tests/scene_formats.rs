@@ -65,12 +65,19 @@ fn gltf_iridescence_camera_and_transforms() {
     let path = write_gltf(dir.path(), true);
     let s = load(&path, &[]).unwrap();
     assert_eq!(s.shapes.len(), 1);
-    let Geometry::Mesh(m) = &s.shapes[0].geometry else { panic!() };
+    let Geometry::Mesh(m) = &s.shapes[0].geometry else {
+        panic!()
+    };
     assert_eq!(m.positions[1], Vec3::new(1.0, 0.0, -2.0));
     assert_eq!(m.uvs[2], Vec2::new(0.0, 1.0));
     assert!(m.normals.iter().all(|n| (*n - Vec3::Z).length() < 1e-6));
     match &s.bsdfs[s.shapes[0].bsdf] {
-        BsdfDesc::ThinFilm { film_ior, thickness_nm: TextureDesc::Bitmap(b), substrate_ior, alpha } => {
+        BsdfDesc::ThinFilm {
+            film_ior,
+            thickness_nm: TextureDesc::Bitmap(b),
+            substrate_ior,
+            alpha,
+        } => {
             assert_eq!(*film_ior, Ior::real(1.8));
             assert_eq!(*substrate_ior, Ior::real(1.45f32 as f64));
             assert!((alpha - 0.09).abs() < 1e-6);
@@ -86,7 +93,9 @@ fn gltf_iridescence_camera_and_transforms() {
     // Camera at z = 3 looking down −Z (Mitsuba frame: local +Z maps to world −Z).
     let fwd = s.camera.to_world.transform_vector3(Vec3::Z);
     assert!((fwd + Vec3::Z).length() < 1e-6, "{fwd}");
-    assert!((s.camera.to_world.transform_point3(Vec3::ZERO) - Vec3::new(0.0, 0.0, 3.0)).length() < 1e-6);
+    assert!(
+        (s.camera.to_world.transform_point3(Vec3::ZERO) - Vec3::new(0.0, 0.0, 3.0)).length() < 1e-6
+    );
     assert_eq!(s.camera.fov_axis, FovAxis::Y);
     assert!((s.camera.fov_deg - 0.5f32.to_degrees()).abs() < 1e-4);
     assert_eq!((s.film.width, s.film.height), (1024, 512));
@@ -99,7 +108,11 @@ fn gltf_metal_and_default_camera() {
     let path = write_gltf(dir.path(), false);
     let s = load(&path, &[]).unwrap();
     match &s.bsdfs[0] {
-        BsdfDesc::Conductor { eta, alpha_u, alpha_v } => {
+        BsdfDesc::Conductor {
+            eta,
+            alpha_u,
+            alpha_v,
+        } => {
             // F0 of n = 1 + ik equals the base colour luminance 0.5.
             let c = eta.at(550.0);
             let f0 = ((c.re - 1.0).powi(2) + c.im.powi(2)) / ((c.re + 1.0).powi(2) + c.im.powi(2));
@@ -131,9 +144,12 @@ fn obj_quad_with_uvs() {
     assert!(m.normals.is_empty());
     // Standalone: default camera sees the mesh, default material and environment.
     let s = load(&p, &[]).unwrap();
-    let Geometry::Mesh(m) = &s.shapes[0].geometry else { panic!() };
+    let Geometry::Mesh(m) = &s.shapes[0].geometry else {
+        panic!()
+    };
     assert!(m.normals.iter().all(|n| (*n - Vec3::Z).length() < 1e-6));
-    let to_center = (Vec3::new(0.5, 0.5, 0.0) - s.camera.to_world.transform_point3(Vec3::ZERO)).normalize();
+    let to_center =
+        (Vec3::new(0.5, 0.5, 0.0) - s.camera.to_world.transform_point3(Vec3::ZERO)).normalize();
     assert!(to_center.dot(s.camera.to_world.transform_vector3(Vec3::Z).normalize()) > 0.999);
     assert!(matches!(s.bsdfs[0], BsdfDesc::Diffuse { .. }));
     assert_eq!(s.emitters.len(), 1);
@@ -176,7 +192,10 @@ fn ply_ascii_and_binary() {
          element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n3 0 1 2\n",
     )
     .unwrap();
-    let e = format!("{:#}", meshio::load_ply(&dir.path().join("bad.ply")).unwrap_err());
+    let e = format!(
+        "{:#}",
+        meshio::load_ply(&dir.path().join("bad.ply")).unwrap_err()
+    );
     assert!(e.contains("face 0 refers to vertex 1"), "{e}");
     let bytes = std::fs::read(&b).unwrap();
     std::fs::write(dir.path().join("trunc.ply"), &bytes[..bytes.len() - 7]).unwrap();
@@ -185,8 +204,14 @@ fn ply_ascii_and_binary() {
 
 #[test]
 fn dispatch_errors() {
-    let e = format!("{:#}", load(Path::new("/nonexistent/scene.xml"), &[]).unwrap_err());
-    assert!(e.contains("/nonexistent/scene.xml") && e.contains("does not exist"), "{e}");
+    let e = format!(
+        "{:#}",
+        load(Path::new("/nonexistent/scene.xml"), &[]).unwrap_err()
+    );
+    assert!(
+        e.contains("/nonexistent/scene.xml") && e.contains("does not exist"),
+        "{e}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("x.blend");
     std::fs::write(&p, "").unwrap();

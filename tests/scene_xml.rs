@@ -57,25 +57,40 @@ fn defaults_and_overrides() {
     assert_eq!(s.camera.fov_deg, 30.0);
     assert_eq!(s.camera.fov_axis, FovAxis::Y);
     assert_eq!((s.camera.near_clip, s.camera.far_clip), (0.5, 50.0));
-    let o = [("spp".to_string(), "128".to_string()), ("res".into(), "100".into())];
+    let o = [
+        ("spp".to_string(), "128".to_string()),
+        ("res".into(), "100".into()),
+    ];
     let s = load_str(&wrap(SENSOR), Path::new("."), &o, "t.xml").unwrap();
     assert_eq!(s.spp, 128);
     assert_eq!(s.film.width, 100);
     // An override for a parameter the file neither declares nor uses is a typo.
     let o = [("sp".to_string(), "1".to_string())];
-    let e = format!("{:#}", load_str(&wrap(SENSOR), Path::new("."), &o, "t.xml").unwrap_err());
-    assert!(e.contains("no parameter $sp") && e.contains("res, spp"), "{e}");
+    let e = format!(
+        "{:#}",
+        load_str(&wrap(SENSOR), Path::new("."), &o, "t.xml").unwrap_err()
+    );
+    assert!(
+        e.contains("no parameter $sp") && e.contains("res, spp"),
+        "{e}"
+    );
     // A parameter used without <default> can be provided by an override.
     let body = r#"<integrator type="path"><integer name="max_depth" value="$d"/></integrator>"#;
     let o = [("d".to_string(), "3".to_string())];
     let s = load_str(&wrap(body), Path::new("."), &o, "t.xml").unwrap();
     assert_eq!(s.integrator.max_depth, 3);
     let e = err(body);
-    assert!(e.contains("undefined parameter $d") && e.contains("test.xml:2:"), "{e}");
+    assert!(
+        e.contains("undefined parameter $d") && e.contains("test.xml:2:"),
+        "{e}"
+    );
     // Mitsuba defaults when no sensor parts are given.
     let s = load(r#"<sensor type="perspective"/>"#).unwrap();
     assert_eq!((s.film.width, s.film.height, s.spp), (768, 576, 4));
-    assert_eq!(s.film.filter, ReconstructionFilter::Gaussian { stddev: 0.5 });
+    assert_eq!(
+        s.film.filter,
+        ReconstructionFilter::Gaussian { stddev: 0.5 }
+    );
     assert_eq!(s.camera.fov_deg, 45.0);
 }
 
@@ -91,12 +106,18 @@ fn integrator_settings() {
     .unwrap();
     assert_eq!(
         s.integrator,
-        IntegratorSettings { max_depth: 8, rr_depth: 3, hide_emitters: true }
+        IntegratorSettings {
+            max_depth: 8,
+            rr_depth: 3,
+            hide_emitters: true
+        }
     );
     assert_eq!(load("").unwrap().integrator, IntegratorSettings::default());
     assert!(err(r#"<integrator type="volpath"/>"#).contains("volpath"));
-    assert!(err(r#"<integrator type="path"><float name="max_depth" value="8"/></integrator>"#)
-        .contains("must be an <integer>"));
+    assert!(
+        err(r#"<integrator type="path"><float name="max_depth" value="8"/></integrator>"#)
+            .contains("must be an <integer>")
+    );
 }
 
 #[test]
@@ -199,7 +220,10 @@ fn refs_and_ids() {
         BsdfDesc::Diffuse { reflectance: TextureDesc::Value(SpectrumDesc::Constant(v)) } if *v == 0.5
     ));
     let e = err(r#"<shape type="cube"><ref id="nope"/></shape>"#);
-    assert!(e.contains("unknown id \"nope\"") && e.contains("test.xml:2:"), "{e}");
+    assert!(
+        e.contains("unknown id \"nope\"") && e.contains("test.xml:2:"),
+        "{e}"
+    );
     let e = err(r#"<bsdf type="diffuse" id="a"/><bsdf type="diffuse" id="a"/>"#);
     assert!(e.contains("duplicate id"), "{e}");
 }
@@ -209,12 +233,20 @@ fn errors_name_element_plugin_and_position() {
     let e = err("<foo/>");
     assert!(e.contains("test.xml:2:1") && e.contains("<foo>"), "{e}");
     let e = err(r#"<shape type="cube" colour="red"/>"#);
-    assert!(e.contains("test.xml:2:20") && e.contains("unknown attribute 'colour'"), "{e}");
+    assert!(
+        e.contains("test.xml:2:20") && e.contains("unknown attribute 'colour'"),
+        "{e}"
+    );
     let e = err("<bsdf type=\"velvet\"/>");
-    assert!(e.contains("test.xml:2:1") && e.contains("\"velvet\"") && e.contains("diffuse"), "{e}");
+    assert!(
+        e.contains("test.xml:2:1") && e.contains("\"velvet\"") && e.contains("diffuse"),
+        "{e}"
+    );
     let e = err("<shape type=\"cube\">\n  <bsdf type=\"diffuse\">\n    <float name=\"bogus\" value=\"1\"/>\n  </bsdf>\n</shape>");
     assert!(
-        e.contains("test.xml:4:5") && e.contains("'bogus'") && e.contains("bsdf plugin \"diffuse\""),
+        e.contains("test.xml:4:5")
+            && e.contains("'bogus'")
+            && e.contains("bsdf plugin \"diffuse\""),
         "{e}"
     );
     let e = err(r#"<shape type="obj"><string name="filename" value="missing.obj"/></shape>"#);
@@ -222,24 +254,54 @@ fn errors_name_element_plugin_and_position() {
     let e = err(r#"<emitter type="envmap"><string name="filename" value="sky.exr"/></emitter>"#);
     assert!(e.contains("sky.exr") && e.contains("not found"), "{e}");
     assert!(err(r#"<float name="x" value="abc"/>"#).contains("'abc' is not a number"));
-    assert!(err(r#"<shape type="cube"><float name="x" value="abc"/></shape>"#).contains("not a number"));
-    assert!(err(r#"<shape type="cube"><boolean name="flip_normals" value="maybe"/></shape>"#).contains("boolean"));
-    assert!(err(r#"<shape type="cube"><float name="flip_normals" value="1"/></shape>"#).contains("must be a <boolean>"));
-    let e = format!("{:#}", load_str("<scene version=\"3.0.0\"><shape></scene>", Path::new("."), &[], "bad.xml").unwrap_err());
+    assert!(
+        err(r#"<shape type="cube"><float name="x" value="abc"/></shape>"#).contains("not a number")
+    );
+    assert!(
+        err(r#"<shape type="cube"><boolean name="flip_normals" value="maybe"/></shape>"#)
+            .contains("boolean")
+    );
+    assert!(
+        err(r#"<shape type="cube"><float name="flip_normals" value="1"/></shape>"#)
+            .contains("must be a <boolean>")
+    );
+    let e = format!(
+        "{:#}",
+        load_str(
+            "<scene version=\"3.0.0\"><shape></scene>",
+            Path::new("."),
+            &[],
+            "bad.xml"
+        )
+        .unwrap_err()
+    );
     assert!(e.contains("bad.xml") && e.contains("malformed XML"), "{e}");
-    let e = format!("{:#}", load_str("<scene/>", Path::new("."), &[], "v.xml").unwrap_err());
+    let e = format!(
+        "{:#}",
+        load_str("<scene/>", Path::new("."), &[], "v.xml").unwrap_err()
+    );
     assert!(e.contains("version"), "{e}");
-    let e = format!("{:#}", load_str("<scene version=\"0.6.0\"/>", Path::new("."), &[], "v.xml").unwrap_err());
+    let e = format!(
+        "{:#}",
+        load_str("<scene version=\"0.6.0\"/>", Path::new("."), &[], "v.xml").unwrap_err()
+    );
     assert!(e.contains("Mitsuba 2/3"), "{e}");
     assert!(err(r#"<medium type="homogeneous"/>"#).contains("<medium>"));
-    assert!(err(r#"<shape type="cube"><bsdf type="diffuse"/><bsdf type="diffuse"/></shape>"#).contains("one BSDF"));
+    assert!(
+        err(r#"<shape type="cube"><bsdf type="diffuse"/><bsdf type="diffuse"/></shape>"#)
+            .contains("one BSDF")
+    );
     assert!(err(r#"<emitter type="area"/>"#).contains("nested inside a <shape>"));
 }
 
 #[test]
 fn values_and_spectra() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("r.spd"), "# test\n400 0.1\n500, 0.5\n600 0.9\n").unwrap();
+    std::fs::write(
+        dir.path().join("r.spd"),
+        "# test\n400 0.1\n500, 0.5\n600 0.9\n",
+    )
+    .unwrap();
     std::fs::write(dir.path().join("bad.spd"), "400 0.1\n300 x\n").unwrap();
     let s = load_in(
         dir.path(),
@@ -251,14 +313,24 @@ fn values_and_spectra() {
     )
     .unwrap();
     let refl = |i: usize| match &s.bsdfs[s.shapes[i].bsdf] {
-        BsdfDesc::Diffuse { reflectance: TextureDesc::Value(v) } => v.clone(),
+        BsdfDesc::Diffuse {
+            reflectance: TextureDesc::Value(v),
+        } => v.clone(),
         b => panic!("{b:?}"),
     };
-    assert_eq!(refl(0), SpectrumDesc::Tabulated(vec![(400.0, 0.1), (500.0, 0.5), (600.0, 0.9)]));
-    assert_eq!(refl(1), SpectrumDesc::Tabulated(vec![(400.0, 0.2), (700.0, 0.8)]));
+    assert_eq!(
+        refl(0),
+        SpectrumDesc::Tabulated(vec![(400.0, 0.1), (500.0, 0.5), (600.0, 0.9)])
+    );
+    assert_eq!(
+        refl(1),
+        SpectrumDesc::Tabulated(vec![(400.0, 0.2), (700.0, 0.8)])
+    );
     assert_eq!(refl(2), SpectrumDesc::Constant(0.3));
     assert_eq!(refl(3), SpectrumDesc::Rgb([0.2, 0.4, 0.6]));
-    assert!(matches!(&s.emitters[0], EmitterDesc::Constant { radiance: SpectrumDesc::D65 { scale } } if *scale == 2.0));
+    assert!(
+        matches!(&s.emitters[0], EmitterDesc::Constant { radiance: SpectrumDesc::D65 { scale } } if *scale == 2.0)
+    );
     let e = format!("{:#}", load_in(dir.path(), r#"<shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" filename="bad.spd"/></bsdf></shape>"#).unwrap_err());
     assert!(e.contains("bad.spd:2"), "{e}");
     assert!(err(r#"<shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" value="500:0.2, 400:0.8"/></bsdf></shape>"#).contains("increase"));
@@ -268,8 +340,12 @@ fn values_and_spectra() {
            <emitter type="point"><transform name="to_world"><translate value="4 5 6"/></transform></emitter>"#,
     )
     .unwrap();
-    assert!(matches!(&s.emitters[0], EmitterDesc::Point { position, intensity: SpectrumDesc::Rgb(c) } if *position == Vec3::new(1.0, 2.0, 3.0) && *c == [5.0; 3]));
-    assert!(matches!(&s.emitters[1], EmitterDesc::Point { position, .. } if *position == Vec3::new(4.0, 5.0, 6.0)));
+    assert!(
+        matches!(&s.emitters[0], EmitterDesc::Point { position, intensity: SpectrumDesc::Rgb(c) } if *position == Vec3::new(1.0, 2.0, 3.0) && *c == [5.0; 3])
+    );
+    assert!(
+        matches!(&s.emitters[1], EmitterDesc::Point { position, .. } if *position == Vec3::new(4.0, 5.0, 6.0))
+    );
 }
 
 fn bsdf(body: &str) -> BsdfDesc {
@@ -279,8 +355,14 @@ fn bsdf(body: &str) -> BsdfDesc {
 
 #[test]
 fn bsdfs() {
-    match bsdf(r#"<bsdf type="dielectric"><string name="int_ior" value="water"/><float name="ext_ior" value="1.0"/></bsdf>"#) {
-        BsdfDesc::Dielectric { int_ior, ext_ior, alpha } => {
+    match bsdf(
+        r#"<bsdf type="dielectric"><string name="int_ior" value="water"/><float name="ext_ior" value="1.0"/></bsdf>"#,
+    ) {
+        BsdfDesc::Dielectric {
+            int_ior,
+            ext_ior,
+            alpha,
+        } => {
             assert_eq!(int_ior, Ior::real(1.333));
             assert_eq!(ext_ior, Ior::real(1.0));
             assert_eq!(alpha, 0.0);
@@ -288,50 +370,99 @@ fn bsdfs() {
         b => panic!("{b:?}"),
     }
     // Mitsuba defaults: bk7 inside, air outside.
-    match bsdf(r#"<bsdf type="roughdielectric"><string name="distribution" value="ggx"/><float name="alpha" value="0.2"/></bsdf>"#) {
-        BsdfDesc::Dielectric { int_ior, ext_ior, alpha } => {
-            assert_eq!((int_ior, ext_ior, alpha), (Ior::real(1.5046), Ior::real(1.000277), 0.2));
+    match bsdf(
+        r#"<bsdf type="roughdielectric"><string name="distribution" value="ggx"/><float name="alpha" value="0.2"/></bsdf>"#,
+    ) {
+        BsdfDesc::Dielectric {
+            int_ior,
+            ext_ior,
+            alpha,
+        } => {
+            assert_eq!(
+                (int_ior, ext_ior, alpha),
+                (Ior::real(1.5046), Ior::real(1.000277), 0.2)
+            );
         }
         b => panic!("{b:?}"),
     }
-    match bsdf(r#"<bsdf type="roughconductor"><string name="distribution" value="ggx"/><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/><float name="eta" value="0.2"/><float name="k" value="3"/></bsdf>"#) {
-        BsdfDesc::Conductor { eta, alpha_u, alpha_v } => {
+    match bsdf(
+        r#"<bsdf type="roughconductor"><string name="distribution" value="ggx"/><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/><float name="eta" value="0.2"/><float name="k" value="3"/></bsdf>"#,
+    ) {
+        BsdfDesc::Conductor {
+            eta,
+            alpha_u,
+            alpha_v,
+        } => {
             assert_eq!(eta, Ior::Constant(Complex64::new(0.2, 3.0)));
             assert_eq!((alpha_u, alpha_v), (0.1, 0.3));
         }
         b => panic!("{b:?}"),
     }
     // "none" = perfect mirror.
-    assert!(matches!(bsdf(r#"<bsdf type="conductor"/>"#), BsdfDesc::Conductor { eta: Ior::Constant(c), alpha_u, .. } if c == Complex64::new(0.0, 1.0) && alpha_u == 0.0));
-    let e = err(r#"<shape type="cube"><bsdf type="conductor"><string name="material" value="Unobtainium"/></bsdf></shape>"#);
+    assert!(
+        matches!(bsdf(r#"<bsdf type="conductor"/>"#), BsdfDesc::Conductor { eta: Ior::Constant(c), alpha_u, .. } if c == Complex64::new(0.0, 1.0) && alpha_u == 0.0)
+    );
+    let e = err(
+        r#"<shape type="cube"><bsdf type="conductor"><string name="material" value="Unobtainium"/></bsdf></shape>"#,
+    );
     assert!(e.contains("Unobtainium") && e.contains("available"), "{e}");
-    match bsdf(r#"<bsdf type="roughplastic"><string name="distribution" value="ggx"/><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/><float name="int_ior" value="1.6"/><boolean name="nonlinear" value="true"/></bsdf>"#) {
-        BsdfDesc::Plastic { diffuse_reflectance: TextureDesc::Value(SpectrumDesc::Rgb(c)), int_ior, ext_ior, alpha, nonlinear } => {
+    match bsdf(
+        r#"<bsdf type="roughplastic"><string name="distribution" value="ggx"/><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/><float name="int_ior" value="1.6"/><boolean name="nonlinear" value="true"/></bsdf>"#,
+    ) {
+        BsdfDesc::Plastic {
+            diffuse_reflectance: TextureDesc::Value(SpectrumDesc::Rgb(c)),
+            int_ior,
+            ext_ior,
+            alpha,
+            nonlinear,
+        } => {
             assert_eq!(c, [0.1, 0.2, 0.3]);
-            assert_eq!((int_ior, ext_ior, alpha, nonlinear), (1.6, 1.000277, 0.1, true));
+            assert_eq!(
+                (int_ior, ext_ior, alpha, nonlinear),
+                (1.6, 1.000277, 0.1, true)
+            );
         }
         b => panic!("{b:?}"),
     }
-    assert!(matches!(bsdf(r#"<bsdf type="plastic"/>"#), BsdfDesc::Plastic { int_ior, alpha, .. } if int_ior == 1.49 && alpha == 0.0));
+    assert!(
+        matches!(bsdf(r#"<bsdf type="plastic"/>"#), BsdfDesc::Plastic { int_ior, alpha, .. } if int_ior == 1.49 && alpha == 0.0)
+    );
     match bsdf(r#"<bsdf type="twosided"><bsdf type="thinfilm"/></bsdf>"#) {
         BsdfDesc::TwoSided(inner) => match *inner {
-            BsdfDesc::ThinFilm { film_ior, thickness_nm: TextureDesc::Value(SpectrumDesc::Constant(d)), substrate_ior, alpha } => {
+            BsdfDesc::ThinFilm {
+                film_ior,
+                thickness_nm: TextureDesc::Value(SpectrumDesc::Constant(d)),
+                substrate_ior,
+                alpha,
+            } => {
                 // design.md defaults
-                assert_eq!((film_ior, d, substrate_ior, alpha), (Ior::real(1.37), 400.0, Ior::real(1.64), 0.0));
+                assert_eq!(
+                    (film_ior, d, substrate_ior, alpha),
+                    (Ior::real(1.37), 400.0, Ior::real(1.64), 0.0)
+                );
             }
             b => panic!("{b:?}"),
         },
         b => panic!("{b:?}"),
     }
-    match bsdf(r#"<bsdf type="thinfilm"><float name="film_ior" value="2.37"/><float name="thickness" value="500"/><float name="substrate_ior" value="0.2"/><float name="substrate_k" value="3.1"/><float name="alpha" value="0.15"/></bsdf>"#) {
-        BsdfDesc::ThinFilm { film_ior, thickness_nm: TextureDesc::Value(SpectrumDesc::Constant(d)), substrate_ior, alpha } => {
+    match bsdf(
+        r#"<bsdf type="thinfilm"><float name="film_ior" value="2.37"/><float name="thickness" value="500"/><float name="substrate_ior" value="0.2"/><float name="substrate_k" value="3.1"/><float name="alpha" value="0.15"/></bsdf>"#,
+    ) {
+        BsdfDesc::ThinFilm {
+            film_ior,
+            thickness_nm: TextureDesc::Value(SpectrumDesc::Constant(d)),
+            substrate_ior,
+            alpha,
+        } => {
             assert_eq!((film_ior, d, alpha), (Ior::real(2.37), 500.0, 0.15));
             assert_eq!(substrate_ior, Ior::Constant(Complex64::new(0.2, 3.1)));
         }
         b => panic!("{b:?}"),
     }
     // Film index by name from Mitsuba's table when the dispersion library lacks it.
-    assert!(matches!(bsdf(r#"<bsdf type="thinfilm"><string name="film_ior" value="water"/></bsdf>"#), BsdfDesc::ThinFilm { film_ior, .. } if film_ior == Ior::real(1.333)));
+    assert!(
+        matches!(bsdf(r#"<bsdf type="thinfilm"><string name="film_ior" value="water"/></bsdf>"#), BsdfDesc::ThinFilm { film_ior, .. } if film_ior == Ior::real(1.333))
+    );
     assert!(err(r#"<shape type="cube"><bsdf type="thinfilm"><float name="thickness" value="-5"/></bsdf></shape>"#).contains("≥ 0"));
     assert!(err(r#"<shape type="cube"><bsdf type="thinfilm"><string name="film_ior" value="cheese"/></bsdf></shape>"#).contains("cheese"));
     assert!(err(r#"<shape type="cube"><bsdf type="dielectric"><string name="int_ior" value="cheese"/></bsdf></shape>"#).contains("unknown IOR name"));
@@ -342,9 +473,12 @@ fn bsdfs() {
 fn textures() {
     let dir = tempfile::tempdir().unwrap();
     let th: Vec<f32> = (0..8).map(|i| 100.0 * i as f32).collect();
-    thinfilm::image_io::write_exr_channels(&dir.path().join("th.exr"), 4, 2, &[("thickness", &th)]).unwrap();
+    thinfilm::image_io::write_exr_channels(&dir.path().join("th.exr"), 4, 2, &[("thickness", &th)])
+        .unwrap();
     // An 8-bit PNG: sRGB 188 ≈ linear 0.5.
-    image::RgbImage::from_pixel(2, 2, image::Rgb([188, 0, 255])).save(dir.path().join("c.png")).unwrap();
+    image::RgbImage::from_pixel(2, 2, image::Rgb([188, 0, 255]))
+        .save(dir.path().join("c.png"))
+        .unwrap();
     let s = load_in(
         dir.path(),
         r#"<shape type="rectangle"><bsdf type="thinfilm">
@@ -364,7 +498,10 @@ fn textures() {
     )
     .unwrap();
     match &s.bsdfs[s.shapes[0].bsdf] {
-        BsdfDesc::ThinFilm { thickness_nm: TextureDesc::Bitmap(b), .. } => {
+        BsdfDesc::ThinFilm {
+            thickness_nm: TextureDesc::Bitmap(b),
+            ..
+        } => {
             assert_eq!((b.width, b.height, b.channels), (4, 2, 1));
             assert_eq!(b.filter, TextureFilter::Nearest);
             assert_eq!(b.wrap, WrapMode::Clamp);
@@ -376,11 +513,16 @@ fn textures() {
         b => panic!("{b:?}"),
     }
     let texel = |i: usize| match &s.bsdfs[s.shapes[i].bsdf] {
-        BsdfDesc::Diffuse { reflectance: TextureDesc::Bitmap(b) } => b.eval(Vec2::new(0.5, 0.5)),
+        BsdfDesc::Diffuse {
+            reflectance: TextureDesc::Bitmap(b),
+        } => b.eval(Vec2::new(0.5, 0.5)),
         b => panic!("{b:?}"),
     };
     let lin = texel(1);
-    assert!((lin[0] - 0.5029).abs() < 1e-3 && lin[1] == 0.0 && (lin[2] - 1.0).abs() < 1e-6, "{lin:?}");
+    assert!(
+        (lin[0] - 0.5029).abs() < 1e-3 && lin[1] == 0.0 && (lin[2] - 1.0).abs() < 1e-6,
+        "{lin:?}"
+    );
     let raw = texel(2);
     assert!((raw[0] - 188.0 / 255.0).abs() < 1e-4, "{raw:?}");
     assert!(err(r#"<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="c.png"/><string name="wrap_mode" value="tile"/></texture></bsdf></shape>"#).contains("not found"));
@@ -392,7 +534,11 @@ fn textures() {
 #[test]
 fn shapes_and_emitters() {
     let dir = tempfile::tempdir().unwrap();
-    let env = thinfilm::image_io::RgbImage { width: 4, height: 2, pixels: vec![[1.0, 0.5, 0.25]; 8] };
+    let env = thinfilm::image_io::RgbImage {
+        width: 4,
+        height: 2,
+        pixels: vec![[1.0, 0.5, 0.25]; 8],
+    };
     thinfilm::image_io::write_exr_rgb(&dir.path().join("env.exr"), &env).unwrap();
     let s = load_in(
         dir.path(),
@@ -416,7 +562,12 @@ fn shapes_and_emitters() {
     )
     .unwrap();
     match &s.emitters[0] {
-        EmitterDesc::Envmap { image, scale, to_world, path } => {
+        EmitterDesc::Envmap {
+            image,
+            scale,
+            to_world,
+            path,
+        } => {
             assert_eq!((image.width, image.height, *scale), (4, 2, 2.0));
             assert_eq!(image.pixels[0], [1.0, 0.5, 0.25]);
             assert!(to_world.abs_diff_eq(Mat4::from_rotation_y(90f32.to_radians()), 1e-6));
@@ -425,7 +576,11 @@ fn shapes_and_emitters() {
         e => panic!("{e:?}"),
     }
     match &s.shapes[0].geometry {
-        Geometry::Sphere { center, radius, flip_normals } => {
+        Geometry::Sphere {
+            center,
+            radius,
+            flip_normals,
+        } => {
             assert!((*center - Vec3::new(2.0, 0.0, 1.0)).length() < 1e-6);
             assert!((*radius - 1.0).abs() < 1e-6);
             assert!(*flip_normals);
@@ -451,12 +606,17 @@ fn shapes_and_emitters() {
     match &s.shapes[3].geometry {
         Geometry::Mesh(m) => {
             let (lo, hi) = m.bounds().unwrap();
-            assert_eq!((lo, hi), (Vec3::new(-2.0, -1.0, -1.0), Vec3::new(2.0, 1.0, 1.0)));
+            assert_eq!(
+                (lo, hi),
+                (Vec3::new(-2.0, -1.0, -1.0), Vec3::new(2.0, 1.0, 1.0))
+            );
             assert_eq!(m.indices.len(), 12);
         }
         g => panic!("{g:?}"),
     }
-    let e = err(r#"<shape type="sphere"><transform name="to_world"><scale x="2"/></transform></shape>"#);
+    let e = err(
+        r#"<shape type="sphere"><transform name="to_world"><scale x="2"/></transform></shape>"#,
+    );
     assert!(e.contains("similarity"), "{e}");
     assert!(err(r#"<shape type="torus"/>"#).contains("\"torus\""));
     assert!(err(r#"<shape type="cube"><emitter type="constant"/></shape>"#).contains("area"));

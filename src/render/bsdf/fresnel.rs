@@ -51,14 +51,15 @@ pub fn fresnel_conductor(cos_theta_i: f32, eta: f32, k: f32) -> f32 {
     }
 }
 
-/// Hemispherically averaged Fresnel reflectance of a dielectric (Egan & Hilgeman 1979 fit,
-/// as in Mitsuba `fresnel_diffuse_reflectance`).
+/// Hemispherically averaged Fresnel reflectance of a dielectric with relative index `eta`
+/// (Mitsuba `fresnel_diffuse_reflectance`: Egan & Hilgeman 1973 fit for η < 1, d'Eon & Irving
+/// 2011 fit for η ≥ 1).
 pub fn fresnel_diffuse_reflectance(eta: f32) -> f32 {
     let inv = 1.0 / eta;
     if eta < 1.0 {
-        0.919317 + inv * (-3.4793 + inv * (6.75335 + inv * (-7.80989 + inv * (4.98554 - inv * 1.36881))))
+        -1.4399 * eta * eta + 0.7099 * eta + 0.6681 + 0.0636 * inv
     } else {
-        -9.23372 + eta * (22.2272 + eta * (-20.9292 + eta * (10.2291 + eta * (-2.54396 + eta * 0.254913))))
+        0.919317 + inv * (-3.4793 + inv * (6.75335 + inv * (-7.80989 + inv * (4.98554 - inv * 1.36881))))
     }
 }
 

@@ -121,18 +121,59 @@ fn generate(manifest: &Path, out_dir: &Path) -> Result<(), String> {
     )
     .unwrap();
 
+    // Σ D65·ȳ over the 1 nm grid: normalises reflectance XYZ (Y = 1 for a perfect reflector)
+    // and the RGB illuminant's D65.
+    let d65_y_sum: f64 = cmf.iter().zip(&d65).map(|(c, d)| c[2] * d[1]).sum();
+    writeln!(
+        out,
+        "/// Σ D65(λ)·ȳ(λ)·1 nm over 360..=830 nm, computed from the tables.\npub(crate) const D65_Y_SUM_1NM: f64 = {d65_y_sum:?};"
+    )
+    .unwrap();
+
     let dest = out_dir.join("cie_tables.rs");
     std::fs::write(&dest, out).map_err(|e| format!("{}: cannot write: {e}", dest.display()))
+}
+
+/// Check the embedded rgb2spec table ("SPEC", u32 res, res f32 z-nodes, 9·res³ f32) so a
+/// truncated or foreign file fails the build instead of the first render.
+fn check_coeff(path: &Path) -> Result<(), String> {
+    let bytes = std::fs::read(path).map_err(|e| {
+        format!(
+            "{}: cannot read: {e} (regenerate with: cargo run --release --manifest-path tools/rgb2spec/Cargo.toml -- spectra/srgb_rgb2spec_64.coeff)",
+            path.display()
+        )
+    })?;
+    if bytes.len() < 8 || &bytes[..4] != b"SPEC" {
+        return Err(format!("{}: missing \"SPEC\" header", path.display()));
+    }
+    let res = u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]) as usize;
+    if res != 64 {
+        return Err(format!("{}: resolution {res}, expected 64", path.display()));
+    }
+    let need = 8 + 4 * (res + 9 * res * res * res);
+    if bytes.len() < need {
+        return Err(format!(
+            "{}: {} bytes, a resolution-{res} table needs {need}",
+            path.display(),
+            bytes.len()
+        ));
+    }
+    Ok(())
 }
 
 fn main() {
     println!("cargo:rerun-if-changed=spectra/cie1931_2deg_cmf_1nm.csv");
     println!("cargo:rerun-if-changed=spectra/cie_d65_1nm.csv");
+    println!("cargo:rerun-if-changed=spectra/srgb_rgb2spec_64.coeff");
     println!("cargo:rerun-if-changed=build.rs");
     let manifest = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"));
     let out_dir = PathBuf::from(std::env::var("OUT_DIR").expect("OUT_DIR"));
     if let Err(msg) = generate(&manifest, &out_dir) {
         eprintln!("error: malformed colour table: {msg}");
+        std::process::exit(1);
+    }
+    if let Err(msg) = check_coeff(&manifest.join("spectra/srgb_rgb2spec_64.coeff")) {
+        eprintln!("error: bad RGB→spectrum table: {msg}");
         std::process::exit(1);
     }
 }

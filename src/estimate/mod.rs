@@ -767,7 +767,7 @@ fn joint_refine(
 fn index_scan(set: &CaptureSet, geom: &Geometry, pixels: &[usize], opts: &Options) -> Option<f64> {
     let px = Pixels::new(set);
     let (na, nb) = (set.angles.len(), set.bands());
-    let sample = spread(pixels, 48);
+    let sample = spread(pixels, 24);
     let data: Vec<(Vec<f32>, Vec<bool>)> = sample
         .iter()
         .map(|&p| {
@@ -778,11 +778,11 @@ fn index_scan(set: &CaptureSet, geom: &Geometry, pixels: &[usize], opts: &Option
         })
         .collect();
     let lo = opts.min_film_ior.max(geom.min_film_ior());
-    let steps = ((opts.max_film_ior - lo) / 0.02).ceil().max(0.0) as usize + 1;
+    let steps = ((opts.max_film_ior - lo) / 0.03).ceil().max(0.0) as usize + 1;
     (0..steps)
         .into_par_iter()
         .map(|i| {
-            let n = lo + 0.02 * i as f64;
+            let n = lo + 0.03 * i as f64;
             let m = geom.model(n);
             let s = DSolver::new(&m, geom, opts);
             let total: f64 = data.iter().map(|(y, mk)| s.search(y, mk).1).sum();

@@ -258,6 +258,26 @@ impl FilmModel {
             let cr = &self.cr[start..start + self.bands];
             let ci = &self.ci[start..start + self.bands];
             let w = &self.w[start..start + self.bands];
+            if step == 1 {
+                let it = y
+                    .iter()
+                    .zip(k)
+                    .zip(w)
+                    .zip(p)
+                    .zip(qr)
+                    .zip(qi)
+                    .zip(dd)
+                    .zip(cr)
+                    .zip(ci);
+                for ((((((((&yb, &k), &w), &p), &qr), &qi), &dd), &cr), &ci) in it {
+                    let (s, c) = fast_sin_cos(k * d);
+                    let num = p + 2.0 * (qr * c - qi * s);
+                    let den = dd + 2.0 * (cr * c - ci * s);
+                    let e = w * num / den - yb;
+                    sse += e * e;
+                }
+                return sse;
+            }
             let mut b = 0;
             while b < self.bands {
                 let (s, c) = fast_sin_cos(k[b] * d);
@@ -298,22 +318,51 @@ impl FilmModel {
             let ya = &y[a * self.bands..(a + 1) * self.bands];
             let start = self.range(a).start;
             let (mut sse, mut g, mut h) = (0.0f32, 0.0f32, 0.0f32);
-            for (b, &yb) in ya.iter().enumerate() {
-                let (mut acc, mut dacc) = (0.0f32, 0.0f32);
-                for j in start + b * t..start + (b + 1) * t {
-                    let (s, c) = fast_sin_cos(self.k[j] * d32);
-                    let num = self.p[j] + 2.0 * (self.qr[j] * c - self.qi[j] * s);
-                    let den = self.dd[j] + 2.0 * (self.cr[j] * c - self.ci[j] * s);
-                    let dnum = -2.0 * self.k[j] * (self.qr[j] * s + self.qi[j] * c);
-                    let dden = -2.0 * self.k[j] * (self.cr[j] * s + self.ci[j] * c);
+            if t == 1 {
+                // Hot path: flat zipped loop over bands (vectorises).
+                let end = start + self.bands;
+                let it = ya
+                    .iter()
+                    .zip(&self.k[start..end])
+                    .zip(&self.w[start..end])
+                    .zip(&self.p[start..end])
+                    .zip(&self.qr[start..end])
+                    .zip(&self.qi[start..end])
+                    .zip(&self.dd[start..end])
+                    .zip(&self.cr[start..end])
+                    .zip(&self.ci[start..end]);
+                for ((((((((&yb, &k), &w), &p), &qr), &qi), &dd), &cr), &ci) in it {
+                    let (s, c) = fast_sin_cos(k * d32);
+                    let num = p + 2.0 * (qr * c - qi * s);
+                    let den = dd + 2.0 * (cr * c - ci * s);
+                    let dnum = -2.0 * k * (qr * s + qi * c);
+                    let dden = -2.0 * k * (cr * s + ci * c);
                     let inv = 1.0 / den;
-                    acc += self.w[j] * num * inv;
-                    dacc += self.w[j] * (dnum * den - num * dden) * inv * inv;
+                    let r = w * num * inv;
+                    let dr = w * (dnum * den - num * dden) * inv * inv;
+                    let e = r - yb;
+                    sse += e * e;
+                    g += dr * e;
+                    h += dr * dr;
                 }
-                let e = acc - yb;
-                sse += e * e;
-                g += dacc * e;
-                h += dacc * dacc;
+            } else {
+                for (b, &yb) in ya.iter().enumerate() {
+                    let (mut acc, mut dacc) = (0.0f32, 0.0f32);
+                    for j in start + b * t..start + (b + 1) * t {
+                        let (s, c) = fast_sin_cos(self.k[j] * d32);
+                        let num = self.p[j] + 2.0 * (self.qr[j] * c - self.qi[j] * s);
+                        let den = self.dd[j] + 2.0 * (self.cr[j] * c - self.ci[j] * s);
+                        let dnum = -2.0 * self.k[j] * (self.qr[j] * s + self.qi[j] * c);
+                        let dden = -2.0 * self.k[j] * (self.cr[j] * s + self.ci[j] * c);
+                        let inv = 1.0 / den;
+                        acc += self.w[j] * num * inv;
+                        dacc += self.w[j] * (dnum * den - num * dden) * inv * inv;
+                    }
+                    let e = acc - yb;
+                    sse += e * e;
+                    g += dacc * e;
+                    h += dacc * dacc;
+                }
             }
             out.sse += sse as f64;
             out.grad += g as f64;

@@ -1,10 +1,21 @@
 //! Hyperspectral captures: ENVI cubes, capture sets (`capture.json`) and the capture
 //! simulator. Knows nothing of rays or fitting.
 //!
-//! CONTRACT (the estimator codes against these types; bodies filled by the capture work).
+//! CONTRACT (the estimator codes against these types).
+//!
+//! - [`envi`]: ENVI header + binary reader (memory-mapped) and writer;
+//! - `set`: `capture.json` (format `thinfilm-capture/1`) → [`CaptureSet`], ground truth;
+//! - [`simulate`]: a synthetic camera (Airy film, Gaussian band response, noise, raw counts).
 
 use crate::optics::Ior;
 use std::path::Path;
+
+pub mod envi;
+mod rng;
+mod set;
+pub mod simulate;
+
+pub use set::{ior_from_json, ior_to_json, CaptureFile, CAPTURE_FORMAT, GROUND_TRUTH_FORMAT};
 
 /// Polarisation state the camera observed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -12,7 +23,33 @@ use std::path::Path;
 pub enum Polarization {
     S,
     P,
+    #[serde(alias = "unpolarised")]
     Unpolarized,
+}
+
+impl std::str::FromStr for Polarization {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "s" => Ok(Polarization::S),
+            "p" => Ok(Polarization::P),
+            "unpolarized" | "unpolarised" | "u" => Ok(Polarization::Unpolarized),
+            other => Err(format!(
+                "unknown polarization '{other}' (expected s, p or unpolarized)"
+            )),
+        }
+    }
+}
+
+impl Polarization {
+    /// The reflectance this camera sees from a film response.
+    pub fn reflectance(self, r: &crate::optics::FilmResponse) -> f64 {
+        match self {
+            Polarization::S => r.r_s,
+            Polarization::P => r.r_p,
+            Polarization::Unpolarized => r.r(),
+        }
+    }
 }
 
 /// Reflectance cube at one incident angle, in memory as band-interleaved-by-pixel f32:
@@ -56,6 +93,19 @@ pub struct InvalidCounts {
     pub bad_reference: u64,
 }
 
+impl InvalidCounts {
+    pub fn total(&self) -> u64 {
+        self.non_finite + self.ignore_value + self.saturated + self.bad_reference
+    }
+
+    pub fn add(&mut self, o: &InvalidCounts) {
+        self.non_finite += o.non_finite;
+        self.ignore_value += o.ignore_value;
+        self.saturated += o.saturated;
+        self.bad_reference += o.bad_reference;
+    }
+}
+
 /// Ground truth written by `thinfilm simulate` in `DIR/ground_truth/`.
 #[derive(Debug, Clone)]
 pub struct GroundTruth {
@@ -68,14 +118,13 @@ pub struct GroundTruth {
 }
 
 /// Loads `dir/capture.json` and its cubes.
+/// `dir` may also be the path of the `capture.json` itself.
 pub fn load_capture_set(dir: &Path) -> anyhow::Result<CaptureSet> {
-    let _ = dir;
-    todo!("capture work")
+    set::load_capture_set(dir)
 }
 
 /// Loads `dir/ground_truth.json` + `dir/thickness.exr` (`dir` is the `ground_truth` folder
 /// or the capture folder that contains it).
 pub fn load_ground_truth(dir: &Path) -> anyhow::Result<GroundTruth> {
-    let _ = dir;
-    todo!("capture work")
+    set::load_ground_truth(dir)
 }

@@ -1,0 +1,477 @@
+//! `capture.json` (format `thinfilm-capture/1`, design.md §2) and the simulator's ground
+//! truth (`ground_truth/ground_truth.json` + `thickness.exr`).
+//!
+//! Reflectance per sample is the cube value, or with references
+//! R = (raw − dark) / (white − dark), where white and dark are averaged per band over
+//! their usable samples (any spatial size). Bad samples are masked to NaN and counted by
+//! cause in [`InvalidCounts`]; they are never an error.
+
+use super::envi::{self, EnviFile};
+use super::{AngleCapture, CaptureSet, GroundTruth, InvalidCounts, Polarization};
+use crate::optics::{Complex64, Ior};
+use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+pub const CAPTURE_FORMAT: &str = "thinfilm-capture/1";
+pub const GROUND_TRUTH_FORMAT: &str = "thinfilm-ground-truth/1";
+
+/// The JSON document, as written and read.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureFile {
+    pub format: String,
+    pub polarization: Polarization,
+    /// A number (or a numeric string); must be real.
+    #[serde(default = "default_ambient")]
+    pub ambient_ior: Value,
+    /// `{"ior": 1.64, "k": 0.0}`, `{"material": "PET"}`, or a bare number / `"n+ki"` / name.
+    pub substrate: Value,
+    pub angles: Vec<AngleEntry>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub description: Option<String>,
+}
+
+fn default_ambient() -> Value {
+    Value::from(1.0)
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AngleEntry {
+    pub incident_deg: f64,
+    pub cube: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark: Option<String>,
+}
+
+/// `{"ior": n, "k": k}` for a constant index, `{"material": name}` for a library material.
+pub fn ior_to_json(ior: &Ior) -> Value {
+    match ior {
+        Ior::Constant(c) => serde_json::json!({"ior": c.re, "k": c.im}),
+        Ior::Material(m) => serde_json::json!({"material": m.name}),
+    }
+}
+
+/// Parses an index given as `{"ior": n|"n+ki", "k": k}`, `{"material": name}`, a number,
+/// or a string (`"1.64"`, `"0.18+3.4i"`, `"Au"`). `what` names the field for errors.
+pub fn ior_from_json(v: &Value, what: &str) -> Result<Ior> {
+    let from_text = |s: &str| s.parse::<Ior>().map_err(|e| anyhow::anyhow!("{what}: {e}"));
+    match v {
+        Value::Number(n) => from_text(&n.to_string()),
+        Value::String(s) => from_text(s),
+        Value::Object(map) => {
+            if let Some(unknown) = map
+                .keys()
+                .find(|k| !matches!(k.as_str(), "ior" | "k" | "material"))
+            {
+                bail!(
+                    "{what}: unknown key '{unknown}' (expected \"ior\" and \"k\", or \"material\")"
+                );
+            }
+            match (map.get("ior"), map.get("material")) {
+                (Some(_), Some(_)) => {
+                    bail!("{what}: give either \"ior\" (and \"k\") or \"material\", not both")
+                }
+                (None, Some(Value::String(name))) => {
+                    if map.contains_key("k") {
+                        bail!("{what}: \"k\" cannot be combined with \"material\"");
+                    }
+                    match from_text(name)? {
+                        m @ Ior::Material(_) => Ok(m),
+                        _ => bail!("{what}.material: '{name}' is not a material name"),
+                    }
+                }
+                (None, Some(_)) => bail!("{what}.material must be a string"),
+                (Some(ior), None) => {
+                    let base = match ior {
+                        Value::Number(n) => from_text(&n.to_string())?,
+                        Value::String(s) => from_text(s)?,
+                        _ => bail!("{what}.ior must be a number or a string like \"0.18+3.4i\""),
+                    };
+                    let k = match map.get("k") {
+                        None | Some(Value::Null) => 0.0,
+                        Some(Value::Number(k)) => k.as_f64().unwrap_or(f64::NAN),
+                        Some(_) => bail!("{what}.k must be a number"),
+                    };
+                    if !(k.is_finite() && k >= 0.0) {
+                        bail!("{what}.k must be finite and ≥ 0, got {k}");
+                    }
+                    match base {
+                        Ior::Constant(c) if k > 0.0 && c.im > 0.0 => {
+                            bail!("{what}: extinction given twice (in \"ior\" and in \"k\")")
+                        }
+                        Ior::Constant(c) => Ok(Ior::Constant(Complex64::new(c.re, c.im + k))),
+                        Ior::Material(_) if map.contains_key("k") => {
+                            bail!("{what}: \"k\" cannot be combined with a material name")
+                        }
+                        m => Ok(m),
+                    }
+                }
+                (None, None) => {
+                    bail!("{what}: expected {{\"ior\": n, \"k\": k}} or {{\"material\": name}}")
+                }
+            }
+        }
+        _ => bail!("{what}: expected a number, a string or an object"),
+    }
+}
+
+fn resolve(dir: &Path, name: &str) -> PathBuf {
+    let p = Path::new(name);
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        dir.join(p)
+    }
+}
+
+/// Wavelength lists agree to 1e-3 nm (text round trips of µm values lose a little).
+fn same_wavelengths(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-3)
+}
+
+fn describe_wavelengths(w: &[f64]) -> String {
+    match (w.first(), w.last()) {
+        (Some(a), Some(b)) => format!("{} bands {a}–{b} nm", w.len()),
+        _ => "no bands".into(),
+    }
+}
+
+/// Opens a cube named in `capture.json`, with the JSON field in the error.
+fn open_named(json: &Path, dir: &Path, field: &str, name: &str) -> Result<EnviFile> {
+    let path = resolve(dir, name);
+    if !envi::header_path(&path).is_file() {
+        bail!(
+            "{}: {field}: cube '{}' not found",
+            json.display(),
+            path.display()
+        );
+    }
+    envi::open(&path).with_context(|| format!("{}: {field}", json.display()))
+}
+
+/// Per-band reference (mean of usable samples), checked against the cube's bands.
+fn reference_means(
+    json: &Path,
+    dir: &Path,
+    field: &str,
+    name: &str,
+    cube: &EnviFile,
+) -> Result<Vec<f64>> {
+    let file = open_named(json, dir, field, name)?;
+    if file.header.bands != cube.header.bands {
+        bail!(
+            "{}: {field}: {} has {} bands but {} has {}",
+            json.display(),
+            file.header.path.display(),
+            file.header.bands,
+            cube.header.path.display(),
+            cube.header.bands
+        );
+    }
+    if let (Some(a), Some(b)) = (&file.header.wavelengths_nm, &cube.header.wavelengths_nm) {
+        if !same_wavelengths(a, b) {
+            bail!(
+                "{}: {field}: wavelengths of {} ({}) differ from {} ({})",
+                json.display(),
+                file.header.path.display(),
+                describe_wavelengths(a),
+                cube.header.path.display(),
+                describe_wavelengths(b)
+            );
+        }
+    }
+    Ok(file.band_means().0)
+}
+
+/// Reflectance and masking for one angle's cube, in place on its BIP f32 decoding.
+fn reflectance(
+    file: &EnviFile,
+    white: Option<&[f64]>,
+    dark: Option<&[f64]>,
+) -> (Vec<f32>, Vec<bool>, InvalidCounts) {
+    let h = &file.header;
+    let (w, nb) = (h.samples, h.bands);
+    let mut data = file.to_bip_f32();
+    let ignore = h.ignore_value.map(|v| v as f32);
+    let sat = h.data_type.saturation_value().map(|v| v as f32);
+    // Per band: (offset, scale) with R = (raw − offset) · scale, or None if the band's
+    // reference is unusable (white − dark ≤ 0, or no usable reference sample).
+    let band_map: Vec<Option<(f64, f64)>> = (0..nb)
+        .map(|b| match white {
+            None => Some((0.0, 1.0)),
+            Some(white) => {
+                let d = dark.map_or(0.0, |d| d[b]);
+                let span = white[b] - d;
+                (span > 0.0 && span.is_finite()).then(|| (d, 1.0 / span))
+            }
+        })
+        .collect();
+    let mut valid = vec![true; w * h.lines];
+    let counts = data
+        .par_chunks_mut(w * nb)
+        .zip(valid.par_chunks_mut(w))
+        .map(|(row, valid_row)| {
+            let mut c = InvalidCounts::default();
+            for (px, ok) in row.chunks_mut(nb).zip(valid_row.iter_mut()) {
+                for (b, v) in px.iter_mut().enumerate() {
+                    let raw = *v;
+                    let cause = if !raw.is_finite() {
+                        Some(&mut c.non_finite)
+                    } else if Some(raw) == ignore {
+                        Some(&mut c.ignore_value)
+                    } else if sat.is_some_and(|s| raw >= s) {
+                        Some(&mut c.saturated)
+                    } else if let Some((offset, scale)) = band_map[b] {
+                        let r = ((raw as f64 - offset) * scale) as f32;
+                        if r.is_finite() {
+                            *v = r;
+                            None
+                        } else {
+                            Some(&mut c.non_finite)
+                        }
+                    } else {
+                        Some(&mut c.bad_reference)
+                    };
+                    if let Some(counter) = cause {
+                        *counter += 1;
+                        *v = f32::NAN;
+                        *ok = false;
+                    }
+                }
+            }
+            c
+        })
+        .reduce(InvalidCounts::default, |mut a, b| {
+            a.add(&b);
+            a
+        });
+    (data, valid, counts)
+}
+
+pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
+    let (dir, json) = if path.is_file() {
+        (
+            path.parent().unwrap_or(Path::new(".")).to_path_buf(),
+            path.to_path_buf(),
+        )
+    } else {
+        (path.to_path_buf(), path.join("capture.json"))
+    };
+    let text = std::fs::read_to_string(&json)
+        .with_context(|| format!("reading capture set {}", json.display()))?;
+    let j = json.display();
+    let doc: Value = serde_json::from_str(&text).with_context(|| format!("{j}: not valid JSON"))?;
+    // Checked by hand first so the message names the field and the allowed values.
+    match doc.get("polarization") {
+        Some(Value::String(p)) => {
+            p.parse::<Polarization>()
+                .map_err(|e| anyhow::anyhow!("{j}: field 'polarization': {e}"))?;
+        }
+        Some(other) => {
+            bail!("{j}: field 'polarization' must be a string (s, p or unpolarized), got {other}")
+        }
+        None => bail!("{j}: missing field 'polarization' (s, p or unpolarized)"),
+    }
+    let spec: CaptureFile = serde_json::from_value(doc)
+        .with_context(|| format!("{j}: not a valid {CAPTURE_FORMAT} document"))?;
+    if spec.format != CAPTURE_FORMAT {
+        bail!(
+            "{j}: field 'format' is '{}', expected '{CAPTURE_FORMAT}'",
+            spec.format
+        );
+    }
+    let ambient =
+        ior_from_json(&spec.ambient_ior, "ambient_ior").with_context(|| format!("{j}"))?;
+    let ambient_ior = match ambient {
+        Ior::Constant(c) if c.im == 0.0 => c.re,
+        other => bail!("{j}: ambient_ior must be a real number (light arrives through a lossless medium), got {other}"),
+    };
+    let substrate_ior =
+        ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
+    if spec.angles.is_empty() {
+        bail!("{j}: 'angles' is empty");
+    }
+    let mut first: Option<EnviFile> = None;
+    let mut angles = Vec::with_capacity(spec.angles.len());
+    let mut invalid = InvalidCounts::default();
+    for (i, a) in spec.angles.iter().enumerate() {
+        let field = format!("angles[{i}]");
+        if !(a.incident_deg.is_finite() && (0.0..90.0).contains(&a.incident_deg)) {
+            bail!(
+                "{j}: {field}.incident_deg = {} must be in [0, 90)",
+                a.incident_deg
+            );
+        }
+        let file = open_named(&json, &dir, &format!("{field}.cube"), &a.cube)?;
+        let h = &file.header;
+        let Some(wl) = &h.wavelengths_nm else {
+            bail!(
+                "{}: header has no 'wavelength' field (a capture needs band wavelengths)",
+                h.path.display()
+            );
+        };
+        if let Some(f) = &first {
+            let fh = &f.header;
+            if (fh.samples, fh.lines) != (h.samples, h.lines) {
+                bail!(
+                    "{j}: cube sizes differ: {} is {}×{} but {} is {}×{}",
+                    fh.path.display(),
+                    fh.samples,
+                    fh.lines,
+                    h.path.display(),
+                    h.samples,
+                    h.lines
+                );
+            }
+            let fw = fh.wavelengths_nm.as_deref().unwrap_or_default();
+            if !same_wavelengths(fw, wl) {
+                bail!(
+                    "{j}: wavelengths differ: {} has {} but {} has {}",
+                    fh.path.display(),
+                    describe_wavelengths(fw),
+                    h.path.display(),
+                    describe_wavelengths(wl)
+                );
+            }
+        }
+        let white = a
+            .white
+            .as_deref()
+            .map(|n| reference_means(&json, &dir, &format!("{field}.white"), n, &file))
+            .transpose()?;
+        let dark = match (&a.dark, &white) {
+            (Some(_), None) => {
+                bail!("{j}: {field}: a 'dark' reference needs a 'white' reference too")
+            }
+            (Some(n), Some(_)) => Some(reference_means(
+                &json,
+                &dir,
+                &format!("{field}.dark"),
+                n,
+                &file,
+            )?),
+            (None, _) => None,
+        };
+        let (data, valid, counts) = reflectance(&file, white.as_deref(), dark.as_deref());
+        invalid.add(&counts);
+        angles.push(AngleCapture {
+            incident_deg: a.incident_deg,
+            reflectance: data,
+            valid,
+        });
+        if first.is_none() {
+            first = Some(file);
+        }
+    }
+    let first = first.expect("angles is non-empty");
+    let h = first.header;
+    Ok(CaptureSet {
+        polarization: spec.polarization,
+        ambient_ior,
+        substrate_ior,
+        wavelengths_nm: h.wavelengths_nm.unwrap_or_default(),
+        fwhm_nm: h.fwhm_nm,
+        width: h.samples,
+        height: h.lines,
+        angles,
+        invalid,
+    })
+}
+
+/// `ground_truth.json` as written by the simulator (only the fields the loader needs
+/// are typed; the rest — statistics and options — is free-form).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GroundTruthFile {
+    pub format: String,
+    pub film: Value,
+    pub substrate: Value,
+    pub width: usize,
+    pub height: usize,
+    #[serde(default = "default_thickness_file")]
+    pub thickness_exr: String,
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, Value>,
+}
+
+fn default_thickness_file() -> String {
+    "thickness.exr".into()
+}
+
+pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
+    let gt_dir = if dir.join("ground_truth.json").is_file() {
+        dir.to_path_buf()
+    } else {
+        dir.join("ground_truth")
+    };
+    let json = gt_dir.join("ground_truth.json");
+    let text = std::fs::read_to_string(&json)
+        .with_context(|| format!("reading ground truth {}", json.display()))?;
+    let spec: GroundTruthFile = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a valid ground-truth document", json.display()))?;
+    let j = json.display();
+    if spec.format != GROUND_TRUTH_FORMAT {
+        bail!(
+            "{j}: field 'format' is '{}', expected '{GROUND_TRUTH_FORMAT}'",
+            spec.format
+        );
+    }
+    let film_ior = ior_from_json(&spec.film, "film").with_context(|| format!("{j}"))?;
+    let substrate_ior =
+        ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
+    let exr = resolve(&gt_dir, &spec.thickness_exr);
+    let (w, h, thickness_nm) = crate::image_io::read_exr_channel(&exr, "thickness")?;
+    if (w, h) != (spec.width, spec.height) {
+        bail!(
+            "{}: is {w}×{h} but {j} says {}×{}",
+            exr.display(),
+            spec.width,
+            spec.height
+        );
+    }
+    Ok(GroundTruth {
+        film_ior,
+        substrate_ior,
+        width: w,
+        height: h,
+        thickness_nm,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn ior_json_forms() {
+        assert_eq!(ior_from_json(&json!(1.64), "s").unwrap(), Ior::real(1.64));
+        assert_eq!(
+            ior_from_json(&json!({"ior": 0.18, "k": 3.4}), "s").unwrap(),
+            Ior::Constant(Complex64::new(0.18, 3.4))
+        );
+        assert_eq!(
+            ior_from_json(&json!({"ior": "0.18+3.4i"}), "s").unwrap(),
+            Ior::Constant(Complex64::new(0.18, 3.4))
+        );
+        assert_eq!(ior_from_json(&json!("1.5"), "s").unwrap(), Ior::real(1.5));
+        for bad in [
+            json!({"ior": 1.5, "k": -1}),
+            json!({"ior": 1.5, "kk": 0}),
+            json!({"material": "NoSuchGlass"}),
+            json!({"ior": 1.5, "material": "x"}),
+            json!([1.5]),
+            json!(-2),
+        ] {
+            let e = ior_from_json(&bad, "substrate").unwrap_err().to_string();
+            assert!(e.contains("substrate"), "{e}");
+        }
+        let v = ior_to_json(&Ior::Constant(Complex64::new(1.64, 0.0)));
+        assert_eq!(ior_from_json(&v, "s").unwrap(), Ior::real(1.64));
+    }
+}

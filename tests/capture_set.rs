@@ -1,0 +1,183 @@
+//! `capture.json` loading: references, masking and counting of invalid samples, and clear
+//! errors for malformed sets.
+
+use std::path::Path;
+use thinfilm::capture::envi::{self, DataType, WriteOptions};
+use thinfilm::capture::{load_capture_set, InvalidCounts, Polarization};
+use thinfilm::optics::{Complex64, Ior};
+
+const WL: [f64; 3] = [500.0, 550.0, 600.0];
+
+fn cube(dir: &Path, name: &str, w: usize, h: usize, dt: DataType, data: &[f32], ignore: Option<f64>) {
+    cube_wl(dir, name, w, h, dt, data, ignore, &WL);
+}
+
+#[allow(clippy::too_many_arguments)]
+fn cube_wl(dir: &Path, name: &str, w: usize, h: usize, dt: DataType, data: &[f32], ignore: Option<f64>, wl: &[f64]) {
+    let mut o = WriteOptions::new(w, h, wl.len());
+    o.data_type = dt;
+    o.wavelengths_nm = Some(wl.to_vec());
+    o.ignore_value = ignore;
+    envi::write_cube(&dir.join(name), data, &o).unwrap();
+}
+
+fn json(dir: &Path, text: &str) {
+    std::fs::write(dir.join("capture.json"), text).unwrap();
+}
+
+fn err(dir: &Path) -> String {
+    format!("{:#}", load_capture_set(dir).unwrap_err())
+}
+
+#[test]
+fn float_cubes_load_as_reflectance() {
+    let d = tempfile::tempdir().unwrap();
+    let a: Vec<f32> = (0..2 * 2 * 3).map(|i| i as f32 * 0.01).collect();
+    let b: Vec<f32> = a.iter().map(|v| v + 0.5).collect();
+    cube(d.path(), "t10.hdr", 2, 2, DataType::F32, &a, None);
+    cube(d.path(), "t20.hdr", 2, 2, DataType::F64, &b, None);
+    json(
+        d.path(),
+        r#"{"format": "thinfilm-capture/1", "polarization": "unpolarized", "ambient_ior": 1.0,
+            "substrate": {"ior": 0.18, "k": 3.4},
+            "angles": [{"incident_deg": 10, "cube": "t10.hdr"}, {"incident_deg": 20.5, "cube": "t20.hdr"}]}"#,
+    );
+    let set = load_capture_set(d.path()).unwrap();
+    assert_eq!(set.polarization, Polarization::Unpolarized);
+    assert_eq!(set.substrate_ior, Ior::Constant(Complex64::new(0.18, 3.4)));
+    assert_eq!((set.width, set.height, set.bands()), (2, 2, 3));
+    assert_eq!(set.wavelengths_nm, WL.to_vec());
+    assert_eq!(set.angles[1].incident_deg, 20.5);
+    assert_eq!(set.angles[0].reflectance, a);
+    assert_eq!(set.angles[1].reflectance, b);
+    assert!(set.angles.iter().all(|a| a.valid.iter().all(|&v| v)));
+    assert_eq!(set.invalid, InvalidCounts::default());
+    // The capture.json path itself is accepted too.
+    assert_eq!(load_capture_set(&d.path().join("capture.json")).unwrap().angles.len(), 2);
+}
+
+#[test]
+fn raw_counts_with_references_and_every_invalid_cause() {
+    let d = tempfile::tempdir().unwrap();
+    let (w, h) = (3, 2);
+    // White 4×1 px (another size than the cube), dark 1×1. Band 2: white == dark → bad reference.
+    let white = [1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0];
+    // One white sample saturated (65535): excluded from the band mean, not propagated.
+    let mut white = white.to_vec();
+    white[3] = 65535.0;
+    let dark = [100.0, 100.0, 500.0];
+    cube(d.path(), "white.hdr", 4, 1, DataType::U16, &white, None);
+    cube(d.path(), "dark.hdr", 1, 1, DataType::U16, &dark, None);
+    // Raw cube: pixel-major, bands (500, 550, 600).
+    let mut raw = Vec::new();
+    for p in 0..w * h {
+        raw.extend([100.0 + 100.0 * p as f32, 100.0 + 200.0 * p as f32, 700.0]);
+    }
+    raw[3] = 65535.0; // pixel 1 band 0: saturated
+    raw[7] = 7.0; // pixel 2 band 1: the ignore value
+    cube(d.path(), "raw.hdr", w, h, DataType::U16, &raw, Some(7.0));
+    // A float cube with NaN and inf at a second angle, no references.
+    let mut f: Vec<f32> = vec![0.25; w * h * 3];
+    f[0] = f32::NAN;
+    f[5] = f32::INFINITY;
+    f[6] = f32::NEG_INFINITY;
+    cube(d.path(), "f.hdr", w, h, DataType::F32, &f, None);
+    json(
+        d.path(),
+        r#"{"format": "thinfilm-capture/1", "polarization": "s", "substrate": 1.64,
+            "angles": [{"incident_deg": 30, "cube": "raw.hdr", "white": "white.hdr", "dark": "dark.hdr"},
+                       {"incident_deg": 40, "cube": "f.hdr"}]}"#,
+    );
+    let set = load_capture_set(d.path()).unwrap();
+    assert_eq!(set.ambient_ior, 1.0);
+    let r = &set.angles[0].reflectance;
+    // R = (raw − dark)/(white − dark): band 0 span 1000, band 1 span 2000.
+    assert_eq!(r[0], 0.0);
+    assert!((r[1] - 0.0).abs() < 1e-7);
+    assert!(r[3].is_nan()); // saturated
+    assert!((r[6] - 0.2).abs() < 1e-6); // pixel 2 band 0: (300 − 100)/1000
+    assert!(r[7].is_nan()); // ignore value
+    assert!((r[3 * 5 + 1] - 0.5).abs() < 1e-6); // pixel 5 band 1: (1100 − 100)/2000
+    assert!(r.chunks(3).all(|px| px[2].is_nan())); // bad reference band
+    assert!(set.angles[0].valid.iter().all(|&v| !v));
+    let f = &set.angles[1];
+    assert!(f.reflectance[0].is_nan() && f.reflectance[5].is_nan() && f.reflectance[6].is_nan());
+    assert_eq!(f.valid, vec![false, false, false, true, true, true]);
+    assert_eq!(
+        set.invalid,
+        InvalidCounts {
+            non_finite: 3,
+            ignore_value: 1,
+            saturated: 1,
+            bad_reference: 6,
+        }
+    );
+}
+
+#[test]
+fn malformed_sets_are_clear_errors() {
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path();
+    let data = vec![0.1f32; 2 * 2 * 3];
+    cube(p, "a.hdr", 2, 2, DataType::F32, &data, None);
+    cube(p, "b.hdr", 2, 2, DataType::F32, &data, None);
+    cube(p, "small.hdr", 1, 2, DataType::F32, &data[..6], None);
+    cube_wl(p, "wl.hdr", 2, 2, DataType::F32, &data, None, &[500.0, 550.0, 610.0]);
+    cube_wl(p, "wl4.hdr", 1, 1, DataType::F32, &data[..4], None, &[500.0, 550.0, 600.0, 650.0]);
+    let doc = |pol: &str, angles: &str| {
+        format!(r#"{{"format": "thinfilm-capture/1", "polarization": "{pol}", "substrate": {{"ior": 1.64}}, "angles": [{angles}]}}"#)
+    };
+    let cases: Vec<(String, Vec<&str>)> = vec![
+        (doc("q", r#"{"incident_deg": 10, "cube": "a.hdr"}"#), vec!["capture.json", "polarization", "'q'"]),
+        (doc("s", r#"{"incident_deg": 10, "cube": "missing.hdr"}"#), vec!["capture.json", "angles[0].cube", "missing.hdr", "not found"]),
+        (
+            doc("s", r#"{"incident_deg": 10, "cube": "a.hdr"}, {"incident_deg": 20, "cube": "small.hdr"}"#),
+            vec!["a.hdr", "small.hdr", "2×2", "1×2"],
+        ),
+        (
+            doc("s", r#"{"incident_deg": 10, "cube": "a.hdr"}, {"incident_deg": 20, "cube": "wl.hdr"}"#),
+            vec!["a.hdr", "wl.hdr", "wavelengths differ"],
+        ),
+        (
+            doc("s", r#"{"incident_deg": 10, "cube": "a.hdr", "white": "wl4.hdr"}"#),
+            vec!["angles[0].white", "wl4.hdr", "4 bands", "a.hdr"],
+        ),
+        (
+            doc("s", r#"{"incident_deg": 10, "cube": "a.hdr", "dark": "b.hdr"}"#),
+            vec!["angles[0]", "'white'"],
+        ),
+        (doc("s", r#"{"incident_deg": 95, "cube": "a.hdr"}"#), vec!["angles[0].incident_deg", "95"]),
+        (doc("s", ""), vec!["'angles' is empty"]),
+        (doc("s", r#"{"incident_deg": 10, "cube": "a.hdr", "whit": "b.hdr"}"#), vec!["capture.json", "whit"]),
+        (
+            r#"{"format": "thinfilm-capture/2", "polarization": "s", "substrate": 1.5, "angles": []}"#.into(),
+            vec!["format", "thinfilm-capture/2"],
+        ),
+        (
+            r#"{"format": "thinfilm-capture/1", "polarization": "s", "substrate": {"material": "Unobtainium"}, "angles": []}"#.into(),
+            vec!["substrate", "Unobtainium"],
+        ),
+        (
+            r#"{"format": "thinfilm-capture/1", "polarization": "s", "ambient_ior": "1.3+0.1i", "substrate": 1.5, "angles": []}"#.into(),
+            vec!["ambient_ior", "real"],
+        ),
+        (r#"{"format": "thinfilm-capture/1", "polarization": "s", "#.into(), vec!["capture.json", "JSON"]),
+    ];
+    for (text, needles) in cases {
+        json(p, &text);
+        let e = err(p);
+        for n in needles {
+            assert!(e.contains(n), "'{n}' not in: {e}\n(json: {text})");
+        }
+    }
+    // A folder without capture.json.
+    let empty = tempfile::tempdir().unwrap();
+    assert!(err(empty.path()).contains("capture.json"));
+    // A cube without wavelengths.
+    let mut o = WriteOptions::new(2, 2, 3);
+    o.data_type = DataType::F32;
+    envi::write_cube(&p.join("nowl.hdr"), &data, &o).unwrap();
+    json(p, &doc("s", r#"{"incident_deg": 10, "cube": "nowl.hdr"}"#));
+    let e = err(p);
+    assert!(e.contains("nowl.hdr") && e.contains("wavelength"), "{e}");
+}

@@ -9,15 +9,18 @@ pub struct RgbSigmoidPolynomial {
 
 impl RgbSigmoidPolynomial {
     pub fn eval(&self, lambda_nm: f32) -> f32 {
-        let _ = lambda_nm;
-        todo!("foundation")
+        let x = (self.c[0] * lambda_nm + self.c[1]) * lambda_nm + self.c[2];
+        if x.is_infinite() {
+            return if x > 0.0 { 1.0 } else { 0.0 };
+        }
+        0.5 + x / (2.0 * (1.0 + x * x).sqrt())
     }
 }
 
 /// Upsample a linear sRGB reflectance (components clamped to [0, 1]).
 pub fn srgb_reflectance(rgb: [f32; 3]) -> RgbSigmoidPolynomial {
     let _ = rgb;
-    todo!("foundation")
+    todo!("foundation: rgb2spec table")
 }
 
 /// An RGB emitter's spectrum as Mitsuba's `srgb_d65`: scale = 2·max, polynomial of rgb/scale,
@@ -31,10 +34,18 @@ pub struct RgbIlluminantSpectrum {
 impl RgbIlluminantSpectrum {
     pub fn new(rgb: [f32; 3]) -> Self {
         let _ = rgb;
-        todo!("foundation")
+        todo!("foundation: rgb2spec table")
     }
     pub fn eval(&self, lambda_nm: f32) -> f32 {
         let _ = lambda_nm;
-        todo!("foundation")
+        todo!("foundation: rgb2spec table")
     }
+}
+
+/// A non-negative RGB quantity that may exceed 1 (e.g. texture values > 1): scale = 2·max,
+/// polynomial of rgb/scale, no illuminant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RgbUnboundedSpectrum {
+    pub scale: f32,
+    pub poly: RgbSigmoidPolynomial,
 }

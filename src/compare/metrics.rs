@@ -267,6 +267,15 @@ mod tests {
     }
 
     #[test]
+    fn white_maps_to_lab_100() {
+        let lab = linear_srgb_to_lab([1.0, 1.0, 1.0]);
+        assert!((lab[0] - 100.0).abs() < 0.05, "{lab:?}");
+        assert!(lab[1].abs() < 0.05 && lab[2].abs() < 0.05, "{lab:?}");
+        let black = linear_srgb_to_lab([0.0, 0.0, 0.0]);
+        assert!(black.iter().all(|v| v.abs() < 1e-9), "{black:?}");
+    }
+
+    #[test]
     fn percentile_nearest_rank() {
         let v: Vec<f64> = (1..=100).map(|i| i as f64).collect();
         assert_eq!(percentile(&v, 0.95), 95.0);

@@ -1,1 +1,325 @@
-//! (to be built)
+//! The hero-wavelength spectral path tracer (design.md §4).
+//!
+//! One file per concept, after pbrt-v4's decomposition:
+//! [`accel`] (obvhs CWBVH + spheres), [`camera`] (Mitsuba `perspective`), [`sampler`]
+//! (deterministic per-sample PCG streams), [`film`] (spectrum → sRGB, reconstruction,
+//! exact-merge accumulation), [`lights`] (envmap, constant, area, point), [`bsdf`] (one file per
+//! model), [`integrator`] (`path` with MIS and Russian roulette), [`effects`] (effect analysis),
+//! [`texture`] (spectra and textures at the path wavelengths).
+//!
+//! Rendering is parallel over image rows with rayon; every sample draws its random numbers from
+//! its own stream keyed by (pixel, global sample index, seed), so the image does not depend on
+//! the number of threads, and `sample_range` splits merge exactly (see [`film`]).
+
+pub mod accel;
+pub mod bsdf;
+pub mod camera;
+pub mod effects;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod lights;
+pub mod sampler;
+pub mod texture;
+
+use crate::image_io::RgbImage;
+use crate::scene::{IntegratorSettings, Scene};
+use crate::spectrum::{SampledSpectrum, SampledWavelengths};
+use anyhow::{bail, Context, Result};
+use bsdf::{Bsdf, Counters};
+use film::{sample_to_rgb, tree_sum, Filter};
+use glam::Vec2;
+use rayon::prelude::*;
+use std::time::Instant;
+
+pub use effects::Effects;
+
+/// Command-line style overrides of the scene's own settings.
+#[derive(Debug, Clone, Default)]
+pub struct RenderOptions {
+    pub spp: Option<u32>,
+    pub seed: Option<u64>,
+    /// Worker threads (None: rayon's default pool).
+    pub threads: Option<usize>,
+    pub max_depth: Option<i32>,
+    pub resolution: Option<(u32, u32)>,
+    /// Render only global sample indices [start, end).
+    pub sample_range: Option<(u32, u32)>,
+    /// Draw a progress bar on stderr (only when it is a terminal).
+    pub progress: bool,
+}
+
+/// Work done and time taken.
+#[derive(Debug, Clone, Default)]
+pub struct RenderStats {
+    pub seconds: f64,
+    /// Time spent building the BVH and light tables.
+    pub setup_seconds: f64,
+    pub samples: u64,
+    pub rays: u64,
+    pub shadow_rays: u64,
+    pub film_evals: u64,
+    /// Samples whose estimate was NaN or infinite and were discarded (should be 0).
+    pub invalid_samples: u64,
+    pub triangles: usize,
+    pub degenerate_triangles: usize,
+    pub threads: usize,
+}
+
+impl RenderStats {
+    pub fn samples_per_second(&self) -> f64 {
+        self.samples as f64 / self.seconds.max(1e-9)
+    }
+    /// Closest-hit plus shadow rays per second.
+    pub fn rays_per_second(&self) -> f64 {
+        (self.rays + self.shadow_rays) as f64 / self.seconds.max(1e-9)
+    }
+}
+
+/// A finished render.
+#[derive(Debug, Clone)]
+pub struct RenderOutput {
+    /// Linear sRGB (Rec.709, D65).
+    pub image: RgbImage,
+    pub stats: RenderStats,
+    pub effects: Effects,
+    /// The global sample indices rendered.
+    pub sample_range: (u32, u32),
+}
+
+/// A scene prepared for tracing.
+pub struct PreparedScene {
+    pub accel: accel::Accel,
+    pub lights: lights::LightSet,
+    pub bsdfs: Vec<Bsdf>,
+    /// BSDF index per shape.
+    pub shape_bsdf: Vec<u32>,
+    pub camera: camera::PerspectiveCamera,
+    pub settings: IntegratorSettings,
+    pub width: u32,
+    pub height: u32,
+    pub filter: Filter,
+    pub seed: u64,
+    pub sample_range: (u32, u32),
+    pub effects: Effects,
+    pub degenerate_triangles: usize,
+}
+
+/// Validates the scene and options, runs effect analysis, builds the BVH and light tables.
+pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> {
+    let effects = effects::analyze(scene)?;
+    let (width, height) = options.resolution.unwrap_or((scene.film.width, scene.film.height));
+    if width == 0 || height == 0 || width > 65536 || height > 65536 {
+        bail!("image resolution must be between 1×1 and 65536×65536, got {width}×{height}");
+    }
+    let spp = options.spp.unwrap_or(scene.spp);
+    let sample_range = match options.sample_range {
+        Some((a, b)) => {
+            if a >= b {
+                bail!("sample range {a}:{b} is empty: START must be < END");
+            }
+            (a, b)
+        }
+        None => {
+            if spp == 0 {
+                bail!("samples per pixel must be ≥ 1");
+            }
+            (0, spp)
+        }
+    };
+    let mut settings = scene.integrator;
+    if let Some(d) = options.max_depth {
+        settings.max_depth = d;
+    }
+    if settings.max_depth == 0 || settings.max_depth < -1 {
+        bail!("max_depth must be −1 (unlimited) or ≥ 1, got {}", settings.max_depth);
+    }
+    let mut bsdfs = Vec::with_capacity(scene.bsdfs.len());
+    for (i, d) in scene.bsdfs.iter().enumerate() {
+        bsdfs.push(Bsdf::from_desc(d).with_context(|| format!("BSDF {i}"))?);
+    }
+    let camera = camera::PerspectiveCamera::new(&scene.camera, width, height)?;
+    let (accel, degenerate_triangles) = accel::Accel::build(scene)?;
+    let lights = lights::LightSet::build(scene, &accel)?;
+    let shape_bsdf = scene.shapes.iter().map(|s| s.bsdf as u32).collect();
+    Ok(PreparedScene {
+        accel,
+        lights,
+        bsdfs,
+        shape_bsdf,
+        camera,
+        settings,
+        width,
+        height,
+        filter: Filter::new(&scene.film.filter)?,
+        seed: options.seed.unwrap_or(scene.seed),
+        sample_range,
+        effects,
+        degenerate_triangles,
+    })
+}
+
+/// One camera sample: wavelengths, film position, path. Returns (film position in pixels,
+/// spectral radiance, wavelengths).
+#[inline]
+fn trace_sample(scene: &PreparedScene, x: u32, y: u32, s: u32, counters: &mut Counters) -> (Vec2, SampledSpectrum, SampledWavelengths) {
+    let mut sampler = sampler::Sampler::for_sample(x, y, s, scene.seed);
+    let mut wl = SampledWavelengths::sample_visible(sampler.next_1d());
+    let jitter = sampler.next_2d();
+    let pos = Vec2::new(x as f32 + jitter.x, y as f32 + jitter.y);
+    let film_uv = pos / Vec2::new(scene.width as f32, scene.height as f32);
+    let ray = scene.camera.generate_ray(film_uv);
+    let l = integrator::li(scene, ray, &mut wl, &mut sampler, counters);
+    (pos, SampledSpectrum(l.to_array()), wl)
+}
+
+#[inline]
+fn finite_rgb(rgb: [f32; 3], counters: &mut Counters) -> [f32; 3] {
+    if rgb.iter().all(|v| v.is_finite()) {
+        rgb
+    } else {
+        counters.invalid_samples += 1;
+        [0.0; 3]
+    }
+}
+
+/// Renders a prepared scene.
+pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result<RenderOutput> {
+    let start = Instant::now();
+    let (w, h) = (scene.width as usize, scene.height as usize);
+    let (s0, s1) = scene.sample_range;
+    let n = (s1 - s0) as usize;
+    let pb = if options.progress {
+        let pb = indicatif::ProgressBar::new(h as u64);
+        if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40.cyan/blue} {pos}/{len} rows ({eta})") {
+            pb.set_style(style);
+        }
+        pb
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let filter = scene.filter;
+    let radius = filter.radius();
+    let reach = if matches!(filter, Filter::Box) { 0 } else { radius.ceil() as i64 };
+
+    // Per row: (pixels of the row for the box filter | splat rows y−reach..=y+reach, counters).
+    let render_row = |y: usize| -> (Vec<[f32; 4]>, Counters) {
+        let mut counters = Counters::default();
+        let mut samples = vec![[0.0f32; 3]; n];
+        let rows = (2 * reach + 1) as usize;
+        let mut buf = vec![[0.0f32; 4]; if reach == 0 { w } else { rows * w }];
+        for x in 0..w {
+            for (i, s) in (s0..s1).enumerate() {
+                let (pos, l, wl) = trace_sample(scene, x as u32, y as u32, s, &mut counters);
+                let rgb = finite_rgb(sample_to_rgb(l, &wl), &mut counters);
+                if reach == 0 {
+                    samples[i] = rgb;
+                } else {
+                    // Splat onto every pixel whose centre lies within the filter radius.
+                    let x_lo = ((pos.x - 0.5 - radius).ceil() as i64).max(0);
+                    let x_hi = ((pos.x - 0.5 + radius).floor() as i64).min(w as i64 - 1);
+                    for py in (y as i64 - reach)..=(y as i64 + reach) {
+                        if py < 0 || py >= h as i64 {
+                            continue;
+                        }
+                        let wy = filter.eval_1d(py as f32 + 0.5 - pos.y);
+                        if wy <= 0.0 {
+                            continue;
+                        }
+                        for px in x_lo..=x_hi {
+                            let wgt = wy * filter.eval_1d(px as f32 + 0.5 - pos.x);
+                            if wgt > 0.0 {
+                                let cell = &mut buf[(py - y as i64 + reach) as usize * w + px as usize];
+                                cell[0] += wgt * rgb[0];
+                                cell[1] += wgt * rgb[1];
+                                cell[2] += wgt * rgb[2];
+                                cell[3] += wgt;
+                            }
+                        }
+                    }
+                }
+            }
+            if reach == 0 {
+                let sum = tree_sum(&samples);
+                buf[x] = [sum[0], sum[1], sum[2], n as f32];
+            }
+        }
+        pb.inc(1);
+        (buf, counters)
+    };
+
+    let run = || -> Vec<(Vec<[f32; 4]>, Counters)> { (0..h).into_par_iter().map(render_row).collect() };
+    let (rows, threads) = match options.threads {
+        Some(t) => {
+            if t == 0 {
+                bail!("--threads must be ≥ 1");
+            }
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build().context("creating the thread pool")?;
+            (pool.install(run), t)
+        }
+        None => (run(), rayon::current_num_threads()),
+    };
+    pb.finish_and_clear();
+
+    // Merge rows in a fixed order: the result does not depend on scheduling.
+    let mut image = RgbImage::new(w, h);
+    let mut counters = Counters::default();
+    if reach == 0 {
+        for (y, (row, c)) in rows.iter().enumerate() {
+            counters.add(c);
+            for x in 0..w {
+                let p = row[x];
+                image.pixels[y * w + x] = [p[0] / p[3], p[1] / p[3], p[2] / p[3]];
+            }
+        }
+    } else {
+        let mut acc = vec![[0.0f32; 4]; w * h];
+        for (y, (row, c)) in rows.iter().enumerate() {
+            counters.add(c);
+            for r in 0..(2 * reach + 1) as usize {
+                let py = y as i64 - reach + r as i64;
+                if py < 0 || py >= h as i64 {
+                    continue;
+                }
+                for x in 0..w {
+                    let src = row[r * w + x];
+                    let dst = &mut acc[py as usize * w + x];
+                    for k in 0..4 {
+                        dst[k] += src[k];
+                    }
+                }
+            }
+        }
+        for (i, p) in acc.iter().enumerate() {
+            image.pixels[i] = if p[3] > 0.0 { [p[0] / p[3], p[1] / p[3], p[2] / p[3]] } else { [0.0; 3] };
+        }
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    Ok(RenderOutput {
+        image,
+        stats: RenderStats {
+            seconds,
+            setup_seconds: 0.0,
+            samples: (w * h * n) as u64,
+            rays: counters.rays,
+            shadow_rays: counters.shadow_rays,
+            film_evals: counters.film_evals,
+            invalid_samples: counters.invalid_samples,
+            triangles: scene.accel.triangle_count(),
+            degenerate_triangles: scene.degenerate_triangles,
+            threads,
+        },
+        effects: scene.effects.clone(),
+        sample_range: scene.sample_range,
+    })
+}
+
+/// Renders `scene` with command-line overrides.
+pub fn render(scene: &Scene, options: &RenderOptions) -> Result<RenderOutput> {
+    let t0 = Instant::now();
+    let prepared = prepare(scene, options)?;
+    let setup = t0.elapsed().as_secs_f64();
+    let mut out = render_prepared(&prepared, options)?;
+    out.stats.setup_seconds = setup;
+    Ok(out)
+}

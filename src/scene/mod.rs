@@ -239,3 +239,205 @@ pub enum EmitterDesc {
         intensity: SpectrumDesc,
     },
 }
+
+pub mod gltf_scene;
+pub mod meshio;
+pub mod mitsuba;
+pub mod shapes;
+pub mod sky;
+pub mod teapot;
+pub mod texture;
+
+pub use texture::load_rgb_image;
+
+use anyhow::{bail, Context, Result};
+use std::path::Path;
+
+/// Loads a scene file, choosing the reader by extension: `.xml` (Mitsuba 3 subset),
+/// `.gltf`/`.glb`, `.obj`, `.ply`. `defaults` are `-D key=value` overrides of the XML's
+/// `<default>` parameters (an override for a name the file does not declare is an error
+/// for XML, and ignored by the other formats only if empty).
+pub fn load(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
+    if !path.is_file() {
+        bail!("scene file {} does not exist", path.display());
+    }
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let non_xml_defaults = || -> Result<()> {
+        if let Some((k, _)) = defaults.first() {
+            bail!(
+                "-D {k}=…: parameter overrides apply to Mitsuba XML scenes only ({} is .{ext})",
+                path.display()
+            );
+        }
+        Ok(())
+    };
+    let mut scene = match ext.as_str() {
+        "xml" => mitsuba::load_file(path, defaults)?,
+        "gltf" | "glb" => {
+            non_xml_defaults()?;
+            gltf_scene::load_gltf(path)?
+        }
+        "obj" | "ply" => {
+            non_xml_defaults()?;
+            let mesh = if ext == "obj" {
+                meshio::load_obj(path)?
+            } else {
+                meshio::load_ply(path)?
+            };
+            scene_for_mesh(mesh, path)?
+        }
+        _ => bail!(
+            "{}: unknown scene format '.{ext}' (expected .xml, .gltf, .glb, .obj or .ply)",
+            path.display()
+        ),
+    };
+    scene.source = Some(path.to_path_buf());
+    scene
+        .validate()
+        .with_context(|| format!("scene {}", path.display()))?;
+    Ok(scene)
+}
+
+/// Default resolution for formats that carry none (OBJ, PLY, glTF).
+pub const DEFAULT_RESOLUTION: (u32, u32) = (512, 512);
+/// Default samples per pixel for formats that carry none.
+pub const DEFAULT_SPP: u32 = 64;
+
+/// The studio environment (the same map as `scenes/textures/studio.exr`), generated in memory
+/// so that standalone meshes and glTF files need no file beside them.
+pub fn default_environment() -> EmitterDesc {
+    let (w, h) = sky::STUDIO_SIZE;
+    EmitterDesc::Envmap {
+        image: Arc::new(sky::studio_environment(w, h)),
+        scale: 1.0,
+        to_world: Mat4::IDENTITY,
+        path: None,
+    }
+}
+
+/// A camera that frames the bounding box `(lo, hi)`: looking at its centre from the front
+/// (+Z side) and slightly above, with a 40° vertical... (`fov_axis` x as Mitsuba's default) field
+/// of view and the box's bounding sphere filling ~80 % of the view.
+pub fn default_camera(bounds: (Vec3, Vec3)) -> Camera {
+    let (lo, hi) = bounds;
+    let center = (lo + hi) * 0.5;
+    let radius = ((hi - lo).length() * 0.5).max(1e-3);
+    let fov_deg: f32 = 40.0;
+    let half = (fov_deg.to_radians() * 0.5).tan();
+    let distance = radius / (0.8 * half).atan().sin();
+    let dir = Vec3::new(0.35, 0.45, 1.0).normalize();
+    let origin = center + dir * distance;
+    Camera {
+        to_world: look_at(origin, center, Vec3::Y),
+        fov_deg,
+        fov_axis: FovAxis::X,
+        near_clip: (distance - radius).max(distance * 1e-3) * 0.5,
+        far_clip: (distance + radius) * 2.0,
+    }
+}
+
+/// Mitsuba's `lookat` transform: camera at `origin` looking at `target`, local +Z forward,
+/// +Y up, +X = up × forward (Mitsuba's left-handed screen convention).
+pub fn look_at(origin: Vec3, target: Vec3, up: Vec3) -> Mat4 {
+    let dir = (target - origin).normalize();
+    let left = up.normalize().cross(dir).normalize();
+    let new_up = dir.cross(left);
+    Mat4::from_cols(
+        left.extend(0.0),
+        new_up.extend(0.0),
+        dir.extend(0.0),
+        origin.extend(1.0),
+    )
+}
+
+/// Bounds of every shape (spheres included); None if the scene has no geometry.
+pub fn shapes_bounds(shapes: &[Shape]) -> Option<(Vec3, Vec3)> {
+    let mut acc: Option<(Vec3, Vec3)> = None;
+    for s in shapes {
+        let b = match &s.geometry {
+            Geometry::Mesh(m) => m.bounds(),
+            Geometry::Sphere { center, radius, .. } => {
+                Some((*center - Vec3::splat(*radius), *center + Vec3::splat(*radius)))
+            }
+        };
+        if let Some((lo, hi)) = b {
+            acc = Some(match acc {
+                None => (lo, hi),
+                Some((a, c)) => (a.min(lo), c.max(hi)),
+            });
+        }
+    }
+    acc
+}
+
+/// A standalone mesh: default diffuse material, default camera framing it, studio light.
+fn scene_for_mesh(mut mesh: TriangleMesh, path: &Path) -> Result<Scene> {
+    mesh.ensure_normals();
+    let bounds = mesh
+        .bounds()
+        .with_context(|| format!("{}: mesh has no vertices", path.display()))?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+    Ok(Scene {
+        camera: default_camera(bounds),
+        film: FilmSettings::default(),
+        integrator: IntegratorSettings::default(),
+        spp: DEFAULT_SPP,
+        seed: 0,
+        shapes: vec![Shape {
+            geometry: Geometry::Mesh(mesh),
+            bsdf: 0,
+            emission: None,
+            name,
+        }],
+        bsdfs: vec![BsdfDesc::default_diffuse()],
+        emitters: vec![default_environment()],
+        polarizer: None,
+        source: Some(path.to_path_buf()),
+    })
+}
+
+impl Default for FilmSettings {
+    /// Mitsuba's `hdrfilm` defaults would be 768×576 with a Gaussian filter; for files without
+    /// a film we use [`DEFAULT_RESOLUTION`] and a box filter (every sample in its own pixel).
+    fn default() -> Self {
+        FilmSettings {
+            width: DEFAULT_RESOLUTION.0,
+            height: DEFAULT_RESOLUTION.1,
+            filter: ReconstructionFilter::Box,
+        }
+    }
+}
+
+impl Scene {
+    /// Checks what the renderer relies on: BSDF indices in range, meshes well formed, a
+    /// positive resolution and sample count, finite camera.
+    pub fn validate(&self) -> Result<()> {
+        if self.film.width == 0 || self.film.height == 0 {
+            bail!("film resolution {}×{} is empty", self.film.width, self.film.height);
+        }
+        if self.spp == 0 {
+            bail!("sample_count must be ≥ 1");
+        }
+        if !self.camera.to_world.is_finite() || !(self.camera.fov_deg > 0.0 && self.camera.fov_deg < 180.0) {
+            bail!("camera is degenerate (fov {}°)", self.camera.fov_deg);
+        }
+        for (i, s) in self.shapes.iter().enumerate() {
+            let what = s.name.clone().unwrap_or_else(|| format!("shape {i}"));
+            if s.bsdf >= self.bsdfs.len() {
+                bail!("{what}: BSDF index {} out of range", s.bsdf);
+            }
+            match &s.geometry {
+                Geometry::Mesh(m) => m.validate(&what)?,
+                Geometry::Sphere { center, radius, .. } => {
+                    if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
+                        bail!("{what}: sphere needs a finite centre and radius > 0");
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}

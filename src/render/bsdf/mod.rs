@@ -1,0 +1,226 @@
+//! Surface scattering models, one file per model, dispatched through the [`Bsdf`] enum (no
+//! trait objects on the hot path).
+//!
+//! Conventions follow Mitsuba 3: directions are in the local shading frame (normal = +z),
+//! `wi` points towards the previous path vertex (the camera side), `wo` is the sampled or
+//! queried direction; `eval` returns f(wi, wo)·|cos θo| and `sample` returns the weight
+//! eval / pdf (for delta lobes: the lobe's value divided by its selection probability).
+
+pub mod conductor;
+pub mod dielectric;
+pub mod diffuse;
+pub mod fresnel;
+pub mod microfacet;
+pub mod plastic;
+pub mod thinfilm;
+
+use super::texture::{Spec, Texture};
+use crate::scene::BsdfDesc;
+use crate::spectrum::SampledWavelengths;
+use glam::{Vec2, Vec3};
+use microfacet::Ggx;
+
+pub use conductor::Conductor;
+pub use dielectric::Dielectric;
+pub use diffuse::Diffuse;
+pub use plastic::Plastic;
+pub use thinfilm::ThinFilmBsdf;
+
+/// What a BSDF needs to know about the shading point besides directions.
+pub struct ShadingCtx<'a> {
+    pub wl: &'a SampledWavelengths,
+    pub uv: Vec2,
+}
+
+/// Per-thread work counters (summed into the render statistics).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Airy thin-film evaluations (each covers 4 wavelengths).
+    pub film_evals: u64,
+    /// Closest-hit rays traced.
+    pub rays: u64,
+    /// Shadow (occlusion) rays traced.
+    pub shadow_rays: u64,
+    /// Samples whose estimate was NaN/inf and was discarded.
+    pub invalid_samples: u64,
+}
+
+impl Counters {
+    pub fn add(&mut self, o: &Counters) {
+        self.film_evals += o.film_evals;
+        self.rays += o.rays;
+        self.shadow_rays += o.shadow_rays;
+        self.invalid_samples += o.invalid_samples;
+    }
+}
+
+/// A sampled direction.
+#[derive(Debug, Clone, Copy)]
+pub struct BsdfSample {
+    pub wo: Vec3,
+    /// eval / pdf, per wavelength.
+    pub weight: Spec,
+    /// Solid-angle pdf (for delta lobes: the discrete selection probability).
+    pub pdf: f32,
+    /// Sampled from a Dirac lobe (no MIS with light sampling).
+    pub delta: bool,
+    /// Relative index crossed (1 for reflection), for Russian roulette's η².
+    pub eta: f32,
+    /// The direction is valid only for the hero wavelength (dispersion).
+    pub terminate_secondary: bool,
+}
+
+impl BsdfSample {
+    #[inline]
+    pub fn smooth(wo: Vec3, weight: Spec, pdf: f32) -> Self {
+        BsdfSample { wo, weight, pdf, delta: false, eta: 1.0, terminate_secondary: false }
+    }
+    #[inline]
+    pub fn delta(wo: Vec3, weight: Spec) -> Self {
+        BsdfSample { wo, weight, pdf: 1.0, delta: true, eta: 1.0, terminate_secondary: false }
+    }
+}
+
+/// A prepared BSDF.
+#[derive(Debug, Clone)]
+pub enum Bsdf {
+    Diffuse(Diffuse),
+    Conductor(Conductor),
+    Dielectric(Dielectric),
+    Plastic(Plastic),
+    ThinFilm(ThinFilmBsdf),
+    /// Mitsuba `twosided`: the back face behaves like the front.
+    TwoSided(Box<Bsdf>),
+}
+
+impl Bsdf {
+    /// Prepares a scene BSDF. Errors name what is unsupported.
+    pub fn from_desc(desc: &BsdfDesc) -> anyhow::Result<Self> {
+        Ok(match desc {
+            BsdfDesc::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse { reflectance: Texture::new(reflectance) }),
+            BsdfDesc::Conductor { eta, alpha_u, alpha_v } => {
+                check_alpha(*alpha_u, "conductor alpha_u")?;
+                check_alpha(*alpha_v, "conductor alpha_v")?;
+                Bsdf::Conductor(Conductor {
+                    eta: eta.clone(),
+                    ggx: (*alpha_u > 0.0 || *alpha_v > 0.0).then(|| Ggx::new(*alpha_u, *alpha_v)),
+                })
+            }
+            BsdfDesc::Dielectric { int_ior, ext_ior, alpha } => {
+                if *alpha > 0.0 {
+                    anyhow::bail!("bsdf 'roughdielectric' (dielectric with alpha = {alpha}) is not supported by the renderer");
+                }
+                Bsdf::Dielectric(Dielectric {
+                    int_ior: int_ior.clone(),
+                    ext_ior: ext_ior.clone(),
+                    dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
+                })
+            }
+            BsdfDesc::Plastic { diffuse_reflectance, int_ior, ext_ior, alpha, nonlinear } => {
+                check_alpha(*alpha, "plastic alpha")?;
+                let eta = int_ior / ext_ior;
+                if !(eta.is_finite() && eta > 0.0) {
+                    anyhow::bail!("plastic: int_ior/ext_ior must be positive and finite, got {int_ior}/{ext_ior}");
+                }
+                Bsdf::Plastic(Plastic::new(Texture::new(diffuse_reflectance), eta, *nonlinear, *alpha))
+            }
+            BsdfDesc::TwoSided(inner) => Bsdf::TwoSided(Box::new(Bsdf::from_desc(inner)?)),
+            BsdfDesc::ThinFilm { film_ior, thickness_nm, substrate_ior, alpha } => {
+                check_alpha(*alpha, "thinfilm alpha")?;
+                Bsdf::ThinFilm(ThinFilmBsdf {
+                    film_ior: film_ior.clone(),
+                    thickness_nm: Texture::new(thickness_nm),
+                    substrate_ior: substrate_ior.clone(),
+                    ggx: (*alpha > 0.0).then(|| Ggx::new(*alpha, *alpha)),
+                })
+            }
+        })
+    }
+
+    /// f·|cos θo| at the four wavelengths.
+    pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3, c: &mut Counters) -> Spec {
+        match self {
+            Bsdf::Diffuse(b) => b.eval(ctx, wi, wo),
+            Bsdf::Conductor(b) => b.eval(ctx, wi, wo),
+            Bsdf::Dielectric(_) => Spec::ZERO,
+            Bsdf::Plastic(b) => b.eval(ctx, wi, wo),
+            Bsdf::ThinFilm(b) => b.eval(ctx, wi, wo, c),
+            Bsdf::TwoSided(b) => {
+                let (wi, wo) = two_sided_flip(wi, wo);
+                b.eval(ctx, wi, wo, c)
+            }
+        }
+    }
+
+    /// Solid-angle pdf of sampling `wo` (non-delta components only).
+    pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
+        match self {
+            Bsdf::Diffuse(b) => b.pdf(wi, wo),
+            Bsdf::Conductor(b) => b.pdf(wi, wo),
+            Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Plastic(b) => b.pdf(wi, wo),
+            Bsdf::ThinFilm(b) => b.pdf(wi, wo),
+            Bsdf::TwoSided(b) => {
+                let (wi, wo) = two_sided_flip(wi, wo);
+                b.pdf(wi, wo)
+            }
+        }
+    }
+
+    /// Samples `wo` from `wi` using `u1` (lobe choice) and `u2` (direction).
+    pub fn sample(&self, ctx: &ShadingCtx, wi: Vec3, u1: f32, u2: Vec2, c: &mut Counters) -> Option<BsdfSample> {
+        let s = match self {
+            Bsdf::Diffuse(b) => b.sample(ctx, wi, u2),
+            Bsdf::Conductor(b) => b.sample(ctx, wi, u2),
+            Bsdf::Dielectric(b) => b.sample(ctx, wi, u1),
+            Bsdf::Plastic(b) => b.sample(ctx, wi, u1, u2),
+            Bsdf::ThinFilm(b) => b.sample(ctx, wi, u2, c),
+            Bsdf::TwoSided(b) => {
+                if wi.z < 0.0 {
+                    let mut s = b.sample(ctx, Vec3::new(wi.x, wi.y, -wi.z), u1, u2, c)?;
+                    s.wo.z = -s.wo.z;
+                    Some(s)
+                } else {
+                    b.sample(ctx, wi, u1, u2, c)
+                }
+            }
+        }?;
+        (s.pdf > 0.0 && s.weight.is_finite() && s.wo.is_finite()).then_some(s)
+    }
+
+    /// Whether the BSDF has a non-delta component (worth light sampling).
+    pub fn has_smooth_component(&self) -> bool {
+        match self {
+            Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
+            Bsdf::Conductor(b) => b.ggx.is_some(),
+            Bsdf::ThinFilm(b) => b.ggx.is_some(),
+            Bsdf::Dielectric(_) => false,
+            Bsdf::TwoSided(b) => b.has_smooth_component(),
+        }
+    }
+
+    /// Whether the BSDF scatters only on the front side of its shading normal.
+    pub fn is_one_sided(&self) -> bool {
+        !matches!(self, Bsdf::Dielectric(_) | Bsdf::TwoSided(_))
+    }
+}
+
+fn check_alpha(alpha: f32, what: &str) -> anyhow::Result<()> {
+    if alpha.is_finite() && alpha >= 0.0 {
+        Ok(())
+    } else {
+        anyhow::bail!("{what} must be finite and ≥ 0, got {alpha}")
+    }
+}
+
+#[inline]
+fn two_sided_flip(mut wi: Vec3, mut wo: Vec3) -> (Vec3, Vec3) {
+    if wi.z < 0.0 {
+        wi.z = -wi.z;
+        wo.z = -wo.z;
+    }
+    (wi, wo)
+}
+
+#[cfg(test)]
+mod tests;

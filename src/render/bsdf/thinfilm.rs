@@ -1,0 +1,107 @@
+//! Opaque thin film on a substrate (design.md "The thin-film BSDF"): the Fresnel term is the
+//! Airy single-film reflectance R(λ, θ) of [`crate::optics::ThinFilm`] (seed eq. 4), averaged
+//! over s and p. Smooth: a mirror lobe weighted by R. Rough (α > 0): a GGX microfacet lobe with
+//! the Airy term evaluated at the microfacet angle (the "rough thin film" of Belcour & Barla
+//! 2017 without their spectral antialiasing). Light transmitted into the substrate is absorbed.
+//! One-sided.
+
+use super::fresnel::{reflect, reflect_local};
+use super::microfacet::Ggx;
+use super::{BsdfSample, Counters, ShadingCtx};
+use crate::optics::{Ior, ThinFilm};
+use crate::render::texture::{Spec, Texture};
+use glam::{Vec2, Vec3};
+
+#[derive(Debug, Clone)]
+pub struct ThinFilmBsdf {
+    pub film_ior: Ior,
+    pub thickness_nm: Texture,
+    pub substrate_ior: Ior,
+    /// None = smooth.
+    pub ggx: Option<Ggx>,
+}
+
+impl ThinFilmBsdf {
+    /// The film at one wavelength for a given thickness (negative/NaN thickness → 0: a texture
+    /// hole shows the bare substrate instead of poisoning the image).
+    #[inline]
+    pub fn film_at(&self, lambda_nm: f32, thickness_nm: f32) -> ThinFilm {
+        let d = if thickness_nm.is_finite() && thickness_nm > 0.0 { thickness_nm as f64 } else { 0.0 };
+        ThinFilm {
+            ambient_ior: 1.0,
+            film_ior: self.film_ior.at(lambda_nm as f64),
+            thickness_nm: d,
+            substrate_ior: self.substrate_ior.at(lambda_nm as f64),
+        }
+    }
+
+    /// Unpolarised (R, T) at the four wavelengths for `cos θ` at the film.
+    #[inline]
+    pub fn reflect_transmit(&self, ctx: &ShadingCtx, cos_theta: f32, counters: &mut Counters) -> (Spec, Spec) {
+        counters.film_evals += 1;
+        let d = self.thickness_nm.eval_scalar(ctx.uv);
+        let mut r = [0.0f32; 4];
+        let mut t = [0.0f32; 4];
+        for k in 0..4 {
+            let resp = self.film_at(ctx.wl.lambda[k], d).response(ctx.wl.lambda[k] as f64, cos_theta.clamp(0.0, 1.0) as f64);
+            let (rk, tk) = (resp.r(), resp.t());
+            r[k] = if rk.is_finite() { rk.clamp(0.0, 1.0) as f32 } else { 0.0 };
+            t[k] = if tk.is_finite() { tk.max(0.0) as f32 } else { 0.0 };
+        }
+        (Spec::from_array(r), Spec::from_array(t))
+    }
+
+    #[inline]
+    fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32, counters: &mut Counters) -> Spec {
+        self.reflect_transmit(ctx, cos_theta, counters).0
+    }
+
+    pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3, counters: &mut Counters) -> Spec {
+        let Some(ggx) = self.ggx else { return Spec::ZERO };
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return Spec::ZERO;
+        }
+        let m = (wi + wo).normalize();
+        let d = ggx.d(m);
+        if d == 0.0 {
+            return Spec::ZERO;
+        }
+        let g = ggx.g(wi, wo, m);
+        self.reflectance(ctx, wi.dot(m), counters) * (d * g / (4.0 * wi.z))
+    }
+
+    pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
+        let Some(ggx) = self.ggx else { return 0.0 };
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return 0.0;
+        }
+        let m = (wi + wo).normalize();
+        let dot = wo.dot(m);
+        if dot <= 0.0 {
+            return 0.0;
+        }
+        ggx.pdf_visible(wi, m) / (4.0 * dot)
+    }
+
+    pub fn sample(&self, ctx: &ShadingCtx, wi: Vec3, u: Vec2, counters: &mut Counters) -> Option<BsdfSample> {
+        if wi.z <= 0.0 {
+            return None;
+        }
+        match self.ggx {
+            None => Some(BsdfSample::delta(reflect_local(wi), self.reflectance(ctx, wi.z, counters))),
+            Some(ggx) => {
+                let m = ggx.sample_visible(wi, u);
+                let wo = reflect(wi, m);
+                if wo.z <= 0.0 {
+                    return None;
+                }
+                let pdf = ggx.pdf_visible(wi, m) / (4.0 * wo.dot(m));
+                if !(pdf > 0.0 && pdf.is_finite()) {
+                    return None;
+                }
+                let weight = self.reflectance(ctx, wi.dot(m), counters) * ggx.g1(wo, m);
+                Some(BsdfSample::smooth(wo, weight, pdf))
+            }
+        }
+    }
+}

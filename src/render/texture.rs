@@ -1,0 +1,318 @@
+//! Spectra and textures as the renderer evaluates them: scene descriptions
+//! ([`crate::scene::SpectrumDesc`], [`crate::scene::TextureDesc`]) turned into values at the
+//! four path wavelengths. RGB reflectances use Jakob & Hanika 2019 upsampling, RGB emitters
+//! Mitsuba's `srgb_d65` (conventions.md "Environment map").
+
+use crate::scene::{BitmapTexture, SpectrumDesc, TextureDesc, TextureFilter, WrapMode};
+use crate::spectrum::{
+    rgb2spec::srgb_reflectance, RgbIlluminantSpectrum, RgbSigmoidPolynomial, SampledWavelengths,
+};
+use glam::{Mat3, Vec2, Vec3, Vec4};
+use std::sync::Arc;
+
+/// A spectrum at the four path wavelengths (one lane per wavelength).
+pub type Spec = Vec4;
+
+/// Wavelengths of a path as a `Vec4` (nm).
+#[inline]
+pub fn lambdas(wl: &SampledWavelengths) -> Vec4 {
+    Vec4::from_array(wl.lambda)
+}
+
+/// A spectrum ready for evaluation.
+#[derive(Debug, Clone)]
+pub enum Spectrum {
+    Constant(f32),
+    /// Bounded RGB reflectance (sigmoid polynomial).
+    Albedo(RgbSigmoidPolynomial),
+    /// RGB emitter: scale · polynomial · normalised D65.
+    Illuminant(RgbIlluminantSpectrum),
+    /// Piecewise-linear (λ nm ascending, value), held constant beyond its ends.
+    Tabulated(Arc<[(f32, f32)]>),
+    /// Normalised D65 times a scale.
+    D65(f32),
+}
+
+impl Spectrum {
+    /// A reflectance (BSDF parameter): RGB is upsampled without an illuminant.
+    pub fn reflectance(desc: &SpectrumDesc) -> Self {
+        match desc {
+            SpectrumDesc::Constant(v) => Spectrum::Constant(*v),
+            SpectrumDesc::Rgb(rgb) if rgb[0] == rgb[1] && rgb[1] == rgb[2] => {
+                Spectrum::Constant(rgb[0])
+            }
+            SpectrumDesc::Rgb(rgb) => Spectrum::Albedo(srgb_reflectance(*rgb)),
+            SpectrumDesc::Tabulated(t) => Spectrum::Tabulated(t.clone().into()),
+            SpectrumDesc::D65 { scale } => Spectrum::D65(*scale),
+        }
+    }
+
+    /// An emitter's radiance: RGB uses Mitsuba's `srgb_d65`.
+    pub fn illuminant(desc: &SpectrumDesc) -> Self {
+        match desc {
+            SpectrumDesc::Rgb(rgb) => Spectrum::Illuminant(RgbIlluminantSpectrum::new(*rgb)),
+            other => Spectrum::reflectance(other),
+        }
+    }
+
+    #[inline]
+    pub fn eval(&self, wl: &SampledWavelengths) -> Spec {
+        match self {
+            Spectrum::Constant(v) => Spec::splat(*v),
+            Spectrum::Albedo(p) => Spec::from_array(wl.lambda.map(|l| p.eval(l))),
+            Spectrum::Illuminant(s) => Spec::from_array(wl.lambda.map(|l| s.eval(l))),
+            Spectrum::Tabulated(t) => Spec::from_array(wl.lambda.map(|l| tabulated(t, l))),
+            Spectrum::D65(scale) => {
+                // RGB (1,1,1) as an illuminant is the normalised D65 curve (scale 2, flat 0.5).
+                let white = RgbIlluminantSpectrum::new([1.0; 3]);
+                Spec::from_array(wl.lambda.map(|l| scale * white.eval(l)))
+            }
+        }
+    }
+
+    /// A wavelength-independent summary used only to weight sampling strategies.
+    pub fn mean_hint(&self) -> f32 {
+        match self {
+            Spectrum::Constant(v) => *v,
+            Spectrum::Albedo(p) => {
+                let s: f32 = (0..16).map(|i| p.eval(400.0 + 20.0 * i as f32)).sum();
+                s / 16.0
+            }
+            Spectrum::Illuminant(s) => s.scale,
+            Spectrum::Tabulated(t) => t.iter().map(|p| p.1).sum::<f32>() / t.len().max(1) as f32,
+            Spectrum::D65(s) => *s,
+        }
+    }
+
+    /// Whether the value is the same at every wavelength.
+    pub fn is_constant(&self) -> bool {
+        matches!(self, Spectrum::Constant(_))
+    }
+}
+
+fn tabulated(t: &[(f32, f32)], lambda: f32) -> f32 {
+    if t.is_empty() {
+        return 0.0;
+    }
+    if lambda <= t[0].0 {
+        return t[0].1;
+    }
+    if lambda >= t[t.len() - 1].0 {
+        return t[t.len() - 1].1;
+    }
+    let i = t.partition_point(|p| p.0 <= lambda).clamp(1, t.len() - 1);
+    let (l0, v0) = t[i - 1];
+    let (l1, v1) = t[i];
+    let f = if l1 > l0 { (lambda - l0) / (l1 - l0) } else { 0.0 };
+    v0 + f * (v1 - v0)
+}
+
+/// A texture evaluated at surface UVs.
+#[derive(Debug, Clone)]
+pub enum Texture {
+    Value(Spectrum),
+    Bitmap(Arc<BitmapTexture>),
+    Checkerboard {
+        color0: Spectrum,
+        color1: Spectrum,
+        to_uv: Mat3,
+    },
+}
+
+impl Texture {
+    /// A reflectance-like texture (RGB bitmaps upsampled as reflectances).
+    pub fn new(desc: &TextureDesc) -> Self {
+        match desc {
+            TextureDesc::Value(v) => Texture::Value(Spectrum::reflectance(v)),
+            TextureDesc::Bitmap(b) => Texture::Bitmap(b.clone()),
+            TextureDesc::Checkerboard {
+                color0,
+                color1,
+                to_uv,
+            } => Texture::Checkerboard {
+                color0: Spectrum::reflectance(color0),
+                color1: Spectrum::reflectance(color1),
+                to_uv: *to_uv,
+            },
+        }
+    }
+
+    /// Spectral value at `uv`.
+    pub fn eval(&self, uv: Vec2, wl: &SampledWavelengths) -> Spec {
+        match self {
+            Texture::Value(s) => s.eval(wl),
+            Texture::Bitmap(b) => {
+                let v = bitmap_lookup(b, uv);
+                if b.channels >= 3 {
+                    let rgb = [v[0], v[1], v[2]];
+                    if rgb[0] == rgb[1] && rgb[1] == rgb[2] {
+                        Spec::splat(rgb[0])
+                    } else {
+                        let p = srgb_reflectance(rgb);
+                        Spec::from_array(wl.lambda.map(|l| p.eval(l)))
+                    }
+                } else {
+                    Spec::splat(v[0])
+                }
+            }
+            Texture::Checkerboard {
+                color0,
+                color1,
+                to_uv,
+            } => {
+                if checker_is_first(*to_uv, uv) {
+                    color0.eval(wl)
+                } else {
+                    color1.eval(wl)
+                }
+            }
+        }
+    }
+
+    /// Scalar value at `uv` (thickness maps, roughness): first channel, or the constant /
+    /// mean of a spectrum. A bitmap with `value_range` maps [0,1] onto (min, max).
+    pub fn eval_scalar(&self, uv: Vec2) -> f32 {
+        match self {
+            Texture::Value(s) => s.mean_hint(),
+            Texture::Bitmap(b) => {
+                // glTF iridescence thickness lives in the G channel.
+                let v = bitmap_lookup(b, uv);
+                match b.value_range {
+                    Some((lo, hi)) => {
+                        let g = if b.channels >= 3 { v[1] } else { v[0] };
+                        lo + g * (hi - lo)
+                    }
+                    None => v[0],
+                }
+            }
+            Texture::Checkerboard {
+                color0,
+                color1,
+                to_uv,
+            } => {
+                if checker_is_first(*to_uv, uv) {
+                    color0.mean_hint()
+                } else {
+                    color1.mean_hint()
+                }
+            }
+        }
+    }
+
+    /// Whether the value varies over the surface.
+    pub fn is_varying(&self) -> bool {
+        !matches!(self, Texture::Value(_))
+    }
+
+    /// Whether the texture is a constant equal to `v` everywhere.
+    pub fn constant_scalar(&self) -> Option<f32> {
+        match self {
+            Texture::Value(Spectrum::Constant(c)) => Some(*c),
+            _ => None,
+        }
+    }
+}
+
+fn checker_is_first(to_uv: Mat3, uv: Vec2) -> bool {
+    let p = to_uv * Vec3::new(uv.x, uv.y, 1.0);
+    let fu = p.x - p.x.floor();
+    let fv = p.y - p.y.floor();
+    // Mitsuba: color0 where both or neither fractional part is below 0.5.
+    (fu < 0.5) == (fv < 0.5)
+}
+
+fn wrap_index(i: i64, n: usize, mode: WrapMode) -> usize {
+    let n = n as i64;
+    let r = match mode {
+        WrapMode::Repeat => i.rem_euclid(n),
+        WrapMode::Clamp => i.clamp(0, n - 1),
+        WrapMode::Mirror => {
+            let p = i.rem_euclid(2 * n);
+            if p >= n {
+                2 * n - 1 - p
+            } else {
+                p
+            }
+        }
+    };
+    r as usize
+}
+
+/// Bitmap lookup (Mitsuba: v = 0 is the bottom row of the image, so the row is flipped).
+fn bitmap_lookup(b: &BitmapTexture, uv: Vec2) -> [f32; 4] {
+    let mut out = [0.0f32; 4];
+    if b.width == 0 || b.height == 0 || b.channels == 0 {
+        return out;
+    }
+    let p = b.to_uv * Vec3::new(uv.x, uv.y, 1.0);
+    if !(p.x.is_finite() && p.y.is_finite()) {
+        return out;
+    }
+    let (w, h, c) = (b.width, b.height, b.channels.min(4));
+    let x = p.x * w as f32 - 0.5;
+    let y = (1.0 - p.y) * h as f32 - 0.5;
+    let texel = |ix: i64, iy: i64, o: &mut [f32; 4], weight: f32| {
+        let tx = wrap_index(ix, w, b.wrap);
+        let ty = wrap_index(iy, h, b.wrap);
+        let base = (ty * w + tx) * b.channels;
+        for k in 0..c {
+            o[k] += weight * b.data[base + k];
+        }
+    };
+    match b.filter {
+        TextureFilter::Nearest => texel(
+            (x + 0.5).floor() as i64,
+            (y + 0.5).floor() as i64,
+            &mut out,
+            1.0,
+        ),
+        TextureFilter::Bilinear => {
+            let x0 = x.floor();
+            let y0 = y.floor();
+            let fx = x - x0;
+            let fy = y - y0;
+            let (ix, iy) = (x0 as i64, y0 as i64);
+            texel(ix, iy, &mut out, (1.0 - fx) * (1.0 - fy));
+            texel(ix + 1, iy, &mut out, fx * (1.0 - fy));
+            texel(ix, iy + 1, &mut out, (1.0 - fx) * fy);
+            texel(ix + 1, iy + 1, &mut out, fx * fy);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tabulated_interpolates_and_clamps() {
+        let t = [(400.0, 1.0), (500.0, 3.0)];
+        assert_eq!(tabulated(&t, 300.0), 1.0);
+        assert_eq!(tabulated(&t, 450.0), 2.0);
+        assert_eq!(tabulated(&t, 900.0), 3.0);
+    }
+
+    #[test]
+    fn bitmap_scalar_lookup_and_range() {
+        let b = BitmapTexture {
+            width: 2,
+            height: 1,
+            channels: 1,
+            data: vec![100.0, 300.0],
+            filter: TextureFilter::Nearest,
+            wrap: WrapMode::Clamp,
+            to_uv: Mat3::IDENTITY,
+            value_range: None,
+            path: None,
+        };
+        let t = Texture::Bitmap(Arc::new(b.clone()));
+        assert_eq!(t.eval_scalar(Vec2::new(0.1, 0.5)), 100.0);
+        assert_eq!(t.eval_scalar(Vec2::new(0.9, 0.5)), 300.0);
+        let mut r = b;
+        r.data = vec![0.0, 1.0];
+        r.value_range = Some((200.0, 600.0));
+        let t = Texture::Bitmap(Arc::new(r));
+        assert_eq!(t.eval_scalar(Vec2::new(0.9, 0.5)), 600.0);
+    }
+}

@@ -1,0 +1,387 @@
+//! glTF 2.0 (`.gltf` / `.glb`) scenes via the `gltf` crate.
+//!
+//! What is read and how it maps onto [`Scene`]:
+//! - **Meshes**: every triangle primitive of every node of the default scene (or the first
+//!   scene), with node transforms composed down the hierarchy; positions, normals (inverse
+//!   transpose; computed smooth if absent), `TEXCOORD_0` (glTF's v runs down the image, the
+//!   same as Mitsuba's bitmap convention, so no flip). Point/line primitives are skipped
+//!   with a warning.
+//! - **Materials** (metallic-roughness), GGX α = roughness² (the glTF convention):
+//!   1. `KHR_materials_iridescence` with `iridescenceFactor` ≥ 0.5 → [`BsdfDesc::ThinFilm`]:
+//!      film index `iridescenceIor` (default 1.3), thickness `iridescenceThicknessMaximum`
+//!      (default 400 nm) or, with `iridescenceThicknessTexture`, its **G channel** v ∈ [0,1]
+//!      mapped through `value_range = (min, max)` (defaults 100, 400 nm); substrate index
+//!      from `KHR_materials_ior` (default 1.5), k = 0. The factor is treated as on/off (the
+//!      thin-film BSDF does not blend with the base layer); factors in (0, 0.5) are ignored
+//!      with a warning.
+//!   2. `KHR_materials_transmission` factor ≥ 0.5 → [`BsdfDesc::Dielectric`] (ior, α).
+//!   3. metallic ≥ 0.5 → [`BsdfDesc::Conductor`] with a grey complex index that reproduces
+//!      the normal-incidence reflectance F0 = luminance(baseColor): n = 1, k = 2·√(F0/(1−F0))
+//!      (from R = ((n−1)² + k²)/((n+1)² + k²)). The hue of coloured metals is lost.
+//!   4. otherwise → [`BsdfDesc::Plastic`]: diffuse = baseColor (factor × sRGB-decoded
+//!      texture), int_ior = `KHR_materials_ior` (default 1.5), α = roughness².
+//!   Emissive factor × `KHR_materials_emissive_strength` > 0 → area emission (linear RGB).
+//! - **Camera**: the first perspective camera found on a node (glTF cameras look down −Z,
+//!   Mitsuba's down +Z: the camera frame is rotated 180° about Y); `yfov` → `fov_axis = y`;
+//!   `aspectRatio` sets the film width for a height of 512. Without one, a default camera
+//!   frames the bounding box.
+//! - **Lighting**: glTF has no environment; the studio environment is always added.
+
+use super::{
+    default_camera, default_environment, shapes_bounds, BitmapTexture, BsdfDesc, Camera,
+    FilmSettings, FovAxis, Geometry, IntegratorSettings, ReconstructionFilter, Scene, Shape,
+    SpectrumDesc, TextureDesc, TextureFilter, TriangleMesh, WrapMode, DEFAULT_RESOLUTION,
+    DEFAULT_SPP,
+};
+use crate::optics::{Complex64, Ior};
+use anyhow::{anyhow, bail, Context, Result};
+use glam::{Mat4, Vec2, Vec3};
+use gltf::image::Format;
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// One channel of a decoded glTF image as floats in [0,1] (row-major, top row first).
+fn image_channel(img: &gltf::image::Data, channel: usize) -> Result<Vec<f32>> {
+    let (n, bytes_per) = match img.format {
+        Format::R8 => (1, 1),
+        Format::R8G8 => (2, 1),
+        Format::R8G8B8 => (3, 1),
+        Format::R8G8B8A8 => (4, 1),
+        Format::R16 => (1, 2),
+        Format::R16G16 => (2, 2),
+        Format::R16G16B16 => (3, 2),
+        Format::R16G16B16A16 => (4, 2),
+        Format::R32G32B32FLOAT => (3, 4),
+        Format::R32G32B32A32FLOAT => (4, 4),
+    };
+    if channel >= n {
+        bail!("image has {n} channel(s), channel {channel} requested");
+    }
+    let stride = n * bytes_per;
+    let count = img.width as usize * img.height as usize;
+    if img.pixels.len() < count * stride {
+        bail!("image data is truncated");
+    }
+    Ok((0..count)
+        .map(|i| {
+            let o = i * stride + channel * bytes_per;
+            match bytes_per {
+                1 => img.pixels[o] as f32 / 255.0,
+                2 => u16::from_le_bytes([img.pixels[o], img.pixels[o + 1]]) as f32 / 65535.0,
+                _ => f32::from_le_bytes(img.pixels[o..o + 4].try_into().unwrap()),
+            }
+        })
+        .collect())
+}
+
+fn wrap_mode(m: gltf::texture::WrappingMode) -> WrapMode {
+    match m {
+        gltf::texture::WrappingMode::ClampToEdge => WrapMode::Clamp,
+        gltf::texture::WrappingMode::MirroredRepeat => WrapMode::Mirror,
+        gltf::texture::WrappingMode::Repeat => WrapMode::Repeat,
+    }
+}
+
+fn filter_of(t: &gltf::Texture) -> TextureFilter {
+    match t.sampler().mag_filter() {
+        Some(gltf::texture::MagFilter::Nearest) => TextureFilter::Nearest,
+        _ => TextureFilter::Bilinear,
+    }
+}
+
+struct Loader<'a> {
+    doc: &'a gltf::Document,
+    images: &'a [gltf::image::Data],
+    file: String,
+    materials: HashMap<Option<usize>, (usize, Option<SpectrumDesc>)>,
+    bsdfs: Vec<BsdfDesc>,
+}
+
+impl Loader<'_> {
+    fn texture_image(&self, tex_index: usize) -> Result<(&gltf::image::Data, gltf::Texture<'_>)> {
+        let tex = self
+            .doc
+            .textures()
+            .nth(tex_index)
+            .with_context(|| format!("{}: texture {tex_index} does not exist", self.file))?;
+        let img = self
+            .images
+            .get(tex.source().index())
+            .with_context(|| format!("{}: image {} was not loaded", self.file, tex.source().index()))?;
+        Ok((img, tex))
+    }
+
+    fn material(&mut self, m: &gltf::Material) -> Result<(usize, Option<SpectrumDesc>)> {
+        if let Some(v) = self.materials.get(&m.index()) {
+            return Ok(v.clone());
+        }
+        let what = format!(
+            "{}: material {}",
+            self.file,
+            m.name().map(str::to_string).unwrap_or_else(|| format!("#{:?}", m.index()))
+        );
+        let pbr = m.pbr_metallic_roughness();
+        let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
+        let alpha = roughness * roughness;
+        let ior = m.ior().unwrap_or(1.5) as f64;
+        let irid = m.extension_value("KHR_materials_iridescence");
+        let factor = irid
+            .and_then(|v| v.get("iridescenceFactor"))
+            .and_then(|x| x.as_f64())
+            .unwrap_or(0.0);
+        let bsdf = if factor >= 0.5 {
+            let v = irid.unwrap();
+            let num = |k: &str, d: f64| v.get(k).and_then(|x| x.as_f64()).unwrap_or(d);
+            let film_n = v
+                .get("iridescenceIor")
+                .or_else(|| v.get("iridescenceIOR"))
+                .and_then(|x| x.as_f64())
+                .unwrap_or(1.3);
+            let tmin = num("iridescenceThicknessMinimum", 100.0) as f32;
+            let tmax = num("iridescenceThicknessMaximum", 400.0) as f32;
+            if !(film_n > 0.0 && tmin >= 0.0 && tmax >= 0.0) {
+                bail!("{what}: iridescence needs ior > 0 and thicknesses ≥ 0");
+            }
+            let thickness_nm = match v.get("iridescenceThicknessTexture") {
+                None => TextureDesc::Value(SpectrumDesc::Constant(tmax)),
+                Some(t) => {
+                    let index = t
+                        .get("index")
+                        .and_then(|x| x.as_u64())
+                        .with_context(|| format!("{what}: iridescenceThicknessTexture has no index"))?
+                        as usize;
+                    if t.get("texCoord").and_then(|x| x.as_u64()).unwrap_or(0) != 0 {
+                        eprintln!("warning: {what}: thickness texture uses texCoord ≠ 0; TEXCOORD_0 is used");
+                    }
+                    let (img, tex) = self.texture_image(index)?;
+                    // G channel, linear data (not colour).
+                    let g = image_channel(img, 1).with_context(|| format!("{what}: thickness texture"))?;
+                    let mut b = BitmapTexture::new(img.width as usize, img.height as usize, 1, g)?;
+                    b.value_range = Some((tmin, tmax));
+                    b.wrap = wrap_mode(tex.sampler().wrap_s());
+                    b.filter = filter_of(&tex);
+                    TextureDesc::Bitmap(Arc::new(b))
+                }
+            };
+            BsdfDesc::ThinFilm {
+                film_ior: Ior::real(film_n),
+                thickness_nm,
+                substrate_ior: Ior::real(ior),
+                alpha,
+            }
+        } else {
+            if factor > 0.0 {
+                eprintln!("warning: {what}: iridescenceFactor {factor} < 0.5 is ignored (thin film is on/off)");
+            }
+            let transmission = m.transmission().map(|t| t.transmission_factor()).unwrap_or(0.0);
+            let base = pbr.base_color_factor();
+            if transmission >= 0.5 {
+                BsdfDesc::Dielectric {
+                    int_ior: Ior::real(ior),
+                    ext_ior: Ior::real(1.0),
+                    alpha,
+                }
+            } else if pbr.metallic_factor() >= 0.5 {
+                let f0 = (0.2126 * base[0] + 0.7152 * base[1] + 0.0722 * base[2]).clamp(0.0, 0.999) as f64;
+                let k = 2.0 * (f0 / (1.0 - f0)).sqrt();
+                BsdfDesc::Conductor {
+                    eta: Ior::Constant(Complex64::new(1.0, k)),
+                    alpha_u: alpha,
+                    alpha_v: alpha,
+                }
+            } else {
+                let diffuse = match pbr.base_color_texture() {
+                    None => TextureDesc::Value(SpectrumDesc::Rgb([base[0], base[1], base[2]])),
+                    Some(info) => {
+                        let (img, tex) = self.texture_image(info.texture().index())?;
+                        let planes: Vec<Vec<f32>> = (0..3)
+                            .map(|c| image_channel(img, c.min(channel_count(img.format) - 1)))
+                            .collect::<Result<_>>()?;
+                        let data = (0..planes[0].len())
+                            .flat_map(|i| (0..3).map(move |c| (i, c)))
+                            .map(|(i, c)| srgb_to_linear(planes[c][i]) * base[c])
+                            .collect();
+                        let mut b = BitmapTexture::new(img.width as usize, img.height as usize, 3, data)?;
+                        b.wrap = wrap_mode(tex.sampler().wrap_s());
+                        b.filter = filter_of(&tex);
+                        TextureDesc::Bitmap(Arc::new(b))
+                    }
+                };
+                BsdfDesc::Plastic {
+                    diffuse_reflectance: diffuse,
+                    int_ior: ior as f32,
+                    ext_ior: 1.0,
+                    alpha,
+                    nonlinear: false,
+                }
+            }
+        };
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        let e = m.emissive_factor().map(|c| c * strength);
+        let emission = e.iter().any(|&c| c > 0.0).then_some(SpectrumDesc::Rgb(e));
+        self.bsdfs.push(bsdf);
+        let entry = (self.bsdfs.len() - 1, emission);
+        self.materials.insert(m.index(), entry.clone());
+        Ok(entry)
+    }
+}
+
+fn channel_count(f: Format) -> usize {
+    match f {
+        Format::R8 | Format::R16 => 1,
+        Format::R8G8 | Format::R16G16 => 2,
+        Format::R8G8B8 | Format::R16G16B16 | Format::R32G32B32FLOAT => 3,
+        _ => 4,
+    }
+}
+
+/// Loads a `.gltf` or `.glb` file (see the module docs for the mapping).
+pub fn load_gltf(path: &Path) -> Result<Scene> {
+    if !path.is_file() {
+        bail!("glTF file {} does not exist", path.display());
+    }
+    let file = path.display().to_string();
+    let (doc, buffers, images) = gltf::import(path)
+        .map_err(|e| anyhow!("{e}"))
+        .with_context(|| format!("reading glTF {file}"))?;
+    let mut loader = Loader {
+        doc: &doc,
+        images: &images,
+        file: file.clone(),
+        materials: HashMap::new(),
+        bsdfs: Vec::new(),
+    };
+    let scene = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .with_context(|| format!("{file}: no scene"))?;
+    let mut shapes = Vec::new();
+    let mut camera: Option<(Camera, Option<f32>)> = None;
+    let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        for c in node.children() {
+            stack.push((c, world));
+        }
+        if let (None, Some(cam)) = (&camera, node.camera()) {
+            if let gltf::camera::Projection::Perspective(p) = cam.projection() {
+                // glTF looks down −Z with +X right; Mitsuba looks down +Z with +X left.
+                let to_world = world * Mat4::from_rotation_y(std::f32::consts::PI);
+                let znear = p.znear().max(1e-6);
+                camera = Some((
+                    Camera {
+                        to_world,
+                        fov_deg: p.yfov().to_degrees(),
+                        fov_axis: FovAxis::Y,
+                        near_clip: znear,
+                        far_clip: p.zfar().unwrap_or(1e4).max(znear * 2.0),
+                    },
+                    p.aspect_ratio(),
+                ));
+            }
+        }
+        let Some(mesh) = node.mesh() else { continue };
+        for prim in mesh.primitives() {
+            let what = format!(
+                "{file}: mesh {} primitive {}",
+                mesh.name().map(str::to_string).unwrap_or_else(|| mesh.index().to_string()),
+                prim.index()
+            );
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                eprintln!("warning: {what}: mode {:?} is not triangles; skipped", prim.mode());
+                continue;
+            }
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+            let positions: Vec<Vec3> = reader
+                .read_positions()
+                .with_context(|| format!("{what}: no POSITION"))?
+                .map(Vec3::from)
+                .collect();
+            let normals: Vec<Vec3> = reader
+                .read_normals()
+                .map(|n| n.map(Vec3::from).collect())
+                .unwrap_or_default();
+            let uvs: Vec<Vec2> = reader
+                .read_tex_coords(0)
+                .map(|t| t.into_f32().map(Vec2::from).collect())
+                .unwrap_or_default();
+            let flat: Vec<u32> = match reader.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..positions.len() as u32).collect(),
+            };
+            if flat.len() % 3 != 0 {
+                bail!("{what}: index count {} is not a multiple of 3", flat.len());
+            }
+            let mut m = TriangleMesh {
+                normals: if normals.len() == positions.len() { normals } else { Vec::new() },
+                uvs: if uvs.len() == positions.len() { uvs } else { Vec::new() },
+                positions,
+                indices: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            };
+            m.validate(&what)?;
+            m.ensure_normals();
+            m.transform(&world);
+            if world.determinant() < 0.0 {
+                // A mirroring node transform flips the winding; glTF says to reverse it.
+                for t in &mut m.indices {
+                    t.swap(1, 2);
+                }
+            }
+            let (bsdf, emission) = loader.material(&prim.material())?;
+            shapes.push(Shape {
+                geometry: Geometry::Mesh(m),
+                bsdf,
+                emission,
+                name: mesh.name().map(str::to_string),
+            });
+        }
+    }
+    if shapes.is_empty() {
+        bail!("{file}: the scene has no triangle meshes");
+    }
+    let mut bsdfs = std::mem::take(&mut loader.bsdfs);
+    if bsdfs.is_empty() {
+        bsdfs.push(BsdfDesc::default_diffuse());
+    }
+    let (camera, film) = match camera {
+        Some((c, aspect)) => {
+            let h = DEFAULT_RESOLUTION.1;
+            let w = aspect
+                .filter(|a| a.is_finite() && *a > 0.0)
+                .map_or(DEFAULT_RESOLUTION.0, |a| ((h as f32 * a).round() as u32).max(1));
+            (
+                c,
+                FilmSettings {
+                    width: w,
+                    height: h,
+                    filter: ReconstructionFilter::Box,
+                },
+            )
+        }
+        None => (
+            default_camera(shapes_bounds(&shapes).unwrap()),
+            FilmSettings::default(),
+        ),
+    };
+    Ok(Scene {
+        camera,
+        film,
+        integrator: IntegratorSettings::default(),
+        spp: DEFAULT_SPP,
+        seed: 0,
+        shapes,
+        bsdfs,
+        emitters: vec![default_environment()],
+        polarizer: None,
+        source: Some(path.to_path_buf()),
+    })
+}

@@ -1,0 +1,290 @@
+//! End-to-end renderer tests on small programmatic scenes: furnace, determinism across thread
+//! counts and sample-range splits, effect analysis, finiteness at grazing views and zero
+//! thickness films.
+
+use glam::{Vec2, Vec3};
+use thinfilm::optics::Ior;
+use thinfilm::render::{render, RenderOptions};
+use thinfilm::scene::*;
+
+fn camera(origin: Vec3, target: Vec3, fov: f32) -> Camera {
+    Camera { to_world: look_at(origin, target, Vec3::Y), fov_deg: fov, fov_axis: FovAxis::X, near_clip: 0.01, far_clip: 1000.0 }
+}
+
+fn base_scene(shapes: Vec<Shape>, bsdfs: Vec<BsdfDesc>, emitters: Vec<EmitterDesc>, res: u32, spp: u32) -> Scene {
+    Scene {
+        camera: camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 40.0),
+        film: FilmSettings { width: res, height: res, filter: ReconstructionFilter::Box },
+        integrator: IntegratorSettings::default(),
+        spp,
+        seed: 0,
+        shapes,
+        bsdfs,
+        emitters,
+        polarizer: None,
+        source: None,
+    }
+}
+
+fn constant(v: f32) -> TextureDesc {
+    TextureDesc::Value(SpectrumDesc::Constant(v))
+}
+
+fn sphere(bsdf: usize) -> Shape {
+    Shape { geometry: Geometry::Sphere { center: Vec3::ZERO, radius: 1.0, flip_normals: false }, bsdf, emission: None, name: Some("ball".into()) }
+}
+
+/// A quad (two triangles) in the plane y = `y`, facing +Y, with UVs.
+fn floor(y: f32, half: f32, bsdf: usize) -> Shape {
+    let mesh = TriangleMesh {
+        positions: vec![
+            Vec3::new(-half, y, -half),
+            Vec3::new(half, y, -half),
+            Vec3::new(half, y, half),
+            Vec3::new(-half, y, half),
+        ],
+        normals: vec![Vec3::Y; 4],
+        uvs: vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)],
+        indices: vec![[0, 2, 1], [0, 3, 2]],
+    };
+    Shape { geometry: Geometry::Mesh(mesh), bsdf, emission: None, name: Some("floor".into()) }
+}
+
+fn white_env() -> EmitterDesc {
+    EmitterDesc::Constant { radiance: SpectrumDesc::Constant(1.0) }
+}
+
+fn thin_film(alpha: f32, thickness: f32) -> BsdfDesc {
+    BsdfDesc::ThinFilm { film_ior: Ior::real(1.37), thickness_nm: constant(thickness), substrate_ior: Ior::real(1.64), alpha }
+}
+
+fn assert_all_finite(img: &thinfilm::image_io::RgbImage, what: &str) {
+    for (i, p) in img.pixels.iter().enumerate() {
+        assert!(p.iter().all(|v| v.is_finite()), "{what}: pixel ({}, {}) = {p:?}", i % img.width, i / img.width);
+    }
+}
+
+/// White furnace: a diffuse albedo-1 sphere in a constant white environment is invisible —
+/// every pixel equals the background (whose colour is that of the flat spectrum) within 1 %.
+#[test]
+fn furnace_diffuse_sphere_is_invisible() {
+    let scene = base_scene(vec![sphere(0)], vec![BsdfDesc::Diffuse { reflectance: constant(1.0) }], vec![white_env()], 24, 256);
+    let out = render(&scene, &RenderOptions::default()).unwrap();
+    let bg = render(&base_scene(vec![], vec![], vec![white_env()], 4, 256), &RenderOptions::default()).unwrap();
+    let reference = bg.image.pixels[0];
+    let mut worst = 0.0f32;
+    for p in &out.image.pixels {
+        for c in 0..3 {
+            worst = worst.max((p[c] / reference[c] - 1.0).abs());
+        }
+    }
+    assert!(worst < 0.01, "furnace deviation {worst}");
+    // The sphere was actually hit (rays bounced).
+    assert!(out.stats.rays > out.stats.samples);
+    assert_eq!(out.stats.invalid_samples, 0);
+}
+
+/// Furnace through triangle meshes: a two-sided diffuse albedo-1 floor seen from above in a
+/// constant environment (BVH hits, MIS between BSDF and light sampling).
+#[test]
+fn furnace_two_sided_diffuse_quad() {
+    let mut scene = base_scene(
+        vec![floor(-0.5, 3.0, 0)],
+        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse { reflectance: constant(1.0) }))],
+        vec![white_env()],
+        16,
+        256,
+    );
+    scene.camera = camera(Vec3::new(0.0, 3.0, -2.0), Vec3::ZERO, 40.0);
+    let out = render(&scene, &RenderOptions::default()).unwrap();
+    let bg = render(&base_scene(vec![], vec![], vec![white_env()], 2, 16), &RenderOptions::default()).unwrap();
+    let reference = bg.image.pixels[0];
+    for p in &out.image.pixels {
+        for c in 0..3 {
+            assert!((p[c] / reference[c] - 1.0).abs() < 0.01, "{p:?} vs {reference:?}");
+        }
+    }
+}
+
+fn film_scene(res: u32, spp: u32) -> Scene {
+    let mut scene = base_scene(
+        vec![sphere(0), floor(-1.0, 4.0, 1)],
+        vec![thin_film(0.15, 400.0), BsdfDesc::Diffuse { reflectance: constant(0.6) }],
+        vec![
+            EmitterDesc::Constant { radiance: SpectrumDesc::Constant(0.8) },
+            EmitterDesc::Point { position: Vec3::new(2.0, 3.0, -2.0), intensity: SpectrumDesc::Constant(5.0) },
+        ],
+        res,
+        spp,
+    );
+    scene.camera = camera(Vec3::new(0.0, 1.0, -4.0), Vec3::ZERO, 45.0);
+    scene
+}
+
+fn bits(img: &thinfilm::image_io::RgbImage) -> Vec<u32> {
+    img.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect()
+}
+
+/// Same seed and spp: bit-identical images with 1 and 2 threads.
+#[test]
+fn deterministic_across_thread_counts() {
+    let scene = film_scene(20, 8);
+    let one = render(&scene, &RenderOptions { threads: Some(1), ..Default::default() }).unwrap();
+    let two = render(&scene, &RenderOptions { threads: Some(2), ..Default::default() }).unwrap();
+    assert_eq!(bits(&one.image), bits(&two.image));
+    let other_seed = render(&scene, &RenderOptions { threads: Some(2), seed: Some(9), ..Default::default() }).unwrap();
+    assert_ne!(bits(&one.image), bits(&other_seed.image));
+}
+
+/// Renders of samples 0:32 and 32:64 merge (sample-weighted mean) to exactly the 0:64 render,
+/// also after a round trip through EXR files.
+#[test]
+fn sample_ranges_merge_exactly() {
+    let scene = film_scene(12, 64);
+    let full = render(&scene, &RenderOptions { sample_range: Some((0, 64)), ..Default::default() }).unwrap();
+    let a = render(&scene, &RenderOptions { sample_range: Some((0, 32)), threads: Some(1), ..Default::default() }).unwrap();
+    let b = render(&scene, &RenderOptions { sample_range: Some((32, 64)), threads: Some(2), ..Default::default() }).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let (pa, pb) = (dir.path().join("a.exr"), dir.path().join("b.exr"));
+    thinfilm::image_io::write_exr_rgb(&pa, &a.image).unwrap();
+    thinfilm::image_io::write_exr_rgb(&pb, &b.image).unwrap();
+    let ra = thinfilm::image_io::read_exr_rgb(&pa).unwrap();
+    let rb = thinfilm::image_io::read_exr_rgb(&pb).unwrap();
+    for i in 0..full.image.pixels.len() {
+        for c in 0..3 {
+            let merged = (32.0 * ra.pixels[i][c] + 32.0 * rb.pixels[i][c]) / 64.0;
+            assert_eq!(merged.to_bits(), full.image.pixels[i][c].to_bits(), "pixel {i} channel {c}");
+        }
+    }
+    // The default range is the same as an explicit 0:spp.
+    let default = render(&scene, &RenderOptions::default()).unwrap();
+    assert_eq!(bits(&default.image), bits(&full.image));
+}
+
+/// Effect analysis: a scene without thin film never calls the film code; one with it does,
+/// and the log says why.
+#[test]
+fn effect_analysis_switches_interference() {
+    let plain = base_scene(
+        vec![sphere(0), floor(-1.0, 4.0, 1)],
+        vec![
+            BsdfDesc::Conductor { eta: "0.2+3.9i".parse().unwrap(), alpha_u: 0.2, alpha_v: 0.2 },
+            BsdfDesc::Diffuse { reflectance: constant(0.5) },
+            // Declared but used by no shape: must not switch interference on.
+            thin_film(0.0, 300.0),
+        ],
+        vec![white_env()],
+        12,
+        4,
+    );
+    let out = render(&plain, &RenderOptions::default()).unwrap();
+    assert!(!out.effects.interference && out.effects.rough && !out.effects.dispersion);
+    assert_eq!(out.stats.film_evals, 0);
+    assert!(out.effects.reasons.iter().any(|r| r.starts_with("interference: off")));
+
+    let film = film_scene(12, 4);
+    let out = render(&film, &RenderOptions::default()).unwrap();
+    assert!(out.effects.interference);
+    assert!(out.stats.film_evals > 0);
+    assert!(out.effects.reasons.iter().any(|r| r.starts_with("interference: ON")));
+
+    let mut polarised = film_scene(4, 1);
+    polarised.polarizer = Some(Polarizer::S);
+    let err = render(&polarised, &RenderOptions::default()).unwrap_err();
+    assert!(format!("{err:#}").contains("polariser"));
+}
+
+/// No NaN/inf: grazing views of a film-coated floor, zero-thickness films, smooth and rough,
+/// a camera inside a sphere, glass.
+#[test]
+fn no_nan_at_grazing_views_and_zero_thickness() {
+    for (alpha, d) in [(0.0, 0.0), (0.3, 0.0), (0.0, 400.0), (0.05, 1e5)] {
+        let mut scene = base_scene(
+            vec![floor(0.0, 100.0, 0), sphere(1)],
+            vec![thin_film(alpha, d), thin_film(alpha, d)],
+            vec![white_env()],
+            16,
+            8,
+        );
+        // Eye 1 mm above a 200 m floor: most rays graze it.
+        scene.camera = camera(Vec3::new(0.0, 1e-3, -50.0), Vec3::new(0.0, 1e-3, 0.0), 60.0);
+        let out = render(&scene, &RenderOptions::default()).unwrap();
+        assert_all_finite(&out.image, &format!("grazing film α={alpha} d={d}"));
+        assert_eq!(out.stats.invalid_samples, 0, "α={alpha} d={d}");
+    }
+    // Camera inside a diffuse sphere lit by a point light.
+    let mut scene = base_scene(
+        vec![sphere(0)],
+        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse { reflectance: constant(0.9) }))],
+        vec![EmitterDesc::Point { position: Vec3::new(0.2, 0.1, 0.0), intensity: SpectrumDesc::Constant(1.0) }],
+        12,
+        8,
+    );
+    scene.camera = camera(Vec3::ZERO, Vec3::Z, 90.0);
+    let out = render(&scene, &RenderOptions::default()).unwrap();
+    assert_all_finite(&out.image, "inside sphere");
+    assert!(out.image.pixels.iter().all(|p| p[1] > 0.0));
+    let glass = base_scene(
+        vec![sphere(0), floor(-1.0, 4.0, 1)],
+        vec![BsdfDesc::Dielectric { int_ior: Ior::real(1.5), ext_ior: Ior::real(1.0), alpha: 0.0 }, BsdfDesc::Diffuse { reflectance: constant(0.5) }],
+        vec![white_env()],
+        12,
+        8,
+    );
+    let out = render(&glass, &RenderOptions::default()).unwrap();
+    assert_all_finite(&out.image, "glass");
+    assert_eq!(out.stats.invalid_samples, 0);
+}
+
+/// max_depth 1 shows only directly visible emitters: the sphere is black, the sky is not.
+#[test]
+fn max_depth_one_shows_only_emitters() {
+    let scene = base_scene(vec![sphere(0)], vec![BsdfDesc::Diffuse { reflectance: constant(1.0) }], vec![white_env()], 16, 2);
+    let out = render(&scene, &RenderOptions { max_depth: Some(1), ..Default::default() }).unwrap();
+    assert_eq!(out.image.get(8, 8), [0.0; 3]);
+    assert!(out.image.get(0, 0)[1] > 0.5);
+}
+
+/// Tent and Gaussian reconstruction: deterministic and finite; a flat scene stays flat.
+#[test]
+fn splatting_filters_are_deterministic() {
+    for filter in [ReconstructionFilter::Tent { radius: 1.0 }, ReconstructionFilter::Gaussian { stddev: 0.5 }] {
+        let mut scene = film_scene(10, 4);
+        scene.film.filter = filter;
+        let one = render(&scene, &RenderOptions { threads: Some(1), ..Default::default() }).unwrap();
+        let two = render(&scene, &RenderOptions { threads: Some(2), ..Default::default() }).unwrap();
+        assert_eq!(bits(&one.image), bits(&two.image));
+        assert_all_finite(&one.image, "filter");
+        let mut flat = base_scene(vec![], vec![], vec![white_env()], 6, 2);
+        flat.film.filter = filter;
+        let out = render(&flat, &RenderOptions::default()).unwrap();
+        let p0 = out.image.pixels[0];
+        for p in &out.image.pixels {
+            for c in 0..3 {
+                assert!((p[c] - p0[c]).abs() <= 1e-5 * p0[c].abs());
+            }
+        }
+    }
+}
+
+/// Bad user input is an error, never a panic.
+#[test]
+fn bad_inputs_are_errors() {
+    let scene = film_scene(8, 4);
+    assert!(render(&scene, &RenderOptions { resolution: Some((0, 8)), ..Default::default() }).is_err());
+    assert!(render(&scene, &RenderOptions { sample_range: Some((5, 5)), ..Default::default() }).is_err());
+    assert!(render(&scene, &RenderOptions { max_depth: Some(0), ..Default::default() }).is_err());
+    assert!(render(&scene, &RenderOptions { threads: Some(0), ..Default::default() }).is_err());
+    let mut bad = film_scene(8, 4);
+    bad.shapes[0].bsdf = 99;
+    assert!(render(&bad, &RenderOptions::default()).is_err());
+    let mut bad = film_scene(8, 4);
+    bad.shapes.push(Shape {
+        geometry: Geometry::Mesh(TriangleMesh { positions: vec![Vec3::ZERO; 3], normals: vec![], uvs: vec![], indices: vec![[0, 1, 7]] }),
+        bsdf: 0,
+        emission: None,
+        name: Some("broken".into()),
+    });
+    let err = render(&bad, &RenderOptions::default()).unwrap_err();
+    assert!(format!("{err:#}").contains("broken"));
+}

@@ -1,1 +1,13 @@
-//! (to be built)
+//! Image comparison: metrics between two linear-sRGB renders ([`metrics`]) and the small
+//! drawing toolkit used for side-by-side figures and heat maps ([`figure`]).
+//!
+//! Convention throughout: the *second* image is the reference (`B` in `thinfilm compare A B`),
+//! so relative errors and biases are measured relative to it.
+
+pub mod figure;
+pub mod metrics;
+
+pub use figure::{compose_comparison, Canvas, Colormap};
+pub use metrics::{
+    check_same_size, compare_images, delta_e00_map, downsample_box, ImageMetrics, RELMSE_EPSILON,
+};

@@ -177,3 +177,22 @@ fn every_scene_loads() {
     }
     assert!(n >= 7, "expected the 7 scenes of issue 6, found {n}");
 }
+
+#[test]
+fn camera_matches_mitsuba() {
+    // Mitsuba 3.9.1: mi.load_file("scenes/teapot_diffuse.xml").sensors()[0].world_transform()
+    let s = load(Path::new("scenes/teapot_diffuse.xml"), &[]).unwrap();
+    let mitsuba_rows = [
+        [-0.934784, -0.129815, -0.330647, 4.0],
+        [0.0, 0.93083, -0.365452, 5.5],
+        [0.355218, -0.341619, -0.870125, 10.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let m = s.camera.to_world;
+    for (r, row) in mitsuba_rows.iter().enumerate() {
+        for (c, &v) in row.iter().enumerate() {
+            assert!((m.col(c)[r] - v).abs() < 1e-5, "({r},{c}): {} vs {v}", m.col(c)[r]);
+        }
+    }
+    assert_eq!((s.spp, s.film.width), (64, 256));
+}

@@ -398,6 +398,55 @@ fn bsdfs() {
         }
         b => panic!("{b:?}"),
     }
+    // Spectral eta/k: tabulated on the union grid, linear in between, clamped outside.
+    match bsdf(
+        r#"<bsdf type="conductor"><spectrum name="eta" value="400:0.5, 700:0.2"/><spectrum name="k" value="500:3, 600:4"/></bsdf>"#,
+    ) {
+        BsdfDesc::Conductor {
+            eta: eta @ Ior::Material(_),
+            ..
+        } => {
+            let c = eta.at(550.0);
+            assert!(
+                (c.re - 0.35).abs() < 1e-6 && (c.im - 3.5).abs() < 1e-6,
+                "{c}"
+            );
+            let c = eta.at(450.0);
+            assert!(
+                (c.re - 0.45).abs() < 1e-6 && (c.im - 3.0).abs() < 1e-6,
+                "{c}"
+            );
+            let c = eta.at(800.0);
+            assert!(
+                (c.re - 0.2).abs() < 1e-6 && (c.im - 4.0).abs() < 1e-6,
+                "{c}"
+            );
+        }
+        b => panic!("{b:?}"),
+    }
+    match bsdf(
+        r#"<bsdf type="thinfilm"><spectrum name="film_ior" value="400:1.40, 800:1.36"/><spectrum name="substrate_k" value="400:0.1, 800:0.3"/></bsdf>"#,
+    ) {
+        BsdfDesc::ThinFilm {
+            film_ior,
+            substrate_ior,
+            ..
+        } => {
+            assert!((film_ior.at(600.0).re - 1.38).abs() < 1e-6);
+            let c = substrate_ior.at(600.0);
+            assert!(
+                (c.re - 1.64).abs() < 1e-6 && (c.im - 0.2).abs() < 1e-6,
+                "{c}"
+            );
+        }
+        b => panic!("{b:?}"),
+    }
+    assert!(err(r#"<shape type="cube"><bsdf type="conductor"><rgb name="eta" value="0.2, 0.3, 0.4"/></bsdf></shape>"#).contains("RGB indices"));
+    assert!(err(r#"<shape type="cube"><bsdf type="thinfilm"><string name="substrate_ior" value="bk7"/><float name="substrate_k" value="0.1"/></bsdf></shape>"#).contains("named substrate"));
+    assert!(err(
+        r#"<shape type="cube"><bsdf type="conductor"><float name="eta" value="-1"/></bsdf></shape>"#
+    )
+    .contains("≥ 0"));
     // "none" = perfect mirror.
     assert!(
         matches!(bsdf(r#"<bsdf type="conductor"/>"#), BsdfDesc::Conductor { eta: Ior::Constant(c), alpha_u, .. } if c == Complex64::new(0.0, 1.0) && alpha_u == 0.0)

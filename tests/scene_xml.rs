@@ -91,7 +91,14 @@ fn defaults_and_overrides() {
         s.film.filter,
         ReconstructionFilter::Gaussian { stddev: 0.5 }
     );
-    assert_eq!(s.camera.fov_deg, 45.0);
+    // Mitsuba's default 50 mm focal length: fov_x = 2·atan(36/100) = 39.5978° (Mitsuba 3.9.1).
+    assert!((s.camera.fov_deg - 39.59775).abs() < 1e-4);
+    assert_eq!(s.camera.fov_axis, FovAxis::X);
+    let s =
+        load(r#"<sensor type="perspective"><string name="focal_length" value="35mm"/></sensor>"#)
+            .unwrap();
+    assert!((s.camera.fov_deg - 54.43222).abs() < 1e-4);
+    assert!(format!("{:#}", load(r#"<sensor type="perspective"><float name="fov" value="30"/><string name="focal_length" value="35mm"/></sensor>"#).unwrap_err()).contains("not both"));
 }
 
 #[test]

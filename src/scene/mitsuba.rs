@@ -3,7 +3,8 @@
 //! Supported: `<scene version>`, `<default>` / `$param` substitution (with `-D` overrides),
 //! `id` / `<ref>`, transforms (`lookat`, `translate`, `rotate`, `scale`, `matrix`, composed in
 //! document order: each new operation is applied after the previous ones, M ← op · M),
-//! `perspective` sensor (`fov`, `fov_axis`, `near_clip`, `far_clip`, `to_world`) with `hdrfilm`
+//! `perspective` sensor (`fov`, `fov_axis`, `focal_length`, `near_clip`, `far_clip`, `to_world`)
+//! with `hdrfilm`
 //! (`width`, `height`, `rfilter` box/tent/gaussian; format options accepted and ignored since
 //! they do not change pixel values) and any sampler (`sample_count`, `seed`), `path`
 //! integrator (`max_depth`, `rr_depth`, `hide_emitters`), shapes `obj`, `ply`, `sphere`,
@@ -1372,7 +1373,33 @@ impl<'a, 'i> Ctx<'a, 'i> {
         if p.plugin != "perspective" {
             return Err(self.unknown_plugin(p, &["perspective"]));
         }
-        let fov = p.float(self, "fov", 45.0)? as f32;
+        // Mitsuba: `fov` (degrees, along `fov_axis`) or `focal_length` ("50mm" default, 35 mm
+        // film equivalent: fov_x = 2·atan(36 / (2f))) — checked against Mitsuba 3.9.1.
+        let focal = p.string(self, "focal_length")?;
+        let fov = match (p.float_opt(self, "fov")?, focal) {
+            (Some(_), Some(_)) => {
+                return Err(self.err(p.node, "give either 'fov' or 'focal_length', not both"))
+            }
+            (Some(f), None) => f as f32,
+            (None, f) => {
+                let f = f.unwrap_or_else(|| "50mm".to_string());
+                let mm = f
+                    .trim()
+                    .strip_suffix("mm")
+                    .unwrap_or(f.trim())
+                    .trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| *v > 0.0 && v.is_finite())
+                    .ok_or_else(|| {
+                        self.err(
+                            p.node,
+                            format!("focal_length \"{f}\" is not a length like \"50mm\""),
+                        )
+                    })?;
+                (2.0 * (36.0 / (2.0 * mm)).atan()).to_degrees() as f32
+            }
+        };
         if !(fov > 0.0 && fov < 180.0) {
             return Err(self.err(p.node, format!("fov {fov}° must be in (0, 180)")));
         }

@@ -92,3 +92,29 @@ fn malformed_tables_name_file_and_line() {
 
     assert!(err("").contains("no header"));
 }
+
+#[test]
+fn rgb2spec_table_parser_rejects_bad_files() {
+    use thinfilm::spectrum::{srgb_table, Rgb2SpecTable};
+    assert_eq!(srgb_table().resolution(), 64);
+    assert!(Rgb2SpecTable::from_bytes(b"").unwrap_err().contains("SPEC"));
+    assert!(Rgb2SpecTable::from_bytes(b"SPAM\x40\0\0\0")
+        .unwrap_err()
+        .contains("SPEC"));
+    // Header claims res 64 but the data are missing.
+    let e = Rgb2SpecTable::from_bytes(b"SPEC\x40\0\0\0").unwrap_err();
+    assert!(e.contains("truncated"), "{e}");
+    // A tiny valid table (res 2) with decreasing z-nodes is rejected, a proper one accepted.
+    let mut bytes = b"SPEC\x02\0\0\0".to_vec();
+    for z in [0.0f32, 1.0] {
+        bytes.extend_from_slice(&z.to_le_bytes());
+    }
+    bytes.extend(std::iter::repeat_n(0u8, 4 * 9 * 8));
+    let t = Rgb2SpecTable::from_bytes(&bytes).unwrap();
+    // All-zero coefficients: S(0) = ½ everywhere.
+    assert_eq!(t.fetch([0.3, 0.6, 0.9]).eval(500.0), 0.5);
+    bytes[8..12].copy_from_slice(&2.0f32.to_le_bytes());
+    assert!(Rgb2SpecTable::from_bytes(&bytes)
+        .unwrap_err()
+        .contains("increasing"));
+}

@@ -17,7 +17,7 @@
 //! Texel convention (conventions.md): column j is centred at u = (j+½)/W, row i at
 //! v = i/(H−1); direction d = (sinθ sinφ, cosθ, −sinθ cosφ) with φ = 2πu, θ = πv.
 //! Values are rounded to half precision, the precision of the committed EXR (f16 channels
-//! keep `studio.exr` ≈ 0.5 MB), so the in-memory map and the file are identical.
+//! keep `studio.exr` at ≈ 40 kB), so the in-memory map and the file are identical.
 
 use crate::image_io::{self, RgbImage};
 use anyhow::Result;

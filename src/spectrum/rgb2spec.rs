@@ -2,10 +2,12 @@
 //! looked up in a 3-D coefficient table for sRGB.
 //!
 //! The table `spectra/srgb_rgb2spec_64.coeff` ("SPEC" format of mitsuba-renderer/rgb2spec:
-//! magic, u32 resolution, `res` f32 z-nodes, then `[3][res][res][res][3]` f32 coefficients) is
-//! made by `tools/rgb2spec` (the `rgb2spec` crate's port of `rgb2spec_opt`, sRGB, res 64 — the
-//! same gamut and resolution Mitsuba 3 builds) and embedded with `include_bytes!`; `build.rs`
-//! validates its header and size. It is parsed once, on first use.
+//! magic, u32 resolution, `res` f32 z-nodes, then `[3][res][res][res][3]` f32 coefficients for
+//! λ in nm) is made by `tools/rgb2spec` — `rgb2spec_opt`'s algorithm at Mitsuba 3's resolution
+//! (64), fitted against this module's own 1 nm CIE/D65 quadrature and sRGB matrix with
+//! Levenberg–Marquardt (see tools/rgb2spec/README.md for timings and the comparison with
+//! Mitsuba's table). It is embedded with `include_bytes!`; `build.rs` validates its header and
+//! size; it is parsed once, on first use.
 //!
 //! Lookup follows `rgb2spec_fetch` (Mitsuba 3, `ext/rgb2spec/rgb2spec.c`): clamp to [0,1],
 //! pick the largest component (ties go to the later channel), z = that component on the

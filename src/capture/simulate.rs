@@ -606,7 +606,13 @@ impl<'a> Simulator<'a> {
                 let mut rng = SplitMix64::stream(cfg.seed, a as u64, y as u64, 1);
                 for px in row.chunks_mut(nb) {
                     for (b, v) in px.iter_mut().enumerate() {
-                        let r = *v as f64 + cfg.noise_sigma * rng.normal();
+                        // No draw at all for σ = 0: a noise-free float capture is the clean cube.
+                        let noise = if cfg.noise_sigma > 0.0 {
+                            cfg.noise_sigma * rng.normal()
+                        } else {
+                            0.0
+                        };
+                        let r = *v as f64 + noise;
                         *v = if cfg.raw_counts {
                             raw_count(&mut rng, r * signal[b], cfg) as f32
                         } else {

@@ -867,7 +867,6 @@ pub fn write_cube(hdr_path: &Path, data: &[f32], opts: &WriteOptions) -> Result<
                 }
             }
         }
-        drop(flush);
         writer.flush().context("flushing cube data")?;
         Ok(())
     })?;

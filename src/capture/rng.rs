@@ -66,7 +66,7 @@ impl SplitMix64 {
 
     /// Poisson variate with mean `lambda` (≥ 0; non-finite or negative gives 0).
     pub fn poisson(&mut self, lambda: f64) -> f64 {
-        if !(lambda > 0.0) || !lambda.is_finite() {
+        if lambda <= 0.0 || !lambda.is_finite() {
             return 0.0;
         }
         if lambda < 10.0 {
@@ -117,7 +117,7 @@ fn log_gamma(x: f64) -> f64 {
         -5.952380952380952e-04,
         8.417508417508418e-04,
         -1.917526917526918e-03,
-        6.410256410256410e-03,
+        6.41025641025641e-3,
         -2.955065359477124e-02,
         1.796443723688307e-01,
         -1.39243221690590e+00,

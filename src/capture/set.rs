@@ -297,7 +297,8 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     if spec.angles.is_empty() {
         bail!("{j}: 'angles' is empty");
     }
-    let mut first: Option<EnviFile> = None;
+    // Only the first header is kept (its mapping is dropped as soon as it is decoded).
+    let mut first: Option<envi::EnviHeader> = None;
     let mut angles = Vec::with_capacity(spec.angles.len());
     let mut invalid = InvalidCounts::default();
     for (i, a) in spec.angles.iter().enumerate() {
@@ -316,8 +317,7 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
                 h.path.display()
             );
         };
-        if let Some(f) = &first {
-            let fh = &f.header;
+        if let Some(fh) = &first {
             if (fh.samples, fh.lines) != (h.samples, h.lines) {
                 bail!(
                     "{j}: cube sizes differ: {} is {}×{} but {} is {}×{}",
@@ -366,11 +366,11 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
             valid,
         });
         if first.is_none() {
-            first = Some(file);
+            first = Some(file.header);
         }
     }
     let first = first.expect("angles is non-empty");
-    let h = first.header;
+    let h = first;
     Ok(CaptureSet {
         polarization: spec.polarization,
         ambient_ior,

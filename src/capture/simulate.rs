@@ -7,9 +7,9 @@
 //! ±4σ, finer than the local fringe period), not point-sampled. `fwhm_nm = 0` samples the
 //! band centre.
 //!
-//! Thickness: d(x, y) = d0 · (1 + v · f(x, y)), with f a smooth field in [−1, 1]
-//! (a few low-frequency plane waves plus Gaussian bumps drawn from the seed, scaled so
-//! max |f| = 1): the seed paper's assumption that thickness varies slowly over the
+//! Thickness: d(x, y) = d0 · (1 + v · f(x, y)), with f a smooth zero-mean field in
+//! [−1, 1] (a few low-frequency plane waves plus Gaussian bumps drawn from the seed,
+//! shifted to zero mean and scaled so max |f| = 1): the seed paper's assumption that thickness varies slowly over the
 //! surface.
 //!
 //! Speed: for big images the band reflectance is tabulated against thickness on a grid
@@ -476,6 +476,9 @@ pub fn thickness_field(cfg: &SimulateConfig) -> Vec<f32> {
             v
         })
         .collect();
+    // Zero mean, so d0 is the mean thickness (before clamping at 0 for v = 1).
+    let mean = g.iter().sum::<f64>() / g.len() as f64;
+    let g: Vec<f64> = g.iter().map(|v| v - mean).collect();
     let peak = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let scale = if peak > 0.0 {
         cfg.thickness_variation / peak
@@ -603,7 +606,13 @@ impl<'a> Simulator<'a> {
                 let mut rng = SplitMix64::stream(cfg.seed, a as u64, y as u64, 1);
                 for px in row.chunks_mut(nb) {
                     for (b, v) in px.iter_mut().enumerate() {
-                        let r = *v as f64 + cfg.noise_sigma * rng.normal();
+                        // No draw at all for σ = 0: a noise-free float capture is the clean cube.
+                        let noise = if cfg.noise_sigma > 0.0 {
+                            cfg.noise_sigma * rng.normal()
+                        } else {
+                            0.0
+                        };
+                        let r = *v as f64 + noise;
                         *v = if cfg.raw_counts {
                             raw_count(&mut rng, r * signal[b], cfg) as f32
                         } else {
@@ -854,6 +863,8 @@ mod tests {
             .map(|i| (t[i + 1] - t[i]).abs())
             .fold(0f32, f32::max);
         assert!(max_step < 0.1 * (hi - lo), "{max_step}");
+        let mean = t.iter().map(|&v| v as f64).sum::<f64>() / t.len() as f64;
+        assert!((mean - 400.0).abs() < 1e-3, "{mean}");
         assert_eq!(t, thickness_field(&cfg));
         assert_ne!(
             t,

@@ -9,8 +9,15 @@ use thinfilm::capture::simulate::{
 use thinfilm::capture::Polarization;
 use thinfilm::optics::{Complex64, Ior};
 
+/// Boxed so the `Command` enum stays small (the options are many).
 #[derive(clap::Args, Debug)]
 pub struct Args {
+    #[command(flatten)]
+    pub options: Box<Options>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct Options {
     /// Output folder (capture.json, one ENVI cube per angle, ground_truth/).
     #[arg(long)]
     pub out: PathBuf,
@@ -89,7 +96,7 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
 }
 
 /// Builds the configuration: preset (or defaults), then every explicit option.
-pub fn config(args: &Args) -> anyhow::Result<SimulateConfig> {
+pub fn config(args: &Options) -> anyhow::Result<SimulateConfig> {
     let mut cfg = match &args.preset {
         Some(p) => SimulateConfig::preset(p)?,
         None => SimulateConfig::default(),
@@ -162,8 +169,8 @@ pub fn config(args: &Args) -> anyhow::Result<SimulateConfig> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let cfg = config(&args)?;
-    let summary = write_capture_set(&cfg, &args.out)?;
+    let cfg = config(&args.options)?;
+    let summary = write_capture_set(&cfg, &args.options.out)?;
     let stats = thinfilm::capture::simulate::thickness_stats(&summary.thickness_nm);
     eprintln!(
         "wrote {} ({} angles, {}×{} px, {} bands); ground truth {} (thickness mean {:.1} nm, range {:.1}–{:.1} nm)",

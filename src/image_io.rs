@@ -101,8 +101,11 @@ pub fn write_exr_channels(
     })
 }
 
+/// A named channel plane: `(name, row-major samples)`.
+pub type NamedPlane = (String, Vec<f32>);
+
 /// Reads every channel of the first layer as f32 planes: `(width, height, [(name, plane)])`.
-pub fn read_exr_channels(path: &Path) -> Result<(usize, usize, Vec<(String, Vec<f32>)>)> {
+pub fn read_exr_channels(path: &Path) -> Result<(usize, usize, Vec<NamedPlane>)> {
     let image = read()
         .no_deep_data()
         .largest_resolution_level()

@@ -13,7 +13,9 @@
 
 pub mod capture;
 pub mod compare;
+pub mod demo;
 pub mod estimate;
+pub mod figure;
 pub mod image_io;
 pub mod optics;
 pub mod render;

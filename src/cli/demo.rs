@@ -1,8 +1,72 @@
-//! `thinfilm demo` (not yet built).
+//! `thinfilm demo`: the whole pipeline on the seed paper's three samples.
+
+use std::path::PathBuf;
+use thinfilm::demo::{self, DemoConfig};
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Output folder (created). Holds the capture sets, fits, figures, README.md and index.html.
+    #[arg(long, default_value = "demo-out")]
+    out: PathBuf,
+    /// Simulated capture size, WxH pixels.
+    #[arg(long, default_value = "128x96", value_parser = parse_size)]
+    size: (usize, usize),
+    /// Teapot render resolution (square), pixels.
+    #[arg(long, default_value_t = 192)]
+    resolution: u32,
+    /// Samples per pixel of the teapot renders.
+    #[arg(long, default_value_t = 32)]
+    spp: u32,
+    /// Additive reflectance noise σ of the simulated captures.
+    #[arg(long, default_value_t = 0.004)]
+    noise: f64,
+    /// Hide the progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`demo` is not built yet")
+pub(crate) fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{s}' is not WxH (e.g. 128x96)"))?;
+    let w: usize = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in '{s}'"))?;
+    let h: usize = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in '{s}'"))?;
+    if w == 0 || h == 0 {
+        return Err(format!("size '{s}' must be at least 1x1"));
+    }
+    Ok((w, h))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut cfg = DemoConfig {
+        out: args.out,
+        noise_sigma: args.noise,
+        progress: !args.quiet,
+        ..DemoConfig::default()
+    };
+    (cfg.width, cfg.height) = args.size;
+    cfg.render.resolution = args.resolution;
+    cfg.render.spp = args.spp;
+    let summary = demo::run(&cfg)?;
+    println!("{}", summary.table_markdown);
+    println!(
+        "Finished in {:.1} s. Outputs in {}:",
+        summary.seconds,
+        cfg.out.display()
+    );
+    for f in &summary.figures {
+        println!("  {}", f.display());
+    }
+    println!(
+        "  {} (open in a browser) and {}",
+        cfg.out.join("index.html").display(),
+        cfg.out.join("README.md").display()
+    );
+    Ok(())
 }

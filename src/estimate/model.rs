@@ -75,7 +75,10 @@ impl Geometry {
     }
 
     pub fn lambda_min(&self) -> f64 {
-        self.wavelengths_nm.iter().copied().fold(f64::INFINITY, f64::min)
+        self.wavelengths_nm
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Builds the tables for film index `n` (clamped to the propagating range).
@@ -83,7 +86,11 @@ impl Geometry {
         let n = n.max(self.min_film_ior());
         // Gauss–Hermite nodes for a Gaussian band response, normalised weights.
         let nodes: &[(f64, f64)] = if self.band_integration {
-            &[(-1.224_744_871, 1.0 / 6.0), (0.0, 2.0 / 3.0), (1.224_744_871, 1.0 / 6.0)]
+            &[
+                (-1.224_744_871, 1.0 / 6.0),
+                (0.0, 2.0 / 3.0),
+                (1.224_744_871, 1.0 / 6.0),
+            ]
         } else {
             &[(0.0, 1.0)]
         };
@@ -433,7 +440,10 @@ mod tests {
         for (pol, sub) in [
             (Polarization::S, Ior::real(1.64)),
             (Polarization::P, Ior::real(1.64)),
-            (Polarization::Unpolarized, Ior::Constant(Complex64::new(0.18, 3.4))),
+            (
+                Polarization::Unpolarized,
+                Ior::Constant(Complex64::new(0.18, 3.4)),
+            ),
         ] {
             let g = geom(pol, sub);
             for &(n, d) in &[(1.37, 400.0), (2.37, 0.0), (1.8, 1500.0)] {
@@ -443,7 +453,10 @@ mod tests {
                     m.spectrum(a, d, &mut out);
                     for (b, &lam) in g.wavelengths_nm.iter().enumerate() {
                         let e = exact_reflectance(&g, n, d, a, lam);
-                        assert!((out[b] as f64 - e).abs() < 2e-4, "{pol:?} n={n} d={d} {lam}");
+                        assert!(
+                            (out[b] as f64 - e).abs() < 2e-4,
+                            "{pol:?} n={n} d={d} {lam}"
+                        );
                     }
                 }
             }
@@ -461,7 +474,11 @@ mod tests {
         m.spectrum(1, 499.95, &mut r2);
         for b in 0..81 {
             let fd = (r1[b] - r2[b]) / 0.1;
-            assert!((fd - dr[b]).abs() < 2e-3 * dr[b].abs().max(1e-2), "band {b}: {fd} {}", dr[b]);
+            assert!(
+                (fd - dr[b]).abs() < 2e-3 * dr[b].abs().max(1e-2),
+                "band {b}: {fd} {}",
+                dr[b]
+            );
         }
     }
 }

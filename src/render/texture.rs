@@ -103,7 +103,11 @@ fn tabulated(t: &[(f32, f32)], lambda: f32) -> f32 {
     let i = t.partition_point(|p| p.0 <= lambda).clamp(1, t.len() - 1);
     let (l0, v0) = t[i - 1];
     let (l1, v1) = t[i];
-    let f = if l1 > l0 { (lambda - l0) / (l1 - l0) } else { 0.0 };
+    let f = if l1 > l0 {
+        (lambda - l0) / (l1 - l0)
+    } else {
+        0.0
+    };
     v0 + f * (v1 - v0)
 }
 

@@ -2,8 +2,8 @@
 //! wavelengths = one hero bundle), f64 Airy, f64 transfer matrix and the renderer's f32 path.
 //! Single thread; build with `--release` for meaningful numbers.
 
-use crate::optics::film_f32::ThinFilmX4;
-use crate::optics::{Stack, ThinFilm};
+use thinfilm::optics::film_f32::ThinFilmX4;
+use thinfilm::optics::{Stack, ThinFilm};
 use num_complex::{Complex32, Complex64};
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -2,9 +2,9 @@
 //! one (or several) incident angles, as CSV or JSON, with the colour under D65 and an
 //! optional plot (the seed paper's Fig. 2 is made this way, see README).
 
-use crate::image_io::write_png_rgb8;
-use crate::optics::{Coherence, FilmResponse, Ior, Layer, Stack};
-use crate::spectrum;
+use thinfilm::image_io::write_png_rgb8;
+use thinfilm::optics::{Coherence, FilmResponse, Ior, Layer, Stack};
+use thinfilm::spectrum;
 use anyhow::{bail, Context, Result};
 use num_complex::Complex64;
 use std::path::PathBuf;

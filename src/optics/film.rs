@@ -79,8 +79,9 @@ impl ThinFilm {
     pub fn amplitudes(&self, lambda_nm: f64, cos_theta1: f64) -> FilmAmplitudes {
         let n1 = Complex64::new(self.ambient_ior, 0.0);
         let cos1 = Complex64::new(cos_theta1.clamp(0.0, 1.0), 0.0);
-        let sin1 = (1.0 - cos_theta1 * cos_theta1).max(0.0).sqrt();
-        let kx = self.ambient_ior * sin1;
+        // (1 − c)(1 + c) keeps sin²θ1 accurate near normal incidence.
+        let c1 = cos_theta1.clamp(0.0, 1.0);
+        let kx = self.ambient_ior * ((1.0 - c1) * (1.0 + c1)).max(0.0).sqrt();
         let n2 = self.film_ior;
         let n3 = self.substrate_ior;
         let n2c = n_cos_theta(n2, kx);
@@ -114,7 +115,7 @@ impl ThinFilm {
         let a = self.amplitudes(lambda_nm, cos_theta1);
         let n1 = self.ambient_ior;
         let cos1 = cos_theta1.clamp(0.0, 1.0);
-        let sin1 = (1.0 - cos1 * cos1).max(0.0).sqrt();
+        let sin1 = ((1.0 - cos1) * (1.0 + cos1)).max(0.0).sqrt();
         let n3 = self.substrate_ior;
         let n3c = n_cos_theta(n3, n1 * sin1);
         let cos3 = n3c / n3;

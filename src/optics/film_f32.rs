@@ -10,7 +10,7 @@
 
 use super::film::ThinFilm;
 use num_complex::{Complex32, Complex64};
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::PI;
 
 /// A film with per-wavelength indices for a bundle of four wavelengths.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -77,7 +77,23 @@ fn forward_sqrt32(z: Complex32) -> Complex32 {
     }
 }
 
+/// Largest denominator condition number for which the f32 path stays within 1e-5
+/// (f32 rounding ≈ 1e-7 per operation times this factor, with margin).
+pub const F32_MAX_CONDITION: f32 = 12.0;
+
 impl ThinFilmX4 {
+    /// Lane `i` in f64 (the fallback for ill-conditioned lanes).
+    pub fn lane_f64(&self, i: usize, lambda_nm: f32, cos_theta1: f32) -> super::FilmResponse {
+        let c = |z: Complex32| Complex64::new(z.re as f64, z.im as f64);
+        ThinFilm {
+            ambient_ior: self.ambient_ior as f64,
+            film_ior: c(self.film_ior[i]),
+            thickness_nm: self.thickness_nm as f64,
+            substrate_ior: c(self.substrate_ior[i]),
+        }
+        .response(lambda_nm as f64, cos_theta1 as f64)
+    }
+
     /// The same film at all four wavelengths (non-dispersive indices).
     pub fn from_film(f: &ThinFilm) -> Self {
         let c = |z: Complex64| Complex32::new(z.re as f32, z.im as f32);
@@ -95,8 +111,6 @@ impl ThinFilmX4 {
     pub fn response(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> FilmResponseX4 {
         let cos1 = cos_theta1.clamp(0.0, 1.0);
         let n1 = self.ambient_ior;
-        // (1 − c)(1 + c) keeps sin² accurate near normal incidence.
-        let kx2 = n1 * n1 * ((1.0 - cos1) * (1.0 + cos1));
         let cos1_64 = cos1 as f64;
         let n1_64 = n1 as f64;
         let kx2_64 = n1_64 * n1_64 * ((1.0 - cos1_64) * (1.0 + cos1_64));
@@ -110,39 +124,63 @@ impl ThinFilmX4 {
             let n2_64 = Complex64::new(n2.re as f64, n2.im as f64);
             let n2c_64 = forward_sqrt64(n2_64 * n2_64 - kx2_64);
             let beta = n2c_64 * (2.0 * PI * d_64 / lambda_nm[i] as f64);
-            let beta_re = beta.re - TAU * (beta.re / TAU).round();
-            let decay = (-beta.im).exp() as f32;
-            let (s, c) = (beta_re as f32).sin_cos();
-            let e_half = Complex32::new(decay * c, decay * s);
-            let e_full = e_half * e_half;
+            // Only E = e^{2iβ} and |e^{iβ}| enter R and T. Write 2 Re β = kπ + y with
+            // |y| ≤ π/2 (in f64, so y keeps full relative precision in f32); then
+            // E = ±e^{x} e^{iy}, x = −2 Im β, and E − 1 is formed without cancellation:
+            // e^{x} e^{iy} − 1 = expm1(x) e^{iy} + (e^{iy} − 1),  e^{iy} − 1 = −2 sin²(y/2) + i sin y.
+            let two_beta = 2.0 * beta.re;
+            let k = (two_beta / PI).round();
+            let y = (two_beta - k * PI) as f32;
+            let (sh, ch) = (0.5 * y).sin_cos();
+            let eiy_m1 = Complex32::new(-2.0 * sh * sh, 2.0 * sh * ch);
+            let em1x = ((-2.0 * beta.im) as f32).exp_m1();
+            let plus = eiy_m1 * em1x + em1x + eiy_m1; // e^{x} e^{iy} − 1
+            let e_minus_1 = if (k as i64) % 2 == 0 { plus } else { -plus - 2.0 };
+            let decay = (-beta.im).exp() as f32; // |e^{iβ}|
 
             let n2c = Complex32::new(n2c_64.re as f32, n2c_64.im as f32);
-            let n3c = forward_sqrt32(n3 * n3 - kx2);
-            let (n1sq, n2sq, n3sq) = (n1 * n1, n2 * n2, n3 * n3);
-            // Interface amplitudes in n cosθ form (tmm.interface_r/t times n_i n_f for p).
-            let s12 = n1c + n2c;
-            let r12s = (n1c - n2c) / s12;
-            let t12s = 2.0 * n1c / s12;
-            let p12a = n2sq * n1c;
-            let p12b = n1sq * n2c;
-            let p12 = p12a + p12b;
-            let r12p = (p12a - p12b) / p12;
-            let t12p = 2.0 * n1 * n2 * n1c / p12;
-            let s23 = n2c + n3c;
-            let r23s = (n2c - n3c) / s23;
-            let t23s = 2.0 * n2c / s23;
-            let p23a = n3sq * n2c;
-            let p23b = n2sq * n3c;
-            let p23 = p23a + p23b;
-            let r23p = (p23a - p23b) / p23;
-            let t23p = 2.0 * n2 * n3 * n2c / p23;
-            // Airy sums (seed eq. 4).
-            let ds = 1.0 + r12s * r23s * e_full;
-            let dp = 1.0 + r12p * r23p * e_full;
-            let rs = (r12s + r23s * e_full) / ds;
-            let rp = (r12p + r23p * e_full) / dp;
-            let ts = t12s * t23s * e_half / ds;
-            let tp = t12p * t23p * e_half / dp;
+            // n3² − n1² sin²θ1 written as (n3 − n1)(n3 + n1) + (n1 cosθ1)²: no cancellation
+            // when n3 ≈ n1 at grazing incidence (where n3² − kx² loses all f32 digits).
+            let n1c_c = Complex32::new(n1, 0.0);
+            let n1c_sq = Complex32::new(n1c * n1c, 0.0);
+            let n3c = forward_sqrt32((n3 - n1c_c) * (n3 + n1c_c) + n1c_sq);
+            // The Airy sum cleared of fractions. With admittances a, b, c of ambient, film and
+            // substrate (s: n cosθ; p: n cosθ / n² = cosθ / n), r_ij = (y_i − y_j)/(y_i + y_j) and
+            //   N = (a+b)(b+c) + (a−b)(b−c) E = 2b(a+c) + (a−b)(b−c)(E − 1),
+            //   r = [(a−b)(b+c) + (a+b)(b−c) E] / N,
+            //   t_s = 4ab e^{iβ} / N,   t_p = (n1/n3) 4ab e^{iβ} / N  (only |t| is needed, so
+            //   e^{iβ} is replaced by its modulus).
+            // Near grazing 1 + r12 r23 E → 0 and the textbook form loses ~2 digits in f32;
+            // this form has no such cancellation.
+            let airy = |a: Complex32, b: Complex32, cc: Complex32| {
+                let e_full = e_minus_1 + 1.0;
+                let num = (a - b) * (b + cc) + (a + b) * (b - cc) * e_full;
+                let den = 2.0 * b * (a + cc) + (a - b) * (b - cc) * e_minus_1;
+                // Condition number of the denominator: how much the cancellation in N
+                // amplifies f32 rounding (≈ finesse of the resonance).
+                let big = (2.0 * b * (a + cc)).norm() + ((a - b) * (b - cc) * e_minus_1).norm();
+                (num / den, 4.0 * a * b * decay / den, big / den.norm())
+            };
+            let n1x = Complex32::new(n1, 0.0);
+            let a_s = Complex32::new(n1c, 0.0);
+            let (rs, ts, cond_s) = airy(a_s, n2c, n3c);
+            let (rp, tp0, cond_p) = airy(
+                a_s / (n1x * n1x),
+                n2c / (n2 * n2),
+                n3c / (n3 * n3),
+            );
+            let tp = tp0 * n1x / n3;
+            // A sharp resonance (high finesse: near-grazing incidence, or a film between two
+            // strong reflectors) amplifies f32 rounding of the phase and admittances beyond
+            // 1e-5; such lanes are evaluated in f64 instead (rare in practice; always correct).
+            if !(cond_s.max(cond_p) <= F32_MAX_CONDITION) {
+                let r = self.lane_f64(i, lambda_nm[i], cos1);
+                out.r_s[i] = r.r_s as f32;
+                out.r_p[i] = r.r_p as f32;
+                out.t_s[i] = r.t_s as f32;
+                out.t_p[i] = r.t_p as f32;
+                continue;
+            }
             out.r_s[i] = rs.norm_sqr();
             out.r_p[i] = rp.norm_sqr();
             if n1c > 0.0 {

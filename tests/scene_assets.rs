@@ -191,7 +191,11 @@ fn camera_matches_mitsuba() {
     let m = s.camera.to_world;
     for (r, row) in mitsuba_rows.iter().enumerate() {
         for (c, &v) in row.iter().enumerate() {
-            assert!((m.col(c)[r] - v).abs() < 1e-5, "({r},{c}): {} vs {v}", m.col(c)[r]);
+            assert!(
+                (m.col(c)[r] - v).abs() < 1e-5,
+                "({r},{c}): {} vs {v}",
+                m.col(c)[r]
+            );
         }
     }
     assert_eq!((s.spp, s.film.width), (64, 256));

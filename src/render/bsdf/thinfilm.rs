@@ -10,9 +10,9 @@ use super::microfacet::Ggx;
 use super::{BsdfSample, Counters, ShadingCtx};
 use crate::optics::film_f32::ThinFilmX4;
 use crate::optics::{Ior, ThinFilm};
-use num_complex::Complex32;
 use crate::render::texture::{Spec, Texture};
 use glam::{Vec2, Vec3};
+use num_complex::Complex32;
 
 #[derive(Debug, Clone)]
 pub struct ThinFilmBsdf {

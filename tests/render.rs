@@ -532,3 +532,111 @@ fn bad_inputs_are_errors() {
     let err = render(&bad, &RenderOptions::default()).unwrap_err();
     assert!(format!("{err:#}").contains("broken"));
 }
+
+/// An inward-facing emissive cube of half-size `h` (12 triangles, normals pointing inwards).
+fn emissive_box(h: f32, bsdf: usize) -> Shape {
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let corner = |a: f32, b: f32| {
+                let mut p = [0.0f32; 3];
+                p[axis] = sign * h;
+                p[u] = a * h;
+                p[v] = b * h;
+                Vec3::from_array(p)
+            };
+            let base = positions.len() as u32;
+            positions.extend([
+                corner(-1.0, -1.0),
+                corner(1.0, -1.0),
+                corner(1.0, 1.0),
+                corner(-1.0, 1.0),
+            ]);
+            let (a, b, c) = (
+                positions[base as usize],
+                positions[base as usize + 1],
+                positions[base as usize + 2],
+            );
+            let inward = (b - a).cross(c - a).dot(-a) > 0.0;
+            if inward {
+                indices.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
+            } else {
+                indices.extend([[base, base + 2, base + 1], [base, base + 3, base + 2]]);
+            }
+        }
+    }
+    Shape {
+        geometry: Geometry::Mesh(TriangleMesh {
+            positions,
+            normals: vec![],
+            uvs: vec![],
+            indices,
+        }),
+        bsdf,
+        emission: Some(SpectrumDesc::Constant(1.0)),
+        name: Some("light box".into()),
+    }
+}
+
+/// Area lights: a diffuse albedo-0.5 sphere inside a black enclosure that emits radiance 1
+/// inwards sees radiance 1 from every direction, so it renders 0.5 ± 1 % (light sampling of
+/// spheres and of triangle meshes, MIS with BSDF sampling, one-sided emission).
+#[test]
+fn area_light_enclosure() {
+    let black = BsdfDesc::Diffuse {
+        reflectance: constant(0.0),
+    };
+    let grey = BsdfDesc::Diffuse {
+        reflectance: constant(0.5),
+    };
+    let centre: Vec<Vec2> = (0..9)
+        .map(|i| Vec2::new(0.45 + 0.05 * (i % 3) as f32, 0.45 + 0.05 * (i / 3) as f32))
+        .collect();
+    let mut sphere_light = Shape {
+        geometry: Geometry::Sphere {
+            center: Vec3::ZERO,
+            radius: 10.0,
+            flip_normals: true,
+        },
+        bsdf: 1,
+        emission: Some(SpectrumDesc::Constant(1.0)),
+        name: Some("light sphere".into()),
+    };
+    let scene = base_scene(
+        vec![sphere(0), sphere_light.clone()],
+        vec![grey.clone(), black.clone()],
+        vec![],
+        8,
+        1,
+    );
+    let dev = furnace_deviation(&scene, &centre, 20_000, 0.5);
+    assert!(dev < 0.01, "sphere light: {dev}");
+    let scene = base_scene(
+        vec![sphere(0), emissive_box(10.0, 1)],
+        vec![grey, black.clone()],
+        vec![],
+        8,
+        1,
+    );
+    let dev = furnace_deviation(&scene, &centre, 20_000, 0.5);
+    assert!(dev < 0.01, "mesh light: {dev}");
+    // Emission is one-sided: with outward normals the enclosure is dark inside.
+    if let Geometry::Sphere { flip_normals, .. } = &mut sphere_light.geometry {
+        *flip_normals = false;
+    }
+    let scene = base_scene(
+        vec![sphere(0), sphere_light],
+        vec![
+            BsdfDesc::Diffuse {
+                reflectance: constant(0.5),
+            },
+            black,
+        ],
+        vec![],
+        8,
+        1,
+    );
+    assert!((furnace_deviation(&scene, &centre, 200, 1.0) - 1.0).abs() < 1e-6);
+}

@@ -5,7 +5,7 @@
 use super::camera::Ray;
 use super::geometry::{Frame, SurfaceInteraction};
 use crate::scene::{Geometry, Scene, TriangleMesh};
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{Vec2, Vec3};
 use obvhs::cwbvh::CwBvh;
 use obvhs::triangle::Triangle;
 
@@ -323,12 +323,6 @@ fn sphere_intersect(s: &SphereGeom, origin: Vec3, dir: Vec3, tmin: f32, tmax: f3
     } else {
         f32::INFINITY
     }
-}
-
-/// Unused-import guard for `Vec3A` conversions in builds without meshes.
-#[allow(dead_code)]
-fn _vec3a(v: Vec3) -> Vec3A {
-    v.into()
 }
 
 #[cfg(test)]

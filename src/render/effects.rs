@@ -102,10 +102,8 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
             }
             BsdfDesc::Dielectric {
                 int_ior, ext_ior, ..
-            } => {
-                if int_ior.is_dispersive() || ext_ior.is_dispersive() {
-                    dispersive.push(format!("dielectric {int_ior}/{ext_ior}"));
-                }
+            } if int_ior.is_dispersive() || ext_ior.is_dispersive() => {
+                dispersive.push(format!("dielectric {int_ior}/{ext_ior}"));
             }
             _ => {}
         }

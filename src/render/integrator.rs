@@ -166,7 +166,7 @@ pub fn li(
 
         // ---- Russian roulette ----
         let tmax_component = throughput.max_element();
-        if !(tmax_component > 0.0) || !tmax_component.is_finite() {
+        if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
             break;
         }
         if depth >= rr_depth {

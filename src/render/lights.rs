@@ -516,7 +516,7 @@ impl LightSet {
                         .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length())
                         .collect();
                     let area: f32 = areas.iter().filter(|a| a.is_finite()).sum();
-                    if !(area > 0.0) {
+                    if area.is_nan() || area <= 0.0 {
                         anyhow::bail!("area light on shape {si} has zero surface area");
                     }
                     AreaGeometry::Triangles {

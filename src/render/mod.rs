@@ -289,9 +289,8 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
     if reach == 0 {
         for (y, (row, c)) in rows.iter().enumerate() {
             counters.add(c);
-            for x in 0..w {
-                let p = row[x];
-                image.pixels[y * w + x] = [p[0] / p[3], p[1] / p[3], p[2] / p[3]];
+            for (dst, p) in image.pixels[y * w..(y + 1) * w].iter_mut().zip(row) {
+                *dst = [p[0] / p[3], p[1] / p[3], p[2] / p[3]];
             }
         }
     } else {

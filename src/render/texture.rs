@@ -259,8 +259,8 @@ fn bitmap_lookup(b: &BitmapTexture, uv: Vec2) -> [f32; 4] {
         let tx = wrap_index(ix, w, b.wrap);
         let ty = wrap_index(iy, h, b.wrap);
         let base = (ty * w + tx) * b.channels;
-        for k in 0..c {
-            o[k] += weight * b.data[base + k];
+        for (ok, v) in o.iter_mut().zip(&b.data[base..base + c]) {
+            *ok += weight * v;
         }
     };
     match b.filter {

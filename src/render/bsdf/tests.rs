@@ -224,10 +224,7 @@ fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) -> f64 {
             if observed[i] > n_samples as f64 * 1e-5 {
                 return 0.0;
             }
-        } else if expected[i] < 5.0 {
-            pooled_e += expected[i];
-            pooled_o += observed[i];
-        } else if pooled_e > 0.0 && pooled_e < 5.0 {
+        } else if expected[i] < 5.0 || (pooled_e > 0.0 && pooled_e < 5.0) {
             pooled_e += expected[i];
             pooled_o += observed[i];
         } else {

@@ -59,7 +59,12 @@ fn spy_fixtures_read_back_equal() {
             for (a, b) in wl.iter().zip(WAVELENGTHS) {
                 assert!((a - b).abs() < 1e-9, "{kind} {il}: {a} vs {b}");
             }
-            assert!(h.fwhm_nm.as_ref().unwrap().iter().all(|f| (f - 5.0).abs() < 1e-9));
+            assert!(h
+                .fwhm_nm
+                .as_ref()
+                .unwrap()
+                .iter()
+                .all(|f| (f - 5.0).abs() < 1e-9));
             assert_eq!(h.ignore_value, (kind == "int16").then_some(-3000.0));
             // Single-sample access agrees with the bulk decode.
             let file = envi::open(&path).unwrap();
@@ -80,7 +85,12 @@ fn write_ours(dir: &Path) -> Vec<PathBuf> {
             let mut o = WriteOptions::new(SAMPLES, LINES, BANDS);
             o.interleave = il;
             o.data_type = DataType::from_name(kind).unwrap();
-            o.big_endian = matches!((kind, il), ("float32", Interleave::Bil) | ("int16", Interleave::Bsq) | ("float64", Interleave::Bip));
+            o.big_endian = matches!(
+                (kind, il),
+                ("float32", Interleave::Bil)
+                    | ("int16", Interleave::Bsq)
+                    | ("float64", Interleave::Bip)
+            );
             o.wavelengths_nm = Some(WAVELENGTHS.to_vec());
             o.fwhm_nm = Some(vec![5.0; BANDS]);
             o.description = Some(format!("thinfilm test fixture {kind} {il}"));
@@ -120,7 +130,15 @@ fn ours_fixtures_are_reproduced() {
         }
         // And our own reader reads it back.
         let cube = envi::read_cube(&p).unwrap();
-        let kind = p.file_stem().unwrap().to_str().unwrap().split('_').next().unwrap().to_string();
+        let kind = p
+            .file_stem()
+            .unwrap()
+            .to_str()
+            .unwrap()
+            .split('_')
+            .next()
+            .unwrap()
+            .to_string();
         assert_eq!(cube.data, expected_bip(&kind));
     }
 }
@@ -129,7 +147,8 @@ fn write_text(path: &Path, text: &str) {
     std::fs::write(path, text).unwrap();
 }
 
-const GOOD_HEADER: &str = "ENVI\nsamples = 2\nlines = 2\nbands = 3\nheader offset = 0\ndata type = 4\n\
+const GOOD_HEADER: &str =
+    "ENVI\nsamples = 2\nlines = 2\nbands = 3\nheader offset = 0\ndata type = 4\n\
                            interleave = bsq\nbyte order = 0\nwavelength = {500, 510, 520}\n";
 
 fn err_of(path: &Path) -> String {
@@ -143,7 +162,11 @@ fn binary_found_by_stem_with_any_extension() {
     for (i, ext) in ["img", "raw", "dat", "bin", ""].iter().enumerate() {
         let hdr = dir.path().join(format!("c{i}.hdr"));
         write_text(&hdr, GOOD_HEADER);
-        let bin = if ext.is_empty() { dir.path().join(format!("c{i}")) } else { hdr.with_extension(ext) };
+        let bin = if ext.is_empty() {
+            dir.path().join(format!("c{i}"))
+        } else {
+            hdr.with_extension(ext)
+        };
         std::fs::write(&bin, &data).unwrap();
         let cube = envi::read_cube(&hdr).unwrap();
         // BSQ → BIP: pixel 0 holds samples 0, 4, 8.
@@ -159,7 +182,12 @@ fn binary_found_by_stem_with_any_extension() {
 fn header_offset_and_ignore_value() {
     let dir = tempfile::tempdir().unwrap();
     let hdr = dir.path().join("off.hdr");
-    write_text(&hdr, &GOOD_HEADER.replace("header offset = 0", "header offset = 7").replace("data type = 4", "data type = 2\ndata ignore value = -1"));
+    write_text(
+        &hdr,
+        &GOOD_HEADER
+            .replace("header offset = 0", "header offset = 7")
+            .replace("data type = 4", "data type = 2\ndata ignore value = -1"),
+    );
     let mut bytes = vec![0xAAu8; 7];
     bytes.extend((0..12).flat_map(|i| (i as i16 - 1).to_le_bytes()));
     std::fs::write(hdr.with_extension("img"), bytes).unwrap();
@@ -179,23 +207,57 @@ fn malformed_inputs_are_clear_errors() {
     let p = d.join("nobin.hdr");
     write_text(&p, GOOD_HEADER);
     let e = err_of(&p);
-    assert!(e.contains("nobin.hdr") && e.contains("no binary data file"), "{e}");
+    assert!(
+        e.contains("nobin.hdr") && e.contains("no binary data file"),
+        "{e}"
+    );
 
     // Truncated binary.
     let p = d.join("trunc.hdr");
     write_text(&p, GOOD_HEADER);
     std::fs::write(d.join("trunc.img"), &bin[..40]).unwrap();
     let e = err_of(&p);
-    assert!(e.contains("trunc.img") && e.contains("truncated") && e.contains("48"), "{e}");
+    assert!(
+        e.contains("trunc.img") && e.contains("truncated") && e.contains("48"),
+        "{e}"
+    );
 
     let cases: [(&str, String, &[&str]); 7] = [
-        ("nosamples", GOOD_HEADER.replace("samples = 2\n", ""), &["samples"]),
-        ("dtype", GOOD_HEADER.replace("data type = 4", "data type = 6"), &["data type", "6"]),
-        ("dtype99", GOOD_HEADER.replace("data type = 4", "data type = 99"), &["data type", "99"]),
-        ("wlcount", GOOD_HEADER.replace("{500, 510, 520}", "{500, 510}"), &["wavelength", "2 values", "3 bands"]),
-        ("wlnum", GOOD_HEADER.replace("510", "5l0"), &["wavelength", "5l0"]),
-        ("interleave", GOOD_HEADER.replace("bsq", "bsx"), &["interleave", "bsx"]),
-        ("units", format!("{GOOD_HEADER}wavelength units = parsecs\n"), &["wavelength units", "parsecs"]),
+        (
+            "nosamples",
+            GOOD_HEADER.replace("samples = 2\n", ""),
+            &["samples"],
+        ),
+        (
+            "dtype",
+            GOOD_HEADER.replace("data type = 4", "data type = 6"),
+            &["data type", "6"],
+        ),
+        (
+            "dtype99",
+            GOOD_HEADER.replace("data type = 4", "data type = 99"),
+            &["data type", "99"],
+        ),
+        (
+            "wlcount",
+            GOOD_HEADER.replace("{500, 510, 520}", "{500, 510}"),
+            &["wavelength", "2 values", "3 bands"],
+        ),
+        (
+            "wlnum",
+            GOOD_HEADER.replace("510", "5l0"),
+            &["wavelength", "5l0"],
+        ),
+        (
+            "interleave",
+            GOOD_HEADER.replace("bsq", "bsx"),
+            &["interleave", "bsx"],
+        ),
+        (
+            "units",
+            format!("{GOOD_HEADER}wavelength units = parsecs\n"),
+            &["wavelength units", "parsecs"],
+        ),
     ];
     for (name, text, needles) in cases {
         let p = d.join(format!("{name}.hdr"));

@@ -8,12 +8,29 @@ use thinfilm::optics::{Complex64, Ior};
 
 const WL: [f64; 3] = [500.0, 550.0, 600.0];
 
-fn cube(dir: &Path, name: &str, w: usize, h: usize, dt: DataType, data: &[f32], ignore: Option<f64>) {
+fn cube(
+    dir: &Path,
+    name: &str,
+    w: usize,
+    h: usize,
+    dt: DataType,
+    data: &[f32],
+    ignore: Option<f64>,
+) {
     cube_wl(dir, name, w, h, dt, data, ignore, &WL);
 }
 
 #[allow(clippy::too_many_arguments)]
-fn cube_wl(dir: &Path, name: &str, w: usize, h: usize, dt: DataType, data: &[f32], ignore: Option<f64>, wl: &[f64]) {
+fn cube_wl(
+    dir: &Path,
+    name: &str,
+    w: usize,
+    h: usize,
+    dt: DataType,
+    data: &[f32],
+    ignore: Option<f64>,
+    wl: &[f64],
+) {
     let mut o = WriteOptions::new(w, h, wl.len());
     o.data_type = dt;
     o.wavelengths_nm = Some(wl.to_vec());
@@ -53,7 +70,13 @@ fn float_cubes_load_as_reflectance() {
     assert!(set.angles.iter().all(|a| a.valid.iter().all(|&v| v)));
     assert_eq!(set.invalid, InvalidCounts::default());
     // The capture.json path itself is accepted too.
-    assert_eq!(load_capture_set(&d.path().join("capture.json")).unwrap().angles.len(), 2);
+    assert_eq!(
+        load_capture_set(&d.path().join("capture.json"))
+            .unwrap()
+            .angles
+            .len(),
+        2
+    );
 }
 
 #[test]
@@ -61,7 +84,9 @@ fn raw_counts_with_references_and_every_invalid_cause() {
     let d = tempfile::tempdir().unwrap();
     let (w, h) = (3, 2);
     // White 4×1 px (another size than the cube), dark 1×1. Band 2: white == dark → bad reference.
-    let white = [1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0];
+    let white = [
+        1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0, 1100.0, 2100.0, 500.0,
+    ];
     // One white sample saturated (65535): excluded from the band mean, not propagated.
     let mut white = white.to_vec();
     white[3] = 65535.0;
@@ -122,10 +147,30 @@ fn malformed_sets_are_clear_errors() {
     cube(p, "a.hdr", 2, 2, DataType::F32, &data, None);
     cube(p, "b.hdr", 2, 2, DataType::F32, &data, None);
     cube(p, "small.hdr", 1, 2, DataType::F32, &data[..6], None);
-    cube_wl(p, "wl.hdr", 2, 2, DataType::F32, &data, None, &[500.0, 550.0, 610.0]);
-    cube_wl(p, "wl4.hdr", 1, 1, DataType::F32, &data[..4], None, &[500.0, 550.0, 600.0, 650.0]);
+    cube_wl(
+        p,
+        "wl.hdr",
+        2,
+        2,
+        DataType::F32,
+        &data,
+        None,
+        &[500.0, 550.0, 610.0],
+    );
+    cube_wl(
+        p,
+        "wl4.hdr",
+        1,
+        1,
+        DataType::F32,
+        &data[..4],
+        None,
+        &[500.0, 550.0, 600.0, 650.0],
+    );
     let doc = |pol: &str, angles: &str| {
-        format!(r#"{{"format": "thinfilm-capture/1", "polarization": "{pol}", "substrate": {{"ior": 1.64}}, "angles": [{angles}]}}"#)
+        format!(
+            r#"{{"format": "thinfilm-capture/1", "polarization": "{pol}", "substrate": {{"ior": 1.64}}, "angles": [{angles}]}}"#
+        )
     };
     let cases: Vec<(String, Vec<&str>)> = vec![
         (doc("q", r#"{"incident_deg": 10, "cube": "a.hdr"}"#), vec!["capture.json", "polarization", "'q'"]),

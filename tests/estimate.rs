@@ -22,13 +22,19 @@ fn full_fits_the_three_seed_samples() {
         let (mae, _, cnt) = synth::thickness_errors(&fit.thickness_nm, &truth);
         assert_eq!(cnt, spec.width * spec.height);
         let nerr = (fit.film_ior - n).abs();
-        eprintln!("full n={n} d={d}: n_fit={:.5} err={nerr:.5} mae={mae:.3}", fit.film_ior);
+        eprintln!(
+            "full n={n} d={d}: n_fit={:.5} err={nerr:.5} mae={mae:.3}",
+            fit.film_ior
+        );
         assert!(nerr <= 0.005, "n error {nerr}");
         assert!(mae <= 3.0, "thickness MAE {mae}");
         let sigma = fit.film_ior_sigma.expect("uncertainty");
         assert!(sigma > 0.0 && sigma < 0.01);
         let rmse = fit.rmse().unwrap();
-        assert!((rmse - 0.004).abs() < 0.001, "residual RMSE {rmse} should match the noise");
+        assert!(
+            (rmse - 0.004).abs() < 0.001,
+            "residual RMSE {rmse} should match the noise"
+        );
     }
 }
 
@@ -36,11 +42,21 @@ fn full_fits_the_three_seed_samples() {
 fn paper_and_grid_run_and_paper_is_worse_on_sample3() {
     let spec = small(2.37, 500.0);
     let (set, truth) = synth::capture(&spec);
-    let paper = estimate(&set, &Options { method: Method::Paper, ..Options::default() }).unwrap();
+    let paper = estimate(
+        &set,
+        &Options {
+            method: Method::Paper,
+            ..Options::default()
+        },
+    )
+    .unwrap();
     let full = estimate(&set, &Options::default()).unwrap();
     let (mae_p, _, _) = synth::thickness_errors(&paper.thickness_nm, &truth);
     let (mae_f, _, _) = synth::thickness_errors(&full.thickness_nm, &truth);
-    eprintln!("paper n={:.4} mae={mae_p:.2}; full n={:.4} mae={mae_f:.2}", paper.film_ior, full.film_ior);
+    eprintln!(
+        "paper n={:.4} mae={mae_p:.2}; full n={:.4} mae={mae_f:.2}",
+        paper.film_ior, full.film_ior
+    );
     assert!(paper.film_ior.is_finite());
     assert!(mae_f < mae_p);
     let mut g = small(1.37, 400.0);
@@ -59,7 +75,11 @@ fn paper_and_grid_run_and_paper_is_worse_on_sample3() {
     )
     .unwrap();
     let (mae_g, _, _) = synth::thickness_errors(&grid.thickness_nm, &gtruth);
-    assert!((grid.film_ior - 1.37).abs() <= 0.02, "grid n {}", grid.film_ior);
+    assert!(
+        (grid.film_ior - 1.37).abs() <= 0.02,
+        "grid n {}",
+        grid.film_ior
+    );
     assert!(mae_g < 15.0, "grid mae {mae_g}");
 }
 
@@ -73,7 +93,11 @@ fn half_order_peaks_when_film_is_denser_than_substrate() {
         let (set, truth) = synth::capture(&spec);
         let fit = estimate(&set, &Options::default()).unwrap();
         let (mae, _, _) = synth::thickness_errors(&fit.thickness_nm, &truth);
-        assert!((fit.film_ior - 2.37).abs() < 0.01, "d={d} n {}", fit.film_ior);
+        assert!(
+            (fit.film_ior - 2.37).abs() < 0.01,
+            "d={d} n {}",
+            fit.film_ior
+        );
         assert!(mae < 5.0, "d={d} mae {mae}");
     }
 }
@@ -84,11 +108,27 @@ fn known_index_works_with_one_angle_and_unknown_index_is_a_clear_error() {
     spec.incident_deg = vec![30.0];
     let (set, truth) = synth::capture(&spec);
     let err = estimate(&set, &Options::default()).unwrap_err().to_string();
-    assert!(err.contains("single incident angle") && err.contains("--film-ior"), "{err}");
-    let fit = estimate(&set, &Options { film_ior: Some(1.37), ..Options::default() }).unwrap();
+    assert!(
+        err.contains("single incident angle") && err.contains("--film-ior"),
+        "{err}"
+    );
+    let fit = estimate(
+        &set,
+        &Options {
+            film_ior: Some(1.37),
+            ..Options::default()
+        },
+    )
+    .unwrap();
     let (mae, _, _) = synth::thickness_errors(&fit.thickness_nm, &truth);
     assert!(mae < 3.0, "mae {mae}");
-    let bad = estimate(&set, &Options { film_ior: Some(0.3), ..Options::default() });
+    let bad = estimate(
+        &set,
+        &Options {
+            film_ior: Some(0.3),
+            ..Options::default()
+        },
+    );
     assert!(bad.unwrap_err().to_string().contains("propagating"));
 }
 
@@ -106,7 +146,13 @@ fn flat_peakless_and_broken_spectra_give_finite_json() {
         a.valid[11] = false;
     }
     for method in [Method::Full, Method::Paper] {
-        let r = estimate(&set, &Options { method, ..Options::default() });
+        let r = estimate(
+            &set,
+            &Options {
+                method,
+                ..Options::default()
+            },
+        );
         match r {
             Ok(fit) => {
                 assert_eq!(fit.invalid_pixels, 1);
@@ -130,7 +176,13 @@ fn flat_peakless_and_broken_spectra_give_finite_json() {
         a.valid.iter_mut().for_each(|v| *v = true);
     }
     for method in [Method::Full, Method::Paper] {
-        if let Ok(fit) = estimate(&set, &Options { method, ..Options::default() }) {
+        if let Ok(fit) = estimate(
+            &set,
+            &Options {
+                method,
+                ..Options::default()
+            },
+        ) {
             assert!(fit.film_ior.is_finite());
             let v = report::fit_json(&set, &fit, &Ok(0.0), None, &[]);
             assert!(!serde_json::to_string(&v).unwrap().contains("NaN"));
@@ -154,7 +206,10 @@ fn unpolarised_metal_substrate_and_thick_film() {
     let (set, truth) = synth::capture(&spec);
     let fit = estimate(&set, &Options::default()).unwrap();
     let (mae, _, _) = synth::thickness_errors(&fit.thickness_nm, &truth);
-    assert!((fit.film_ior - 1.38).abs() < 0.01, "metal n {}", fit.film_ior);
+    assert!(
+        (fit.film_ior - 1.38).abs() < 0.01,
+        "metal n {}",
+        fit.film_ior
+    );
     assert!(mae < 5.0, "metal mae {mae}");
 }
-

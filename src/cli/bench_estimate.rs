@@ -11,7 +11,9 @@ use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
-use thinfilm::capture::simulate::{parse_wavelengths, write_capture_set, SimulateConfig, Simulator};
+use thinfilm::capture::simulate::{
+    parse_wavelengths, write_capture_set, SimulateConfig, Simulator,
+};
 use thinfilm::capture::{load_capture_set, AngleCapture, CaptureSet, InvalidCounts, Polarization};
 use thinfilm::estimate::{estimate, report, synth, Fit, Method, Options};
 
@@ -53,8 +55,14 @@ fn parse_size(s: &str) -> Result<(usize, usize)> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .with_context(|| format!("size '{s}' must look like 128x96"))?;
-    let w: usize = w.trim().parse().with_context(|| format!("bad width in '{s}'"))?;
-    let h: usize = h.trim().parse().with_context(|| format!("bad height in '{s}'"))?;
+    let w: usize = w
+        .trim()
+        .parse()
+        .with_context(|| format!("bad width in '{s}'"))?;
+    let h: usize = h
+        .trim()
+        .parse()
+        .with_context(|| format!("bad height in '{s}'"))?;
     anyhow::ensure!(w > 0 && h > 0, "size '{s}' must be positive");
     Ok((w, h))
 }
@@ -111,12 +119,24 @@ fn opts_for(method: Method, grid_stride: usize) -> Options {
         // the full range the other methods cover).
         min_film_ior: if method == Method::Grid { 1.2 } else { 1.1 },
         max_film_ior: if method == Method::Grid { 2.6 } else { 3.0 },
-        max_thickness_nm: if method == Method::Grid { 1000.0 } else { 2000.0 },
+        max_thickness_nm: if method == Method::Grid {
+            1000.0
+        } else {
+            2000.0
+        },
+        // The seed's baseline models point samples (band integration would triple its cost).
+        band_integration: method != Method::Grid,
         ..Options::default()
     }
 }
 
-fn run_one(label: &str, set: &CaptureSet, truth: &[f32], n_true: f64, opts: &Options) -> Result<(Row, Fit)> {
+fn run_one(
+    label: &str,
+    set: &CaptureSet,
+    truth: &[f32],
+    n_true: f64,
+    opts: &Options,
+) -> Result<(Row, Fit)> {
     let t = Instant::now();
     let fit = estimate(set, opts).with_context(|| format!("{label}: {} failed", opts.method))?;
     let seconds = t.elapsed().as_secs_f64();
@@ -128,7 +148,9 @@ fn run_one(label: &str, set: &CaptureSet, truth: &[f32], n_true: f64, opts: &Opt
             method: opts.method,
             n_fit: fit.film_ior,
             n_err: te.film_ior_abs_error,
-            mean_d: report::thickness_stats(&fit.thickness_nm).map(|s| s.mean).unwrap_or(f64::NAN),
+            mean_d: report::thickness_stats(&fit.thickness_nm)
+                .map(|s| s.mean)
+                .unwrap_or(f64::NAN),
             mae: te.thickness_mae_nm,
             de,
             rmse: fit.rmse(),
@@ -139,7 +161,9 @@ fn run_one(label: &str, set: &CaptureSet, truth: &[f32], n_true: f64, opts: &Opt
 }
 
 fn opt(v: Option<f64>, prec: usize) -> String {
-    v.filter(|x| x.is_finite()).map(|x| format!("{x:.prec$}")).unwrap_or_else(|| "—".into())
+    v.filter(|x| x.is_finite())
+        .map(|x| format!("{x:.prec$}"))
+        .unwrap_or_else(|| "—".into())
 }
 
 fn table_header(s: &mut String) {
@@ -164,7 +188,8 @@ fn table_row(s: &mut String, r: &Row) {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
     let (w, h) = parse_size(&args.size)?;
     let mut md = String::new();
     let _ = writeln!(
@@ -199,8 +224,21 @@ pub fn run(args: Args) -> Result<()> {
             p.5
         );
         for method in [Method::Paper, Method::Grid, Method::Full] {
-            let (row, _) = run_one(&format!("Sample {}", i + 1), &set, &truth, p.0, &opts_for(method, args.grid_stride))?;
-            eprintln!("Sample {} {}: n {:.4} MAE {:.2} nm in {:.2} s", i + 1, method, row.n_fit, row.mae, row.seconds);
+            let (row, _) = run_one(
+                &format!("Sample {}", i + 1),
+                &set,
+                &truth,
+                p.0,
+                &opts_for(method, args.grid_stride),
+            )?;
+            eprintln!(
+                "Sample {} {}: n {:.4} MAE {:.2} nm in {:.2} s",
+                i + 1,
+                method,
+                row.n_fit,
+                row.mae,
+                row.seconds
+            );
             table_row(&mut md, &row);
             if method == Method::Full {
                 acceptance.push((row.n_err <= 0.005 && row.mae <= 3.0, row.n_err, row.mae));
@@ -212,7 +250,10 @@ pub fn run(args: Args) -> Result<()> {
         "\nAcceptance (full: |n error| ≤ 0.005, MAE ≤ 3 nm): {}\n",
         acceptance
             .iter()
-            .map(|(ok, n, m)| format!("{} (|Δn| {n:.4}, MAE {m:.2} nm)", if *ok { "pass" } else { "FAIL" }))
+            .map(|(ok, n, m)| format!(
+                "{} (|Δn| {n:.4}, MAE {m:.2} nm)",
+                if *ok { "pass" } else { "FAIL" }
+            ))
             .collect::<Vec<_>>()
             .join("; ")
     );
@@ -234,16 +275,32 @@ pub fn run(args: Args) -> Result<()> {
 /// Accuracy against time for every method and band spacing (Sample 3, the hard one).
 fn sweep(args: &Args, md: &mut String) -> Result<()> {
     let (w, h) = parse_size(&args.sweep_size)?;
-    let _ = writeln!(md, "### What accuracy costs in time (Sample 3, {w}×{h} px, band spacing = FWHM)\n");
+    let _ = writeln!(
+        md,
+        "### What accuracy costs in time (Sample 3, {w}×{h} px, band spacing = FWHM)\n"
+    );
     md.push_str("| bands (nm) | method | \\|n error\\| | thickness MAE (nm) | seconds |\n|---|---|---|---|---|\n");
     let mut points: Vec<(Method, f64, f64, f64)> = Vec::new();
     for spacing in [1.0, 2.0, 4.0, 8.0] {
         let cfg = seed_config(3, w, h, spacing)?;
         let (set, truth) = simulate(&cfg)?;
         for method in [Method::Paper, Method::Grid, Method::Full] {
-            let (row, _) = run_one("sweep", &set, &truth, 2.37, &opts_for(method, args.grid_stride))?;
-            let _ = writeln!(md, "| {spacing} | {method} | {:.4} | {:.2} | {:.2} |", row.n_err, row.mae, row.seconds);
-            eprintln!("sweep {spacing} nm {method}: MAE {:.2} in {:.2} s", row.mae, row.seconds);
+            let (row, _) = run_one(
+                "sweep",
+                &set,
+                &truth,
+                2.37,
+                &opts_for(method, args.grid_stride),
+            )?;
+            let _ = writeln!(
+                md,
+                "| {spacing} | {method} | {:.4} | {:.2} | {:.2} |",
+                row.n_err, row.mae, row.seconds
+            );
+            eprintln!(
+                "sweep {spacing} nm {method}: MAE {:.2} in {:.2} s",
+                row.mae, row.seconds
+            );
             points.push((method, spacing, row.seconds, row.mae));
         }
     }
@@ -262,17 +319,42 @@ fn plot_points(path: &std::path::Path, pts: &[(Method, f64, f64, f64)]) -> Resul
     );
     let (iw, ih) = (900u32, 600u32);
     let mut buf = vec![255u8; (iw * ih * 3) as usize];
-    let finite: Vec<&(Method, f64, f64, f64)> = pts.iter().filter(|p| p.2 > 0.0 && p.3.is_finite()).collect();
-    let tmin = finite.iter().map(|p| p.2).fold(f64::INFINITY, f64::min).max(1e-4) / 2.0;
-    let tmax = finite.iter().map(|p| p.2).fold(0.0, f64::max).max(tmin * 4.0) * 2.0;
-    let emin = finite.iter().map(|p| p.3.max(1e-3)).fold(f64::INFINITY, f64::min) / 2.0;
-    let emax = finite.iter().map(|p| p.3).fold(0.0, f64::max).max(emin * 4.0) * 2.0;
+    let finite: Vec<&(Method, f64, f64, f64)> = pts
+        .iter()
+        .filter(|p| p.2 > 0.0 && p.3.is_finite())
+        .collect();
+    let tmin = finite
+        .iter()
+        .map(|p| p.2)
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-4)
+        / 2.0;
+    let tmax = finite
+        .iter()
+        .map(|p| p.2)
+        .fold(0.0, f64::max)
+        .max(tmin * 4.0)
+        * 2.0;
+    let emin = finite
+        .iter()
+        .map(|p| p.3.max(1e-3))
+        .fold(f64::INFINITY, f64::min)
+        / 2.0;
+    let emax = finite
+        .iter()
+        .map(|p| p.3)
+        .fold(0.0, f64::max)
+        .max(emin * 4.0)
+        * 2.0;
     {
         let root = BitMapBackend::with_buffer(&mut buf, (iw, ih)).into_drawing_area();
         let e = |e: DrawingAreaErrorKind<_>| anyhow::anyhow!("plot: {e:?}");
         root.fill(&WHITE).map_err(e)?;
         let mut chart = ChartBuilder::on(&root)
-            .caption("Thickness MAE vs fit time (Sample 3; labels = band spacing nm)", ("sans-serif", 20))
+            .caption(
+                "Thickness MAE vs fit time (Sample 3; labels = band spacing nm)",
+                ("sans-serif", 20),
+            )
             .margin(15)
             .x_label_area_size(45)
             .y_label_area_size(70)
@@ -284,17 +366,26 @@ fn plot_points(path: &std::path::Path, pts: &[(Method, f64, f64, f64)]) -> Resul
             .y_desc("thickness MAE, nm (log)")
             .draw()
             .map_err(|x| anyhow::anyhow!("plot: {x:?}"))?;
-        for (method, color) in [(Method::Paper, RED), (Method::Grid, BLUE), (Method::Full, GREEN)] {
+        for (method, color) in [
+            (Method::Paper, RED),
+            (Method::Grid, BLUE),
+            (Method::Full, GREEN),
+        ] {
             let series: Vec<(f64, f64, f64)> = finite
                 .iter()
                 .filter(|p| p.0 == method)
                 .map(|p| (p.2, p.3.max(emin), p.1))
                 .collect();
             chart
-                .draw_series(LineSeries::new(series.iter().map(|p| (p.0, p.1)), color.stroke_width(2)))
+                .draw_series(LineSeries::new(
+                    series.iter().map(|p| (p.0, p.1)),
+                    color.stroke_width(2),
+                ))
                 .map_err(|x| anyhow::anyhow!("plot: {x:?}"))?
                 .label(method.to_string())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
             chart
                 .draw_series(series.iter().map(|p| {
                     EmptyElement::at((p.0, p.1))
@@ -317,7 +408,9 @@ fn plot_points(path: &std::path::Path, pts: &[(Method, f64, f64, f64)]) -> Resul
 /// Robust cases, `full` only.
 fn robustness(args: &Args, md: &mut String) -> Result<()> {
     let (w, h) = (64, 48);
-    md.push_str("### Robustness (full, 64×48 px, σ = 0.004; target |n error| ≤ 0.01, MAE ≤ 5 nm)\n\n");
+    md.push_str(
+        "### Robustness (full, 64×48 px, σ = 0.004; target |n error| ≤ 0.01, MAE ≤ 5 nm)\n\n",
+    );
     md.push_str("| case | n true | n fit | \\|n error\\| | thickness MAE (nm) | valid px | seconds | pass |\n|---|---|---|---|---|---|---|---|\n");
     let mut cases: Vec<(String, CaptureSet, Vec<f32>, f64)> = Vec::new();
     let base = |n: f64, d: f64| -> Result<SimulateConfig> {
@@ -344,7 +437,12 @@ fn robustness(args: &Args, md: &mut String) -> Result<()> {
     let dir = args.out.join("raw_bil_capture");
     let summary = write_capture_set(&c, &dir)?;
     let s = load_capture_set(&dir)?;
-    cases.push(("raw uint16 BIL + white/dark (files)".into(), s, summary.thickness_nm, 1.37));
+    cases.push((
+        "raw uint16 BIL + white/dark (files)".into(),
+        s,
+        summary.thickness_nm,
+        1.37,
+    ));
     // NaN / inf pixels.
     let c = base(1.37, 600.0)?;
     let (mut s, t) = simulate(&c)?;
@@ -362,7 +460,12 @@ fn robustness(args: &Args, md: &mut String) -> Result<()> {
     for (label, set, truth, n_true) in cases {
         let (row, fit) = run_one(&label, &set, &truth, n_true, &Options::default())?;
         let ok = row.n_err <= 0.01 && row.mae <= 5.0;
-        eprintln!("robust {label}: n {:.4} MAE {:.2} {}", row.n_fit, row.mae, if ok { "ok" } else { "FAIL" });
+        eprintln!(
+            "robust {label}: n {:.4} MAE {:.2} {}",
+            row.n_fit,
+            row.mae,
+            if ok { "ok" } else { "FAIL" }
+        );
         let _ = writeln!(
             md,
             "| {label} | {n_true} | {:.4} | {:.4} | {:.2} | {} | {:.2} | {} |",
@@ -386,7 +489,13 @@ fn large(md: &mut String) -> Result<()> {
     let (set, truth) = simulate(&cfg)?;
     let mp = (set.width * set.height) as f64 / 1e6;
     let t = Instant::now();
-    let fit = estimate(&set, &Options { progress: true, ..Options::default() })?;
+    let fit = estimate(
+        &set,
+        &Options {
+            progress: true,
+            ..Options::default()
+        },
+    )?;
     let total = t.elapsed().as_secs_f64();
     let te = report::truth_errors(&fit, 1.37, &truth);
     let _ = writeln!(

@@ -79,7 +79,8 @@ pub fn run(args: Args) -> Result<()> {
     let de_s = t.elapsed().as_secs_f64();
     let truth = match &args.ground_truth {
         Some(dir) => {
-            let gt = load_ground_truth(dir).with_context(|| format!("loading ground truth {}", dir.display()))?;
+            let gt = load_ground_truth(dir)
+                .with_context(|| format!("loading ground truth {}", dir.display()))?;
             Some(report::truth_from_ground_truth(&fit, &gt)?)
         }
         None => None,

@@ -144,7 +144,8 @@ impl<'a> Pixels<'a> {
         let mut used = 0;
         for (a, ang) in self.set.angles.iter().enumerate() {
             let src = &ang.reflectance[p * b..(p + 1) * b];
-            let ok = ang.valid.get(p).copied().unwrap_or(false) && src.iter().all(|v| v.is_finite());
+            let ok =
+                ang.valid.get(p).copied().unwrap_or(false) && src.iter().all(|v| v.is_finite());
             mask[a] = ok;
             if ok {
                 y[a * b..(a + 1) * b].copy_from_slice(src);
@@ -183,7 +184,11 @@ fn check_set(set: &CaptureSet) -> Result<()> {
             bail!("incident angle {}° is outside [0°, 90°)", a.incident_deg);
         }
     }
-    if set.wavelengths_nm.iter().any(|l| !(l.is_finite() && *l > 0.0)) {
+    if set
+        .wavelengths_nm
+        .iter()
+        .any(|l| !(l.is_finite() && *l > 0.0))
+    {
         bail!("capture wavelengths must be finite and > 0 nm");
     }
     Ok(())
@@ -228,11 +233,9 @@ fn progress_bar(opts: &Options, len: usize, what: &str) -> indicatif::ProgressBa
     }
     let pb = indicatif::ProgressBar::new(len as u64);
     pb.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{msg:>12} [{bar:40}] {pos}/{len} px ({eta} left)",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-        .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} px ({eta} left)")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
     );
     pb.set_message(what.to_string());
     pb
@@ -303,7 +306,8 @@ impl<'a> DSolver<'a> {
             if !(cur.hess > 0.0) {
                 break;
             }
-            let mut step = (-cur.grad / cur.hess).clamp(-self.max_newton_step, self.max_newton_step);
+            let mut step =
+                (-cur.grad / cur.hess).clamp(-self.max_newton_step, self.max_newton_step);
             let mut moved = false;
             for _ in 0..6 {
                 let dn = (d + step).clamp(self.d_min, self.d_max);
@@ -469,7 +473,9 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
         let tau = solver.scan_step * 2.0;
         let changes: Vec<(usize, f32, f32)> = (0..w * h)
             .into_par_iter()
-            .filter(|&p| d[p].is_finite() && med[p].is_finite() && (d[p] - med[p]).abs() as f64 > tau)
+            .filter(|&p| {
+                d[p].is_finite() && med[p].is_finite() && (d[p] - med[p]).abs() as f64 > tau
+            })
             .map_init(
                 || (vec![0f32; na * nb], vec![false; na]),
                 |(yb, m), p| {
@@ -495,7 +501,14 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
     Thickness { d, sse, samples }
 }
 
-fn interpolate_seed(seed: &[f32], gw: usize, gh: usize, stride: usize, x: usize, y: usize) -> Option<f64> {
+fn interpolate_seed(
+    seed: &[f32],
+    gw: usize,
+    gh: usize,
+    stride: usize,
+    x: usize,
+    y: usize,
+) -> Option<f64> {
     let fx = x as f64 / stride as f64;
     let fy = y as f64 / stride as f64;
     let x0 = (fx.floor() as usize).min(gw - 1);
@@ -566,7 +579,11 @@ fn angle_order(set: &CaptureSet) -> Vec<(usize, f64)> {
 
 /// First index estimate of `full`: sub-band peaks tracked from angle to angle (each order
 /// separately), eq. (12) generalised to all angles of a track, median over tracks.
-fn index_from_peaks(set: &CaptureSet, pixels: &[usize], geom: &Geometry) -> Option<(f64, f64, usize)> {
+fn index_from_peaks(
+    set: &CaptureSet,
+    pixels: &[usize],
+    geom: &Geometry,
+) -> Option<(f64, f64, usize)> {
     let px = Pixels::new(set);
     let (na, nb) = (set.angles.len(), set.bands());
     let order = angle_order(set);
@@ -585,7 +602,10 @@ fn index_from_peaks(set: &CaptureSet, pixels: &[usize], geom: &Geometry) -> Opti
                     .map(|&(a, kx)| {
                         let ya = &y[a * nb..(a + 1) * nb];
                         let sigma = peaks::noise_sigma(ya);
-                        (kx, peaks::subband_peaks(ya, lambdas, (4.0 * sigma).max(0.002), 10.0))
+                        (
+                            kx,
+                            peaks::subband_peaks(ya, lambdas, (4.0 * sigma).max(0.002), 10.0),
+                        )
                     })
                     .collect();
                 let mut out = Vec::new();
@@ -593,7 +613,15 @@ fn index_from_peaks(set: &CaptureSet, pixels: &[usize], geom: &Geometry) -> Opti
                 for start in 0..per_angle.len() {
                     for pk in &per_angle[start].1 {
                         // Only start tracks at peaks not continuing an earlier track.
-                        if start > 0 && track_prev(&per_angle[start - 1], per_angle[start].0, pk.lambda_nm, n_lo).is_some() {
+                        if start > 0
+                            && track_prev(
+                                &per_angle[start - 1],
+                                per_angle[start].0,
+                                pk.lambda_nm,
+                                n_lo,
+                            )
+                            .is_some()
+                        {
                             continue;
                         }
                         let mut track = vec![(per_angle[start].0, pk.lambda_nm)];
@@ -632,7 +660,9 @@ fn index_from_peaks(set: &CaptureSet, pixels: &[usize], geom: &Geometry) -> Opti
 /// largest shift any index ≥ `n_lo` allows (λ2/λ1 = √((n²−kx2²)/(n²−kx1²))).
 fn track_next(kx1: f64, lambda1: f64, next: &(f64, Vec<peaks::Peak>), n_lo: f64) -> Option<f64> {
     let kx2 = next.0;
-    let lo_ratio = ((n_lo * n_lo - kx2 * kx2) / (n_lo * n_lo - kx1 * kx1)).max(0.25).sqrt();
+    let lo_ratio = ((n_lo * n_lo - kx2 * kx2) / (n_lo * n_lo - kx1 * kx1))
+        .max(0.25)
+        .sqrt();
     next.1
         .iter()
         .map(|p| p.lambda_nm)
@@ -641,10 +671,21 @@ fn track_next(kx1: f64, lambda1: f64, next: &(f64, Vec<peaks::Peak>), n_lo: f64)
 }
 
 fn track_prev(prev: &(f64, Vec<peaks::Peak>), kx: f64, lambda: f64, n_lo: f64) -> Option<f64> {
-    prev.1
-        .iter()
-        .map(|p| p.lambda_nm)
-        .find(|&l0| track_next(prev.0, l0, &(kx, vec![peaks::Peak { lambda_nm: lambda, prominence: 0.0 }]), n_lo).is_some())
+    prev.1.iter().map(|p| p.lambda_nm).find(|&l0| {
+        track_next(
+            prev.0,
+            l0,
+            &(
+                kx,
+                vec![peaks::Peak {
+                    lambda_nm: lambda,
+                    prominence: 0.0,
+                }],
+            ),
+            n_lo,
+        )
+        .is_some()
+    })
 }
 
 /// Joint Levenberg–Marquardt of n (shared) and d_i (per pixel) on `pixels`, with the
@@ -718,8 +759,15 @@ fn joint_refine(
         let c: f64 = parts.iter().map(|p| p[3]).sum();
         let hn: f64 = parts.iter().map(|p| p[4]).sum();
         // Undamped Schur complement for the uncertainty at the current point.
-        let schur0: f64 = c - parts.iter().filter(|p| p[0] > 0.0).map(|p| p[1] * p[1] / p[0]).sum::<f64>();
-        let dof = data.iter().map(|(_, m)| m.iter().filter(|&&v| v).count() * nb).sum::<usize>() as f64
+        let schur0: f64 = c - parts
+            .iter()
+            .filter(|p| p[0] > 0.0)
+            .map(|p| p[1] * p[1] / p[0])
+            .sum::<f64>();
+        let dof = data
+            .iter()
+            .map(|(_, m)| m.iter().filter(|&&v| v).count() * nb)
+            .sum::<usize>() as f64
             - (pixels.len() + 1) as f64;
         if schur0 > 0.0 && dof > 0.0 {
             sigma = Some((cur / dof / schur0).sqrt());
@@ -733,7 +781,11 @@ fn joint_refine(
                 s_c -= p[1] * p[1] / a;
                 s_h -= p[1] * p[2] / a;
             }
-            let dn = if s_c > 0.0 { (-s_h / s_c).clamp(-0.05, 0.05) } else { 0.0 };
+            let dn = if s_c > 0.0 {
+                (-s_h / s_c).clamp(-0.05, 0.05)
+            } else {
+                0.0
+            };
             let n_new = (n + dn).max(n_min);
             let d_new: Vec<f64> = parts
                 .iter()
@@ -815,8 +867,11 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         let n0 = match first {
             Some((n0, _, _)) if n0 > geom.min_film_ior() && n0 < 10.0 => n0,
             _ => {
-                warnings.push("no peak could be tracked across angles; index from a coarse scan".into());
-                index_scan(set, &geom, &sub, opts).ok_or_else(|| anyhow::anyhow!("index scan found no candidate"))?
+                warnings.push(
+                    "no peak could be tracked across angles; index from a coarse scan".into(),
+                );
+                index_scan(set, &geom, &sub, opts)
+                    .ok_or_else(|| anyhow::anyhow!("index scan found no candidate"))?
             }
         };
         stages.push(("index_from_peaks".to_string(), t.elapsed().as_secs_f64()));
@@ -858,7 +913,16 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let t = Instant::now();
     let th = fit_thickness(set, &geom, n, opts);
     stages.push(("thickness".to_string(), t.elapsed().as_secs_f64()));
-    Ok(finish(set, Method::Full, n, sigma, note, th, stages, warnings))
+    Ok(finish(
+        set,
+        Method::Full,
+        n,
+        sigma,
+        note,
+        th,
+        stages,
+        warnings,
+    ))
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -883,7 +947,9 @@ fn finish(
         film_ior_note: note,
         width: set.width,
         height: set.height,
-        unfitted_pixels: set.width * set.height - invalid - fitted.min(set.width * set.height - invalid),
+        unfitted_pixels: set.width * set.height
+            - invalid
+            - fitted.min(set.width * set.height - invalid),
         thickness_nm: th.d,
         sse: th.sse,
         samples: th.samples,
@@ -952,7 +1018,10 @@ fn paper(set: &CaptureSet, opts: &Options) -> Result<Fit> {
                  (flat or peak-less spectra, or λ1 = λ2); try --method full or --film-ior"
             )
         })?;
-        (n, format!("eq. (12): median over {k} angle pairs of band-quantised peaks"))
+        (
+            n,
+            format!("eq. (12): median over {k} angle pairs of band-quantised peaks"),
+        )
     };
     if n <= geom.max_kx() {
         bail!("paper method: index {n} ≤ n1 sinθ: eq. (13) has no real solution");
@@ -1002,15 +1071,29 @@ fn paper(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     pb.finish_and_clear();
     let nopeak = res.iter().filter(|r| r.2 > 0 && !r.0.is_finite()).count();
     if nopeak > 0 {
-        warnings.push(format!("{nopeak} pixels had no peak at any angle: no thickness (eq. 13 needs a peak)"));
+        warnings.push(format!(
+            "{nopeak} pixels had no peak at any angle: no thickness (eq. 13 needs a peak)"
+        ));
     }
     stages.push(("thickness_eq13_14".to_string(), t.elapsed().as_secs_f64()));
     let th = Thickness {
         d: res.iter().map(|r| r.0).collect(),
-        sse: res.iter().map(|r| if r.0.is_finite() { r.1 } else { 0.0 }).collect(),
+        sse: res
+            .iter()
+            .map(|r| if r.0.is_finite() { r.1 } else { 0.0 })
+            .collect(),
         samples: res.iter().map(|r| r.2).collect(),
     };
-    Ok(finish(set, Method::Paper, n, None, note, th, stages, warnings))
+    Ok(finish(
+        set,
+        Method::Paper,
+        n,
+        None,
+        note,
+        th,
+        stages,
+        warnings,
+    ))
 }
 
 /// Exhaustive grid: for every n, every pixel's best d on the thickness grid; n minimises
@@ -1054,7 +1137,10 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             })
             .collect();
         let lo = opts.min_film_ior.max(geom.min_film_ior());
-        let n_steps = ((opts.max_film_ior - lo) / opts.grid_ior_step).floor().max(0.0) as usize + 1;
+        let n_steps = ((opts.max_film_ior - lo) / opts.grid_ior_step)
+            .floor()
+            .max(0.0) as usize
+            + 1;
         let pb = progress_bar(opts, n_steps, "grid n");
         let mut best = (f64::NAN, f64::INFINITY);
         for i in 0..n_steps {
@@ -1071,7 +1157,10 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             best.0,
             format!(
                 "grid: n step {} over [{lo:.3}, {:.3}], d step {} nm, {} pixels",
-                opts.grid_ior_step, opts.max_film_ior, opts.grid_thickness_step_nm, sub.len()
+                opts.grid_ior_step,
+                opts.max_film_ior,
+                opts.grid_thickness_step_nm,
+                sub.len()
             ),
         )
     };
@@ -1099,5 +1188,14 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         samples: res.iter().map(|r| r.2).collect(),
     };
     let sigma = Some(opts.grid_ior_step / 12f64.sqrt());
-    Ok(finish(set, Method::Grid, n, sigma, note, th, stages, Vec::new()))
+    Ok(finish(
+        set,
+        Method::Grid,
+        n,
+        sigma,
+        note,
+        th,
+        stages,
+        Vec::new(),
+    ))
 }

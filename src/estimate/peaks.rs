@@ -76,7 +76,9 @@ fn mean_spacing(l: &[f64]) -> f64 {
     if l.len() < 2 {
         return 1.0;
     }
-    ((l[l.len() - 1] - l[0]) / (l.len() - 1) as f64).abs().max(1e-6)
+    ((l[l.len() - 1] - l[0]) / (l.len() - 1) as f64)
+        .abs()
+        .max(1e-6)
 }
 
 /// The seed's peak: the band centre of the most prominent maximum (3-band smoothing against
@@ -193,12 +195,7 @@ pub enum Eq12Error {
 
 /// Seed eq. (12): n² = (λ2² sin²θ1 − λ1² sin²θ2) / (λ2² − λ1²), for the same order m seen at
 /// two angles (ambient index `n1` folded into sinθ: n1 sinθ1 = n2 sinθ2).
-pub fn index_from_pair(
-    lambda1: f64,
-    kx1: f64,
-    lambda2: f64,
-    kx2: f64,
-) -> Result<f64, Eq12Error> {
+pub fn index_from_pair(lambda1: f64, kx1: f64, lambda2: f64, kx2: f64) -> Result<f64, Eq12Error> {
     if (kx1 - kx2).abs() < 1e-12 {
         return Err(Eq12Error::EqualAngles);
     }

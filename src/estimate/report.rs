@@ -39,7 +39,11 @@ fn pct(sorted: &[f64], q: f64) -> f64 {
 }
 
 pub fn thickness_stats(d: &[f32]) -> Option<Stats> {
-    let mut v: Vec<f64> = d.iter().filter(|x| x.is_finite()).map(|&x| x as f64).collect();
+    let mut v: Vec<f64> = d
+        .iter()
+        .filter(|x| x.is_finite())
+        .map(|&x| x as f64)
+        .collect();
     if v.is_empty() {
         return None;
     }
@@ -73,18 +77,27 @@ fn xyz_weights(lambdas: &[f64]) -> Result<Vec<[f64; 3]>, String> {
 
 /// Mean ΔE*ab (CIE76, D65, Y of a perfect reflector = 1) between measured and model
 /// spectra over fitted pixels (at most `max_pixels`, evenly spread) and their valid angles.
-pub fn mean_delta_e(set: &CaptureSet, fit: &Fit, band_integration: bool, max_pixels: usize) -> Result<f64, String> {
+pub fn mean_delta_e(
+    set: &CaptureSet,
+    fit: &Fit,
+    band_integration: bool,
+    max_pixels: usize,
+) -> Result<f64, String> {
     if set.wavelengths_nm.windows(2).any(|w| w[1] <= w[0]) {
         return Err("wavelengths are not ascending".into());
     }
     let wts = xyz_weights(&set.wavelengths_nm)?;
-    let white = wts.iter().fold([0.0; 3], |a, w| [a[0] + w[0], a[1] + w[1], a[2] + w[2]]);
+    let white = wts
+        .iter()
+        .fold([0.0; 3], |a, w| [a[0] + w[0], a[1] + w[1], a[2] + w[2]]);
     if !(white[1] > 0.0) {
         return Err("the bands carry no luminance (outside the visible range)".into());
     }
     let geom = Geometry::from_capture(set, band_integration);
     let model = geom.model(fit.film_ior);
-    let fitted: Vec<usize> = (0..fit.thickness_nm.len()).filter(|&p| fit.thickness_nm[p].is_finite()).collect();
+    let fitted: Vec<usize> = (0..fit.thickness_nm.len())
+        .filter(|&p| fit.thickness_nm[p].is_finite())
+        .collect();
     let pixels = super::spread(&fitted, max_pixels);
     let nb = set.bands();
     let lab = |s: &[f32]| {
@@ -269,7 +282,11 @@ pub fn write_colormap_png(
 ) -> Result<()> {
     use plotters::prelude::*;
     register_font();
-    let mut finite: Vec<f64> = values.iter().filter(|v| v.is_finite()).map(|&v| v as f64).collect();
+    let mut finite: Vec<f64> = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|&v| v as f64)
+        .collect();
     finite.sort_by(f64::total_cmp);
     let (lo, hi) = if finite.is_empty() {
         (0.0, 1.0)
@@ -298,19 +315,29 @@ pub fn write_colormap_png(
                     RGBColor(128, 128, 128)
                 };
                 let (x0, y0) = ((x * scale + 10) as i32, (y * scale + 40) as i32);
-                root.draw(&Rectangle::new([(x0, y0), (x0 + scale as i32, y0 + scale as i32)], c.filled()))
-                    .map_err(|e| anyhow::anyhow!("{e}"))?;
+                root.draw(&Rectangle::new(
+                    [(x0, y0), (x0 + scale as i32, y0 + scale as i32)],
+                    c.filled(),
+                ))
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
             }
         }
-        root.draw(&Text::new(label.to_string(), (10, 12), ("sans-serif", 18).into_font()))
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        root.draw(&Text::new(
+            label.to_string(),
+            (10, 12),
+            ("sans-serif", 18).into_font(),
+        ))
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
         // Colour bar.
         let (bx, by, bh) = (mw as i32 + 30, 40i32, mh.max(200) as i32 - 10);
         for i in 0..bh {
             let t = 1.0 - i as f64 / (bh - 1).max(1) as f64;
             let [r, g, b] = viridis(t);
-            root.draw(&Rectangle::new([(bx, by + i), (bx + 20, by + i + 1)], RGBColor(r, g, b).filled()))
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            root.draw(&Rectangle::new(
+                [(bx, by + i), (bx + 20, by + i + 1)],
+                RGBColor(r, g, b).filled(),
+            ))
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
         }
         for k in 0..=4 {
             let t = k as f64 / 4.0;
@@ -318,9 +345,17 @@ pub fn write_colormap_png(
             let yy = by + (t * (bh - 1) as f64) as i32;
             root.draw(&PathElement::new(vec![(bx + 20, yy), (bx + 26, yy)], BLACK))
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
-            let txt = if (hi - lo) < 0.1 { format!("{v:.4}") } else { format!("{v:.1}") };
-            root.draw(&Text::new(txt, (bx + 30, yy - 7), ("sans-serif", 14).into_font()))
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let txt = if (hi - lo) < 0.1 {
+                format!("{v:.4}")
+            } else {
+                format!("{v:.1}")
+            };
+            root.draw(&Text::new(
+                txt,
+                (bx + 30, yy - 7),
+                ("sans-serif", 14).into_font(),
+            ))
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
         }
         root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
     }
@@ -356,7 +391,9 @@ pub fn material_xml(fit: &Fit, set: &CaptureSet) -> String {
 /// glTF thickness texture: G = (d − min)/(max − min); invalid pixels take the median.
 pub fn gltf_texture(fit: &Fit) -> (Vec<u8>, f64, f64) {
     let s = thickness_stats(&fit.thickness_nm);
-    let (lo, hi, med) = s.map(|s| (s.min, s.max, s.median)).unwrap_or((0.0, 0.0, 0.0));
+    let (lo, hi, med) = s
+        .map(|s| (s.min, s.max, s.median))
+        .unwrap_or((0.0, 0.0, 0.0));
     let span = if hi > lo { hi - lo } else { 1.0 };
     let mut bytes = Vec::with_capacity(fit.thickness_nm.len() * 3);
     for &d in &fit.thickness_nm {
@@ -393,35 +430,62 @@ pub fn material_gltf(fit: &Fit, set: &CaptureSet, min: f64, max: f64, texture: &
 }
 
 /// Writes every output file of a fit into `out`.
-pub fn write_outputs(
-    out: &Path,
-    set: &CaptureSet,
-    fit: &Fit,
-    json: &Value,
-) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating output folder {}", out.display()))?;
+pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> Result<()> {
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("creating output folder {}", out.display()))?;
     let (w, h) = (fit.width, fit.height);
-    crate::image_io::write_exr_channels(&out.join("thickness.exr"), w, h, &[("thickness", &fit.thickness_nm)])
-        .context("writing thickness.exr")?;
-    write_colormap_png(&out.join("thickness.png"), &fit.thickness_nm, w, h, "thickness (nm)")
-        .context("writing thickness.png")?;
+    crate::image_io::write_exr_channels(
+        &out.join("thickness.exr"),
+        w,
+        h,
+        &[("thickness", &fit.thickness_nm)],
+    )
+    .context("writing thickness.exr")?;
+    write_colormap_png(
+        &out.join("thickness.png"),
+        &fit.thickness_nm,
+        w,
+        h,
+        "thickness (nm)",
+    )
+    .context("writing thickness.png")?;
     let rmse: Vec<f32> = fit
         .sse
         .iter()
         .zip(&fit.samples)
         .zip(&fit.thickness_nm)
-        .map(|((&s, &c), d)| if d.is_finite() && c > 0 { (s / c as f32).sqrt() } else { f32::NAN })
+        .map(|((&s, &c), d)| {
+            if d.is_finite() && c > 0 {
+                (s / c as f32).sqrt()
+            } else {
+                f32::NAN
+            }
+        })
         .collect();
-    write_colormap_png(&out.join("residual.png"), &rmse, w, h, "residual RMSE (reflectance)")
-        .context("writing residual.png")?;
+    write_colormap_png(
+        &out.join("residual.png"),
+        &rmse,
+        w,
+        h,
+        "residual RMSE (reflectance)",
+    )
+    .context("writing residual.png")?;
     let (tex, lo, hi) = gltf_texture(fit);
-    crate::image_io::write_png_rgb8(&out.join("thickness_gltf.png"), w, h, tex).context("writing thickness_gltf.png")?;
+    crate::image_io::write_png_rgb8(&out.join("thickness_gltf.png"), w, h, tex)
+        .context("writing thickness_gltf.png")?;
     let xml = material_xml(fit, set);
-    crate::image_io::write_atomically(&out.join("material.xml"), |p| Ok(std::fs::write(p, xml.as_bytes())?))?;
-    let gltf = serde_json::to_string_pretty(&material_gltf(fit, set, lo, hi, "thickness_gltf.png"))?;
-    crate::image_io::write_atomically(&out.join("material.gltf"), |p| Ok(std::fs::write(p, gltf.as_bytes())?))?;
+    crate::image_io::write_atomically(&out.join("material.xml"), |p| {
+        Ok(std::fs::write(p, xml.as_bytes())?)
+    })?;
+    let gltf =
+        serde_json::to_string_pretty(&material_gltf(fit, set, lo, hi, "thickness_gltf.png"))?;
+    crate::image_io::write_atomically(&out.join("material.gltf"), |p| {
+        Ok(std::fs::write(p, gltf.as_bytes())?)
+    })?;
     let text = serde_json::to_string_pretty(json)?;
-    crate::image_io::write_atomically(&out.join("fit.json"), |p| Ok(std::fs::write(p, text.as_bytes())?))?;
+    crate::image_io::write_atomically(&out.join("fit.json"), |p| {
+        Ok(std::fs::write(p, text.as_bytes())?)
+    })?;
     Ok(())
 }
 
@@ -436,5 +500,9 @@ pub fn truth_from_ground_truth(fit: &Fit, gt: &GroundTruth) -> Result<TruthError
             fit.height
         );
     }
-    Ok(truth_errors(fit, gt.film_ior.at(550.0).re, &gt.thickness_nm))
+    Ok(truth_errors(
+        fit,
+        gt.film_ior.at(550.0).re,
+        &gt.thickness_nm,
+    ))
 }

@@ -124,6 +124,8 @@ fn opts_for(method: Method, grid_stride: usize) -> Options {
         } else {
             2000.0
         },
+        // The seed's baseline models point samples (band integration would triple its cost).
+        band_integration: method != Method::Grid,
         ..Options::default()
     }
 }

@@ -1,0 +1,123 @@
+//! End to end: `thinfilm simulate`'s library writer → `thinfilm estimate` binary → every
+//! output file, and the CLI's error for a single-angle capture without `--film-ior`.
+
+use std::process::Command;
+use thinfilm::capture::simulate::{write_capture_set, SimulateConfig};
+
+fn small_capture(dir: &std::path::Path, angles: Vec<f64>) {
+    let mut cfg = SimulateConfig::preset("sample1").unwrap();
+    cfg.width = 12;
+    cfg.height = 8;
+    cfg.noise_sigma = 0.004;
+    cfg.angles_deg = angles;
+    write_capture_set(&cfg, dir).unwrap();
+}
+
+#[test]
+fn estimate_writes_every_output_and_reports_truth_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    small_capture(&cap, vec![10.0, 20.0, 30.0, 40.0, 50.0]);
+    let out = tmp.path().join("fit");
+    let st = Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+        .args([
+            "estimate",
+            cap.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ])
+        .arg("--ground-truth")
+        .arg(&cap)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for f in [
+        "fit.json",
+        "thickness.exr",
+        "thickness.png",
+        "residual.png",
+        "material.xml",
+        "material.gltf",
+        "thickness_gltf.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let text = std::fs::read_to_string(out.join("fit.json")).unwrap();
+    assert!(!text.contains("NaN"));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["method"], "full");
+    let n = v["film_ior"].as_f64().unwrap();
+    assert!((n - 1.37).abs() < 0.01, "n {n}");
+    assert!(v["ground_truth"]["thickness_mae_nm"].as_f64().unwrap() < 5.0);
+    assert!(
+        v["thickness_nm"]["p5"].as_f64().unwrap() <= v["thickness_nm"]["p95"].as_f64().unwrap()
+    );
+    assert_eq!(v["pixels"]["valid"].as_u64().unwrap(), 96);
+    let de = &v["delta_e_ab_d65_mean"];
+    assert!(de
+        .as_f64()
+        .map(|d| d >= 0.0 && d < 5.0)
+        .unwrap_or(v["delta_e_reason"].is_string()));
+    let (w, h, d) =
+        thinfilm::image_io::read_exr_channel(&out.join("thickness.exr"), "thickness").unwrap();
+    assert_eq!((w, h, d.len()), (12, 8, 96));
+    let xml = std::fs::read_to_string(out.join("material.xml")).unwrap();
+    assert!(
+        xml.contains("type=\"thinfilm\"")
+            && xml.contains("thickness.exr")
+            && xml.contains("film_ior")
+    );
+    let g: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("material.gltf")).unwrap()).unwrap();
+    let ir = &g["materials"][0]["extensions"]["KHR_materials_iridescence"];
+    assert!(
+        ir["iridescenceThicknessMinimum"].as_f64().unwrap()
+            < ir["iridescenceThicknessMaximum"].as_f64().unwrap()
+    );
+}
+
+#[test]
+fn single_angle_without_index_is_a_clear_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    small_capture(&cap, vec![30.0]);
+    let out = tmp.path().join("fit");
+    let st = Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+        .args([
+            "estimate",
+            cap.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ])
+        .output()
+        .unwrap();
+    assert!(!st.status.success());
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(err.contains("--film-ior"), "{err}");
+    assert!(!out.join("fit.json").exists(), "nothing half-written");
+    let st = Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+        .args([
+            "estimate",
+            cap.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+            "--film-ior",
+            "1.37",
+            "--method",
+            "paper",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+}

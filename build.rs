@@ -8,79 +8,16 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-const LAMBDA_MIN_NM: i64 = 360;
-const LAMBDA_MAX_NM: i64 = 830;
-const N_ROWS: usize = (LAMBDA_MAX_NM - LAMBDA_MIN_NM + 1) as usize;
+#[path = "src/spectrum/table_csv.rs"]
+mod table_csv;
 
-/// Parse a 1 nm table with `columns` (first column `lambda_nm`) into rows of values.
+use table_csv::TABLE_ROWS as N_ROWS;
+
+/// Read and parse one table; errors name the file and line.
 fn parse_table(path: &Path, columns: &[&str]) -> Result<Vec<Vec<f64>>, String> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
-    let mut header_seen = false;
-    let mut rows: Vec<Vec<f64>> = Vec::with_capacity(N_ROWS);
-    for (idx, raw) in text.lines().enumerate() {
-        let line_no = idx + 1;
-        let at = || format!("{}:{line_no}", path.display());
-        let line = raw.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if !header_seen {
-            if fields != columns {
-                return Err(format!(
-                    "{}: header is {:?}, expected {:?}",
-                    at(),
-                    fields,
-                    columns
-                ));
-            }
-            header_seen = true;
-            continue;
-        }
-        if fields.len() != columns.len() {
-            return Err(format!(
-                "{}: {} fields, expected {} ({})",
-                at(),
-                fields.len(),
-                columns.len(),
-                columns.join(",")
-            ));
-        }
-        let mut row = Vec::with_capacity(columns.len());
-        for (field, name) in fields.iter().zip(columns) {
-            let v: f64 = field.parse().map_err(|e| {
-                format!("{}: column `{name}`: `{field}` is not a number ({e})", at())
-            })?;
-            if !v.is_finite() {
-                return Err(format!(
-                    "{}: column `{name}`: `{field}` is not finite",
-                    at()
-                ));
-            }
-            row.push(v);
-        }
-        let expected = LAMBDA_MIN_NM + rows.len() as i64;
-        if row[0] != expected as f64 {
-            return Err(format!(
-                "{}: lambda_nm is {}, expected {expected} (tables must be 360..=830 nm in 1 nm steps)",
-                at(),
-                row[0]
-            ));
-        }
-        rows.push(row);
-    }
-    if !header_seen {
-        return Err(format!("{}: no header line", path.display()));
-    }
-    if rows.len() != N_ROWS {
-        return Err(format!(
-            "{}: {} data rows, expected {N_ROWS} (360..=830 nm at 1 nm)",
-            path.display(),
-            rows.len()
-        ));
-    }
-    Ok(rows)
+    table_csv::parse_1nm_table(&text, &path.display().to_string(), columns)
 }
 
 fn generate(manifest: &Path, out_dir: &Path) -> Result<(), String> {
@@ -121,18 +58,60 @@ fn generate(manifest: &Path, out_dir: &Path) -> Result<(), String> {
     )
     .unwrap();
 
+    // Σ D65·ȳ over the 1 nm grid: normalises reflectance XYZ (Y = 1 for a perfect reflector)
+    // and the RGB illuminant's D65.
+    let d65_y_sum: f64 = cmf.iter().zip(&d65).map(|(c, d)| c[2] * d[1]).sum();
+    writeln!(
+        out,
+        "/// Σ D65(λ)·ȳ(λ)·1 nm over 360..=830 nm, computed from the tables.\npub(crate) const D65_Y_SUM_1NM: f64 = {d65_y_sum:?};"
+    )
+    .unwrap();
+
     let dest = out_dir.join("cie_tables.rs");
     std::fs::write(&dest, out).map_err(|e| format!("{}: cannot write: {e}", dest.display()))
+}
+
+/// Check the embedded rgb2spec table ("SPEC", u32 res, res f32 z-nodes, 9·res³ f32) so a
+/// truncated or foreign file fails the build instead of the first render.
+fn check_coeff(path: &Path) -> Result<(), String> {
+    let bytes = std::fs::read(path).map_err(|e| {
+        format!(
+            "{}: cannot read: {e} (regenerate with: cargo run --release --manifest-path tools/rgb2spec/Cargo.toml -- spectra/srgb_rgb2spec_64.coeff)",
+            path.display()
+        )
+    })?;
+    if bytes.len() < 8 || &bytes[..4] != b"SPEC" {
+        return Err(format!("{}: missing \"SPEC\" header", path.display()));
+    }
+    let res = u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]) as usize;
+    if res != 64 {
+        return Err(format!("{}: resolution {res}, expected 64", path.display()));
+    }
+    let need = 8 + 4 * (res + 9 * res * res * res);
+    if bytes.len() < need {
+        return Err(format!(
+            "{}: {} bytes, a resolution-{res} table needs {need}",
+            path.display(),
+            bytes.len()
+        ));
+    }
+    Ok(())
 }
 
 fn main() {
     println!("cargo:rerun-if-changed=spectra/cie1931_2deg_cmf_1nm.csv");
     println!("cargo:rerun-if-changed=spectra/cie_d65_1nm.csv");
+    println!("cargo:rerun-if-changed=spectra/srgb_rgb2spec_64.coeff");
+    println!("cargo:rerun-if-changed=src/spectrum/table_csv.rs");
     println!("cargo:rerun-if-changed=build.rs");
     let manifest = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"));
     let out_dir = PathBuf::from(std::env::var("OUT_DIR").expect("OUT_DIR"));
     if let Err(msg) = generate(&manifest, &out_dir) {
         eprintln!("error: malformed colour table: {msg}");
+        std::process::exit(1);
+    }
+    if let Err(msg) = check_coeff(&manifest.join("spectra/srgb_rgb2spec_64.coeff")) {
+        eprintln!("error: bad RGB→spectrum table: {msg}");
         std::process::exit(1);
     }
 }

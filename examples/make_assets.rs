@@ -40,7 +40,9 @@ fn main() -> Result<()> {
     write_exr_channels(&path, tw, th, &[("Y", &thickness)])?;
     let (mn, mx) = thickness
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     println!("{}: {tw}×{th}, {mn:.1}–{mx:.1} nm", path.display());
     Ok(())
 }

@@ -7,11 +7,14 @@
 
 pub mod dispersion;
 pub mod film;
+pub mod film_f32;
 pub mod fresnel;
 pub mod ior;
+pub mod stack;
 
 pub use film::{FilmResponse, ThinFilm};
 pub use ior::Ior;
+pub use stack::{Coherence, Layer, Stack};
 pub use num_complex::Complex64;
 
 /// Why an optical computation was refused (never a NaN instead).

@@ -110,6 +110,12 @@ impl Distribution2D {
     }
 }
 
+/// The normalised D65 illuminant alone: scale 1 × a flat 1 (sigmoid of 0 is ½, so scale 2).
+const D65_UNIT: RgbIlluminantSpectrum = RgbIlluminantSpectrum {
+    scale: 2.0,
+    poly: crate::spectrum::RgbSigmoidPolynomial { c: [0.0; 3] },
+};
+
 /// Lat-long environment map.
 #[derive(Debug, Clone)]
 pub struct EnvMap {
@@ -196,6 +202,8 @@ impl EnvMap {
         let c1 = (c0 + 1) % w;
         let r0 = (y.floor() as usize).min(h - 2);
         let fy = y - r0 as f32;
+        // The four texels share the D65 factor: evaluate it once per wavelength.
+        let d65 = Spec::from_array(wl.lambda.map(|l| D65_UNIT.eval(l)));
         let mut out = Spec::ZERO;
         for (r, c, wgt) in [
             (r0, c0, (1.0 - fx) * (1.0 - fy)),
@@ -203,11 +211,12 @@ impl EnvMap {
             (r0 + 1, c0, (1.0 - fx) * fy),
             (r0 + 1, c1, fx * fy),
         ] {
-            if wgt > 0.0 {
-                let t = &self.texels[r * w + c];
-                out += Spec::from_array(wl.lambda.map(|l| t.eval(l))) * wgt;
+            let t = &self.texels[r * w + c];
+            if wgt > 0.0 && t.scale > 0.0 {
+                out += Spec::from_array(wl.lambda.map(|l| t.poly.eval(l))) * (wgt * t.scale);
             }
         }
+        out *= d65;
         out * self.scale
     }
 

@@ -20,6 +20,7 @@
 //!      (from R = ((n−1)² + k²)/((n+1)² + k²)). The hue of coloured metals is lost.
 //!   4. otherwise → [`BsdfDesc::Plastic`]: diffuse = baseColor (factor × sRGB-decoded
 //!      texture), int_ior = `KHR_materials_ior` (default 1.5), α = roughness².
+//!
 //!   Emissive factor × `KHR_materials_emissive_strength` > 0 → area emission (linear RGB).
 //! - **Camera**: the first perspective camera found on a node (glTF cameras look down −Z,
 //!   Mitsuba's down +Z: the camera frame is rotated 180° about Y); `yfov` → `fov_axis = y`;
@@ -113,10 +114,13 @@ impl Loader<'_> {
             .textures()
             .nth(tex_index)
             .with_context(|| format!("{}: texture {tex_index} does not exist", self.file))?;
-        let img = self
-            .images
-            .get(tex.source().index())
-            .with_context(|| format!("{}: image {} was not loaded", self.file, tex.source().index()))?;
+        let img = self.images.get(tex.source().index()).with_context(|| {
+            format!(
+                "{}: image {} was not loaded",
+                self.file,
+                tex.source().index()
+            )
+        })?;
         Ok((img, tex))
     }
 
@@ -127,7 +131,9 @@ impl Loader<'_> {
         let what = format!(
             "{}: material {}",
             self.file,
-            m.name().map(str::to_string).unwrap_or_else(|| format!("#{:?}", m.index()))
+            m.name()
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("#{:?}", m.index()))
         );
         let pbr = m.pbr_metallic_roughness();
         let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
@@ -154,17 +160,16 @@ impl Loader<'_> {
             let thickness_nm = match v.get("iridescenceThicknessTexture") {
                 None => TextureDesc::Value(SpectrumDesc::Constant(tmax)),
                 Some(t) => {
-                    let index = t
-                        .get("index")
-                        .and_then(|x| x.as_u64())
-                        .with_context(|| format!("{what}: iridescenceThicknessTexture has no index"))?
-                        as usize;
+                    let index = t.get("index").and_then(|x| x.as_u64()).with_context(|| {
+                        format!("{what}: iridescenceThicknessTexture has no index")
+                    })? as usize;
                     if t.get("texCoord").and_then(|x| x.as_u64()).unwrap_or(0) != 0 {
                         eprintln!("warning: {what}: thickness texture uses texCoord ≠ 0; TEXCOORD_0 is used");
                     }
                     let (img, tex) = self.texture_image(index)?;
                     // G channel, linear data (not colour).
-                    let g = image_channel(img, 1).with_context(|| format!("{what}: thickness texture"))?;
+                    let g = image_channel(img, 1)
+                        .with_context(|| format!("{what}: thickness texture"))?;
                     let mut b = BitmapTexture::new(img.width as usize, img.height as usize, 1, g)?;
                     b.value_range = Some((tmin, tmax));
                     b.wrap = wrap_mode(tex.sampler().wrap_s());
@@ -182,7 +187,10 @@ impl Loader<'_> {
             if factor > 0.0 {
                 eprintln!("warning: {what}: iridescenceFactor {factor} < 0.5 is ignored (thin film is on/off)");
             }
-            let transmission = m.transmission().map(|t| t.transmission_factor()).unwrap_or(0.0);
+            let transmission = m
+                .transmission()
+                .map(|t| t.transmission_factor())
+                .unwrap_or(0.0);
             let base = pbr.base_color_factor();
             if transmission >= 0.5 {
                 BsdfDesc::Dielectric {
@@ -191,7 +199,8 @@ impl Loader<'_> {
                     alpha,
                 }
             } else if pbr.metallic_factor() >= 0.5 {
-                let f0 = (0.2126 * base[0] + 0.7152 * base[1] + 0.0722 * base[2]).clamp(0.0, 0.999) as f64;
+                let f0 = (0.2126 * base[0] + 0.7152 * base[1] + 0.0722 * base[2]).clamp(0.0, 0.999)
+                    as f64;
                 let k = 2.0 * (f0 / (1.0 - f0)).sqrt();
                 BsdfDesc::Conductor {
                     eta: Ior::Constant(Complex64::new(1.0, k)),
@@ -210,7 +219,8 @@ impl Loader<'_> {
                             .flat_map(|i| (0..3).map(move |c| (i, c)))
                             .map(|(i, c)| srgb_to_linear(planes[c][i]) * base[c])
                             .collect();
-                        let mut b = BitmapTexture::new(img.width as usize, img.height as usize, 3, data)?;
+                        let mut b =
+                            BitmapTexture::new(img.width as usize, img.height as usize, 3, data)?;
                         b.wrap = wrap_mode(tex.sampler().wrap_s());
                         b.filter = filter_of(&tex);
                         TextureDesc::Bitmap(Arc::new(b))
@@ -293,11 +303,16 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         for prim in mesh.primitives() {
             let what = format!(
                 "{file}: mesh {} primitive {}",
-                mesh.name().map(str::to_string).unwrap_or_else(|| mesh.index().to_string()),
+                mesh.name()
+                    .map(str::to_string)
+                    .unwrap_or_else(|| mesh.index().to_string()),
                 prim.index()
             );
             if prim.mode() != gltf::mesh::Mode::Triangles {
-                eprintln!("warning: {what}: mode {:?} is not triangles; skipped", prim.mode());
+                eprintln!(
+                    "warning: {what}: mode {:?} is not triangles; skipped",
+                    prim.mode()
+                );
                 continue;
             }
             let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
@@ -322,8 +337,16 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
                 bail!("{what}: index count {} is not a multiple of 3", flat.len());
             }
             let mut m = TriangleMesh {
-                normals: if normals.len() == positions.len() { normals } else { Vec::new() },
-                uvs: if uvs.len() == positions.len() { uvs } else { Vec::new() },
+                normals: if normals.len() == positions.len() {
+                    normals
+                } else {
+                    Vec::new()
+                },
+                uvs: if uvs.len() == positions.len() {
+                    uvs
+                } else {
+                    Vec::new()
+                },
                 positions,
                 indices: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
             };
@@ -357,7 +380,9 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
             let h = DEFAULT_RESOLUTION.1;
             let w = aspect
                 .filter(|a| a.is_finite() && *a > 0.0)
-                .map_or(DEFAULT_RESOLUTION.0, |a| ((h as f32 * a).round() as u32).max(1));
+                .map_or(DEFAULT_RESOLUTION.0, |a| {
+                    ((h as f32 * a).round() as u32).max(1)
+                });
             (
                 c,
                 FilmSettings {

@@ -18,9 +18,12 @@
 //! deviation: rough BSDFs with Mitsuba's default `beckmann` distribution are rendered with
 //! GGX (the renderer's only microfacet model) and a warning is printed.
 
+// `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use super::{
-    look_at, shapes, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis,
-    Geometry, IntegratorSettings, ReconstructionFilter, Scene, Shape, SpectrumDesc, TextureDesc,
+    look_at, shapes, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
+    IntegratorSettings, ReconstructionFilter, Scene, Shape, SpectrumDesc, TextureDesc,
     TextureFilter, WrapMode,
 };
 use crate::optics::{dispersion, Complex64, Ior};
@@ -322,10 +325,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         if !full.is_file() {
             return Err(self.err(
                 node,
-                format!(
-                    "file '{file}' not found (looked for {})",
-                    full.display()
-                ),
+                format!("file '{file}' not found (looked for {})", full.display()),
             ));
         }
         Ok(full)
@@ -342,14 +342,19 @@ impl<'a, 'i> Ctx<'a, 'i> {
             return Err(self.err(root, "the root element must be <scene version=\"3.0.0\">"));
         }
         self.check_attrs(root, &["version"])?;
-        let version = root
-            .attribute("version")
-            .ok_or_else(|| self.err(root, "missing attribute 'version' (e.g. version=\"3.0.0\")"))?;
+        let version = root.attribute("version").ok_or_else(|| {
+            self.err(root, "missing attribute 'version' (e.g. version=\"3.0.0\")")
+        })?;
         let major = version
             .split('.')
             .next()
             .and_then(|m| m.trim().parse::<u32>().ok())
-            .ok_or_else(|| self.err(root, format!("version \"{version}\" is not a version number")))?;
+            .ok_or_else(|| {
+                self.err(
+                    root,
+                    format!("version \"{version}\" is not a version number"),
+                )
+            })?;
         if major < 2 {
             return Err(self.err(
                 root,
@@ -376,7 +381,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 bail!(
                     "{}: -D {k}={v}: the scene has no parameter ${k} (declared: {})",
                     self.file,
-                    if names.is_empty() { "none".to_string() } else { names.join(", ") }
+                    if names.is_empty() {
+                        "none".to_string()
+                    } else {
+                        names.join(", ")
+                    }
                 );
             }
             self.params.insert(k.clone(), v.clone());
@@ -429,7 +438,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
     fn unknown_element(&self, node: Node, parent: &str) -> anyhow::Error {
         self.err(
             node,
-            format!("unsupported element <{}> inside {parent}", node.tag_name().name()),
+            format!(
+                "unsupported element <{}> inside {parent}",
+                node.tag_name().name()
+            ),
         )
     }
 
@@ -475,9 +487,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
     fn parse_value(&mut self, node: Node<'a, 'i>) -> Result<(String, Val)> {
         let tag = node.tag_name().name();
         let name = node.attribute("name").unwrap_or("").to_string();
-        let bad = |ctx: &Self, what: &str, v: &str| {
-            ctx.err(node, format!("'{v}' is not {what}"))
-        };
+        let bad = |ctx: &Self, what: &str, v: &str| ctx.err(node, format!("'{v}' is not {what}"));
         let val = match tag {
             "float" => {
                 self.check_attrs(node, &["name", "value", "id"])?;
@@ -585,7 +595,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
         self.check_attrs(node, &["name", "value", "filename", "type", "id"])?;
         if let Some(t) = self.attr(node, "type")? {
             if t != "d65" {
-                return Err(self.err(node, format!("unsupported spectrum type \"{t}\" (only d65)")));
+                return Err(self.err(
+                    node,
+                    format!("unsupported spectrum type \"{t}\" (only d65)"),
+                ));
             }
             let mut scale = 1.0;
             for c in Self::elements(node) {
@@ -709,11 +722,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 "ref" => {
                     self.check_attrs(c, &["id", "name"])?;
                     let id = self.req_attr(c, "id")?;
-                    let named = self
-                        .ids
-                        .get(&id)
-                        .cloned()
-                        .ok_or_else(|| self.err(c, format!("reference to unknown id \"{id}\"")))?;
+                    let named =
+                        self.ids.get(&id).cloned().ok_or_else(|| {
+                            self.err(c, format!("reference to unknown id \"{id}\""))
+                        })?;
                     let val = match named {
                         Named::Bsdf(i) => Val::BsdfRef(i),
                         Named::Texture(t) => Val::Texture(t),
@@ -743,14 +755,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 }
                 _ => return Err(self.unknown_element(c, &Self::describe(node))),
             };
-            if list.iter().any(|p: &Prop| p.name == name) {
+            // Unnamed nested objects ("<bsdf>") are checked by the plugin that takes them.
+            if !name.starts_with('<') && list.iter().any(|p: &Prop| p.name == name) {
                 return Err(self.err(c, format!("parameter '{name}' given twice")));
             }
-            list.push(Prop {
-                name,
-                val,
-                node: c,
-            });
+            list.push(Prop { name, val, node: c });
         }
         Ok(Props {
             node,
@@ -847,12 +856,16 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let material = p.string(self, "material")?;
                 let eta = p.take("eta");
                 let k = p.take("k");
-                p.accept(&["specular_reflectance"], self, |v| {
-                    matches!(v, Val::Float(x) if *x == 1.0)
-                })?;
+                p.accept(
+                    &["specular_reflectance"],
+                    self,
+                    |v| matches!(v, Val::Float(x) if *x == 1.0),
+                )?;
                 let ior = match (material, eta, k) {
                     (Some(_), Some(e), _) | (Some(_), None, Some(e)) => {
-                        return Err(self.err(e.node, "give either 'material' or 'eta'/'k', not both"))
+                        return Err(
+                            self.err(e.node, "give either 'material' or 'eta'/'k', not both")
+                        )
                     }
                     (Some(m), None, None) => self.conductor_material(p.node, &m)?,
                     (None, None, None) => self.conductor_material(p.node, "none")?,
@@ -879,12 +892,22 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
             "dielectric" | "roughdielectric" | "thindielectric" => {
                 if plugin == "thindielectric" {
-                    return Err(self.unknown_plugin(p, KNOWN.iter().filter(|k| **k != "thindielectric").copied().collect::<Vec<_>>().as_slice()));
+                    return Err(self.unknown_plugin(
+                        p,
+                        KNOWN
+                            .iter()
+                            .filter(|k| **k != "thindielectric")
+                            .copied()
+                            .collect::<Vec<_>>()
+                            .as_slice(),
+                    ));
                 }
                 let alpha = if plugin == "roughdielectric" {
                     let (au, av) = self.microfacet(p)?;
                     if au != av {
-                        return Err(self.err(p.node, "anisotropic roughdielectric is not supported"));
+                        return Err(
+                            self.err(p.node, "anisotropic roughdielectric is not supported")
+                        );
                     }
                     au
                 } else {
@@ -959,7 +982,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         ref v => {
                             return Err(self.err(
                                 q.node,
-                                format!("thickness must be a float or a bitmap texture, not {}", v.kind()),
+                                format!(
+                                    "thickness must be a float or a bitmap texture, not {}",
+                                    v.kind()
+                                ),
                             ))
                         }
                     },
@@ -1032,7 +1058,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
             (Some(a), None, None) => (a, a),
             (None, Some(u), Some(v)) => (u, v),
             (None, None, None) => (0.1, 0.1),
-            _ => return Err(self.err(p.node, "give either 'alpha' or both 'alpha_u' and 'alpha_v'")),
+            _ => {
+                return Err(self.err(
+                    p.node,
+                    "give either 'alpha' or both 'alpha_u' and 'alpha_v'",
+                ))
+            }
         };
         if !(u >= 0.0 && v >= 0.0) {
             return Err(self.err(p.node, "roughness must be ≥ 0"));
@@ -1083,7 +1114,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 } else if let Some(v) = mitsuba_ior(s) {
                     Ior::real(v)
                 } else {
-                    s.parse::<Ior>().map_err(|e| self.err(q.node, format!("{what}: {e}")))?
+                    s.parse::<Ior>()
+                        .map_err(|e| self.err(q.node, format!("{what}: {e}")))?
                 }
             }
             _ => Ior::real(self.real(q, what)?),
@@ -1104,7 +1136,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     .ok_or_else(|| self.err(p.node, "missing parameter 'filename'"))?;
                 let path = self.resolve_path(p.node, &file)?;
                 let raw = p.bool(self, "raw", false)?;
-                let mut tex = BitmapTexture::load(&path, raw).map_err(|e| self.err(p.node, format!("{e:#}")))?;
+                let mut tex = BitmapTexture::load(&path, raw)
+                    .map_err(|e| self.err(p.node, format!("{e:#}")))?;
                 if let Some(f) = p.string(self, "filter_type")? {
                     tex.filter = TextureFilter::parse(&f).ok_or_else(|| {
                         self.err(p.node, format!("filter_type \"{f}\" (bilinear, nearest)"))
@@ -1115,14 +1148,14 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         self.err(p.node, format!("wrap_mode \"{w}\" (repeat, mirror, clamp)"))
                     })?;
                 }
-                tex.to_uv = p.to_uv(self)?;
+                tex.to_uv = p.uv_transform(self)?;
                 p.accept(&["format"], self, |v| matches!(v, Val::Str(_)))?;
                 Ok(TextureDesc::Bitmap(Arc::new(tex)))
             }
             "checkerboard" => {
                 let color0 = p.spectrum(self, "color0", 0.4)?;
                 let color1 = p.spectrum(self, "color1", 0.2)?;
-                let to_uv = p.to_uv(self)?;
+                let to_uv = p.uv_transform(self)?;
                 Ok(TextureDesc::Checkerboard {
                     color0,
                     color1,
@@ -1162,10 +1195,18 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let path = self.resolve_path(p.node, &file)?;
                 let image = super::texture::load_rgb_image(&path)
                     .map_err(|e| self.err(p.node, format!("{e:#}")))?;
-                if image.pixels.iter().flatten().any(|v| !v.is_finite() || *v < 0.0) {
+                if image
+                    .pixels
+                    .iter()
+                    .flatten()
+                    .any(|v| !v.is_finite() || *v < 0.0)
+                {
                     return Err(self.err(
                         p.node,
-                        format!("environment map {} has negative or non-finite texels", path.display()),
+                        format!(
+                            "environment map {} has negative or non-finite texels",
+                            path.display()
+                        ),
                     ));
                 }
                 let scale = p.float(self, "scale", 1.0)? as f32;
@@ -1214,11 +1255,15 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 };
                 let radius = p.float(self, "radius", 1.0)? as f32;
                 // Mitsuba: to_world · translate(center) · scale(radius).
-                let m = to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
+                let m = to_world
+                    * Mat4::from_translation(center)
+                    * Mat4::from_scale(Vec3::splat(radius));
                 let c = m.transform_point3(Vec3::ZERO);
                 let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| m.transform_vector3(a));
                 let r = axes[0].length();
-                let similar = axes.iter().all(|a| (a.length() - r).abs() <= 1e-4 * r.max(1e-12))
+                let similar = axes
+                    .iter()
+                    .all(|a| (a.length() - r).abs() <= 1e-4 * r.max(1e-12))
                     && axes[0].dot(axes[1]).abs() <= 1e-4 * r * r
                     && axes[1].dot(axes[2]).abs() <= 1e-4 * r * r
                     && axes[0].dot(axes[2]).abs() <= 1e-4 * r * r;
@@ -1275,10 +1320,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 Geometry::Mesh(mesh)
             }
             _ => {
-                return Err(self.unknown_plugin(
-                    p,
-                    &["obj", "ply", "sphere", "rectangle", "cube", "disk"],
-                ))
+                return Err(
+                    self.unknown_plugin(p, &["obj", "ply", "sphere", "rectangle", "cube", "disk"])
+                )
             }
         };
         let bsdf = match bsdf {
@@ -1315,7 +1359,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
             Some("smaller") => FovAxis::Smaller,
             Some("larger") => FovAxis::Larger,
             Some(o) => {
-                return Err(self.err(p.node, format!("fov_axis \"{o}\" (x, y, diagonal, smaller, larger)")))
+                return Err(self.err(
+                    p.node,
+                    format!("fov_axis \"{o}\" (x, y, diagonal, smaller, larger)"),
+                ))
             }
         };
         let near_clip = p.float(self, "near_clip", 0.01)? as f32;
@@ -1408,7 +1455,13 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     fn build_sampler(&mut self, p: &mut Props<'a, 'i>) -> Result<(u32, u64)> {
-        const KNOWN: &[&str] = &["independent", "stratified", "multijitter", "orthogonal", "ldsampler"];
+        const KNOWN: &[&str] = &[
+            "independent",
+            "stratified",
+            "multijitter",
+            "orthogonal",
+            "ldsampler",
+        ];
         if !KNOWN.contains(&p.plugin.as_str()) {
             return Err(self.unknown_plugin(p, KNOWN));
         }
@@ -1517,7 +1570,11 @@ pub fn read_spd(path: &Path) -> Result<SpectrumDesc> {
             Some([l, v]) if l.is_finite() && v.is_finite() && *l > 0.0 => {
                 pairs.push((*l as f32, *v as f32))
             }
-            _ => bail!("{}:{}: expected \"wavelength value\", got \"{line}\"", path.display(), n + 1),
+            _ => bail!(
+                "{}:{}: expected \"wavelength value\", got \"{line}\"",
+                path.display(),
+                n + 1
+            ),
         }
     }
     check_tabulated(pairs).map_err(|e| anyhow!("{}: {e}", path.display()))
@@ -1566,7 +1623,11 @@ impl<'a, 'i> Props<'a, 'i> {
     fn type_err(ctx: &Ctx, q: &Prop, want: &str) -> anyhow::Error {
         ctx.err(
             q.node,
-            format!("parameter '{}' must be {want}, not {}", q.name, q.val.kind()),
+            format!(
+                "parameter '{}' must be {want}, not {}",
+                q.name,
+                q.val.kind()
+            ),
         )
     }
 
@@ -1626,7 +1687,7 @@ impl<'a, 'i> Props<'a, 'i> {
     }
 
     /// `to_uv` as a 3×3 homogeneous 2-D transform (the x/y rows of the 4×4).
-    fn to_uv(&mut self, ctx: &Ctx) -> Result<Mat3> {
+    fn uv_transform(&mut self, ctx: &Ctx) -> Result<Mat3> {
         let m = self.transform(ctx, "to_uv")?;
         Ok(Mat3::from_cols(
             m.x_axis.truncate().truncate().extend(0.0),

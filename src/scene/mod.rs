@@ -359,9 +359,10 @@ pub fn shapes_bounds(shapes: &[Shape]) -> Option<(Vec3, Vec3)> {
     for s in shapes {
         let b = match &s.geometry {
             Geometry::Mesh(m) => m.bounds(),
-            Geometry::Sphere { center, radius, .. } => {
-                Some((*center - Vec3::splat(*radius), *center + Vec3::splat(*radius)))
-            }
+            Geometry::Sphere { center, radius, .. } => Some((
+                *center - Vec3::splat(*radius),
+                *center + Vec3::splat(*radius),
+            )),
         };
         if let Some((lo, hi)) = b {
             acc = Some(match acc {
@@ -416,12 +417,19 @@ impl Scene {
     /// positive resolution and sample count, finite camera.
     pub fn validate(&self) -> Result<()> {
         if self.film.width == 0 || self.film.height == 0 {
-            bail!("film resolution {}×{} is empty", self.film.width, self.film.height);
+            bail!(
+                "film resolution {}×{} is empty",
+                self.film.width,
+                self.film.height
+            );
         }
         if self.spp == 0 {
             bail!("sample_count must be ≥ 1");
         }
-        if !self.camera.to_world.is_finite() || !(self.camera.fov_deg > 0.0 && self.camera.fov_deg < 180.0) {
+        if !(self.camera.to_world.is_finite()
+            && self.camera.fov_deg > 0.0
+            && self.camera.fov_deg < 180.0)
+        {
             bail!("camera is degenerate (fov {}°)", self.camera.fov_deg);
         }
         for (i, s) in self.shapes.iter().enumerate() {

@@ -86,7 +86,10 @@ impl TriangleMesh {
     pub fn validate(&self, what: &str) -> Result<()> {
         let n = self.positions.len();
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            bail!("{what}: vertex {i} has a non-finite position {:?}", self.positions[i]);
+            bail!(
+                "{what}: vertex {i} has a non-finite position {:?}",
+                self.positions[i]
+            );
         }
         if !self.normals.is_empty() && self.normals.len() != n {
             bail!("{what}: {} normals for {n} vertices", self.normals.len());
@@ -109,7 +112,10 @@ impl TriangleMesh {
     /// does for meshes without normals unless `face_normals` is set).
     pub fn ensure_normals(&mut self) {
         if self.normals.len() != self.positions.len()
-            || self.normals.iter().any(|n| !n.is_finite() || n.length_squared() == 0.0)
+            || self
+                .normals
+                .iter()
+                .any(|n| !n.is_finite() || n.length_squared() == 0.0)
         {
             self.normals = smooth_normals(&self.positions, &self.indices, false);
         }
@@ -210,7 +216,8 @@ pub fn disk(rings: usize, segments: usize) -> TriangleMesh {
     for s in 0..segments {
         m.positions.push(Vec3::ZERO);
         m.normals.push(Vec3::Z);
-        m.uvs.push(Vec2::new(0.0, (s as f32 + 0.5) / segments as f32));
+        m.uvs
+            .push(Vec2::new(0.0, (s as f32 + 0.5) / segments as f32));
     }
     let ring_base = |r: usize| (segments + (r - 1) * (segments + 1)) as u32;
     for r in 1..=rings {

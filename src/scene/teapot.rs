@@ -225,4 +225,3 @@ pub fn signed_volume(mesh: &TriangleMesh) -> f64 {
         })
         .sum()
 }
-

@@ -147,7 +147,8 @@ impl BitmapTexture {
                     self.texel(xb, yb),
                 );
                 std::array::from_fn(|k| {
-                    (1.0 - ty) * ((1.0 - tx) * a[k] + tx * b[k]) + ty * ((1.0 - tx) * c[k] + tx * d[k])
+                    (1.0 - ty) * ((1.0 - tx) * a[k] + tx * b[k])
+                        + ty * ((1.0 - tx) * c[k] + tx * d[k])
                 })
             }
         };
@@ -331,7 +332,10 @@ mod tests {
         // uv (0.6, 0.1) → (1.2, 0.2) → repeat → texel (0, 0).
         assert_eq!(t.eval_scalar(Vec2::new(0.6, 0.1)), 1.0);
         assert!(checkerboard_is_color0(&Mat3::IDENTITY, Vec2::new(0.2, 0.2)));
-        assert!(!checkerboard_is_color0(&Mat3::IDENTITY, Vec2::new(0.7, 0.2)));
+        assert!(!checkerboard_is_color0(
+            &Mat3::IDENTITY,
+            Vec2::new(0.7, 0.2)
+        ));
         assert!(checkerboard_is_color0(&Mat3::IDENTITY, Vec2::new(0.7, 0.7)));
     }
 

@@ -134,7 +134,10 @@ pub fn delta_e76(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
 ///
 /// Follows the paper's equations (1)–(22), including its notes on the hue angle of neutral
 /// colours (h' = 0 when a' = b = 0), on Δh' and the mean hue when C'₁C'₂ = 0, and on the
-/// ±180° discontinuity of the mean hue.
+/// ±180° discontinuity of the mean hue. Hue differences within 1e-9° of 180° are treated as
+/// exactly 180° (the "≤ 180°" branch): test pair 14 has h'₂ − h'₁ = 180° mathematically, and
+/// atan2 rounding (≈3e-14°) must not flip it to the other side of the discontinuity, which
+/// would give 4.7461 instead of the published 4.8045.
 pub fn delta_e2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
     let [l1, a1, b1] = lab1;
     let [l2, a2, b2] = lab2;
@@ -173,13 +176,14 @@ pub fn delta_e2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
     let dlp = l2 - l1;
     let dcp = c2p - c1p;
     let cc = c1p * c2p;
+    const HUE_EPS_DEG: f64 = 1e-9;
     let dhp = if cc == 0.0 {
         0.0
     } else {
         let d = h2p - h1p;
-        if d > 180.0 {
+        if d > 180.0 + HUE_EPS_DEG {
             d - 360.0
-        } else if d < -180.0 {
+        } else if d < -180.0 - HUE_EPS_DEG {
             d + 360.0
         } else {
             d
@@ -192,7 +196,7 @@ pub fn delta_e2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
     let cp_mean = 0.5 * (c1p + c2p);
     let hp_mean = if cc == 0.0 {
         h1p + h2p
-    } else if (h1p - h2p).abs() <= 180.0 {
+    } else if (h1p - h2p).abs() <= 180.0 + HUE_EPS_DEG {
         0.5 * (h1p + h2p)
     } else if h1p + h2p < 360.0 {
         0.5 * (h1p + h2p + 360.0)
@@ -283,5 +287,11 @@ mod tests {
         // Symmetric.
         assert!((delta_e2000(a, b) - delta_e2000(b, a)).abs() < 1e-12);
         assert!(delta_e2000([f64::NAN, 0.0, 0.0], a).is_nan());
+        // Sharma pair 14 (hue difference exactly 180°).
+        let d14 = delta_e2000([50.0, -0.001, 2.49], [50.0, 0.001, -2.49]);
+        assert!((d14 - 4.8045).abs() < 1e-4, "{d14}");
+        // Both neutral: pure lightness difference.
+        let dl = delta_e2000([50.0, 0.0, 0.0], [60.0, 0.0, 0.0]);
+        assert!(dl > 0.0 && dl < 10.0);
     }
 }

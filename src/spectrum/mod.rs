@@ -12,10 +12,12 @@
 pub mod color;
 pub mod rgb2spec;
 pub mod sampled;
+pub mod table_csv;
 
 pub use color::*;
 pub use rgb2spec::{
-    srgb_reflectance, RgbIlluminantSpectrum, RgbSigmoidPolynomial, RgbUnboundedSpectrum,
+    srgb_reflectance, srgb_table, Rgb2SpecTable, RgbIlluminantSpectrum, RgbSigmoidPolynomial,
+    RgbUnboundedSpectrum, RGB_ILLUMINANT_D65_NORM,
 };
 pub use sampled::{
     visible_wavelengths_pdf, SampledSpectrum, SampledWavelengths, N_SPECTRUM_SAMPLES,
@@ -80,11 +82,7 @@ pub fn d65(lambda_nm: f64) -> f64 {
 
 /// Σ D65(λ)·ȳ(λ) over the 1 nm grid: the normalisation that gives a perfect reflector Y = 1.
 fn d65_y_sum() -> f64 {
-    tables::CIE_D65_1NM
-        .iter()
-        .zip(tables::CIE_CMF_1NM.iter())
-        .map(|(s, c)| s * c[1])
-        .sum()
+    tables::D65_Y_SUM_1NM
 }
 
 /// Exact XYZ of a reflectance spectrum under D65, integrated at 1 nm over 360–830 nm,

@@ -16,7 +16,7 @@ use super::{cie_xyz_cmf, CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 pub const N_SPECTRUM_SAMPLES: usize = 4;
 
 /// Normalisation of the visible pdf: 0.0072 / (tanh(0.0072·178) + tanh(0.0072·292)).
-const VISIBLE_PDF_NORM: f32 = 0.003_939_804_2;
+const VISIBLE_PDF_NORM: f32 = 0.003_939_804;
 
 /// Four wavelengths (nm) and their sampling pdfs (1/nm). A pdf of 0 marks a terminated
 /// secondary wavelength (after a dispersive refraction).

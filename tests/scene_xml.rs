@@ -1,0 +1,623 @@
+//! Mitsuba XML subset: every construct, error messages with positions, missing files.
+
+use glam::{Mat4, Vec2, Vec3};
+use std::path::Path;
+use thinfilm::optics::{Complex64, Ior};
+use thinfilm::scene::mitsuba::load_str;
+use thinfilm::scene::*;
+
+fn wrap(body: &str) -> String {
+    format!("<scene version=\"3.0.0\">\n{body}\n</scene>\n")
+}
+
+fn load(body: &str) -> anyhow::Result<Scene> {
+    load_str(&wrap(body), Path::new("."), &[], "test.xml")
+}
+
+fn load_in(dir: &Path, body: &str) -> anyhow::Result<Scene> {
+    load_str(&wrap(body), dir, &[], "test.xml")
+}
+
+fn err(body: &str) -> String {
+    format!("{:#}", load(body).expect_err("should fail"))
+}
+
+fn mat_close(a: Mat4, b: Mat4) {
+    assert!(a.abs_diff_eq(b, 1e-5), "\n{a}\n!=\n{b}");
+}
+
+const SENSOR: &str = r#"
+<default name="spp" value="16"/>
+<default name="res" value="64"/>
+<sensor type="perspective">
+  <float name="fov" value="30"/>
+  <string name="fov_axis" value="y"/>
+  <float name="near_clip" value="0.5"/>
+  <float name="far_clip" value="50"/>
+  <sampler type="independent">
+    <integer name="sample_count" value="$spp"/>
+    <integer name="seed" value="7"/>
+  </sampler>
+  <film type="hdrfilm">
+    <integer name="width" value="$res"/>
+    <integer name="height" value="32"/>
+    <string name="pixel_format" value="rgb"/>
+    <string name="component_format" value="float32"/>
+    <rfilter type="tent"><float name="radius" value="1.5"/></rfilter>
+  </film>
+</sensor>"#;
+
+#[test]
+fn defaults_and_overrides() {
+    let s = load(SENSOR).unwrap();
+    assert_eq!(s.spp, 16);
+    assert_eq!(s.seed, 7);
+    assert_eq!((s.film.width, s.film.height), (64, 32));
+    assert_eq!(s.film.filter, ReconstructionFilter::Tent { radius: 1.5 });
+    assert_eq!(s.camera.fov_deg, 30.0);
+    assert_eq!(s.camera.fov_axis, FovAxis::Y);
+    assert_eq!((s.camera.near_clip, s.camera.far_clip), (0.5, 50.0));
+    let o = [
+        ("spp".to_string(), "128".to_string()),
+        ("res".into(), "100".into()),
+    ];
+    let s = load_str(&wrap(SENSOR), Path::new("."), &o, "t.xml").unwrap();
+    assert_eq!(s.spp, 128);
+    assert_eq!(s.film.width, 100);
+    // An override for a parameter the file neither declares nor uses is a typo.
+    let o = [("sp".to_string(), "1".to_string())];
+    let e = format!(
+        "{:#}",
+        load_str(&wrap(SENSOR), Path::new("."), &o, "t.xml").unwrap_err()
+    );
+    assert!(
+        e.contains("no parameter $sp") && e.contains("res, spp"),
+        "{e}"
+    );
+    // A parameter used without <default> can be provided by an override.
+    let body = r#"<integrator type="path"><integer name="max_depth" value="$d"/></integrator>"#;
+    let o = [("d".to_string(), "3".to_string())];
+    let s = load_str(&wrap(body), Path::new("."), &o, "t.xml").unwrap();
+    assert_eq!(s.integrator.max_depth, 3);
+    let e = err(body);
+    assert!(
+        e.contains("undefined parameter $d") && e.contains("test.xml:2:"),
+        "{e}"
+    );
+    // Mitsuba defaults when no sensor parts are given.
+    let s = load(r#"<sensor type="perspective"/>"#).unwrap();
+    assert_eq!((s.film.width, s.film.height, s.spp), (768, 576, 4));
+    assert_eq!(
+        s.film.filter,
+        ReconstructionFilter::Gaussian { stddev: 0.5 }
+    );
+    assert_eq!(s.camera.fov_deg, 45.0);
+}
+
+#[test]
+fn integrator_settings() {
+    let s = load(
+        r#"<integrator type="path">
+            <integer name="max_depth" value="8"/>
+            <integer name="rr_depth" value="3"/>
+            <boolean name="hide_emitters" value="true"/>
+        </integrator>"#,
+    )
+    .unwrap();
+    assert_eq!(
+        s.integrator,
+        IntegratorSettings {
+            max_depth: 8,
+            rr_depth: 3,
+            hide_emitters: true
+        }
+    );
+    assert_eq!(load("").unwrap().integrator, IntegratorSettings::default());
+    assert!(err(r#"<integrator type="volpath"/>"#).contains("volpath"));
+    assert!(
+        err(r#"<integrator type="path"><float name="max_depth" value="8"/></integrator>"#)
+            .contains("must be an <integer>")
+    );
+}
+
+#[test]
+fn transforms_compose_in_document_order() {
+    let s = load(
+        r#"<sensor type="perspective"><transform name="to_world">
+            <translate x="1" y="2" z="3"/>
+            <rotate y="1" angle="90"/>
+            <scale value="2"/>
+        </transform></sensor>"#,
+    )
+    .unwrap();
+    // M = S · R_y(90°) · T: linear part 2·R, translation S·R·(1,2,3) = (6, 4, −2).
+    let expected = Mat4::from_cols(
+        [0.0, 0.0, -2.0, 0.0].into(),
+        [0.0, 2.0, 0.0, 0.0].into(),
+        [2.0, 0.0, 0.0, 0.0].into(),
+        [6.0, 4.0, -2.0, 1.0].into(),
+    );
+    mat_close(s.camera.to_world, expected);
+
+    // matrix is row-major; scale with x/y/z defaults 1; value= forms.
+    let s = load(
+        r#"<sensor type="perspective"><transform name="to_world">
+            <matrix value="1 0 0 5  0 1 0 6  0 0 1 7  0 0 0 1"/>
+            <scale x="2"/>
+            <translate value="1, 1, 1"/>
+        </transform></sensor>"#,
+    )
+    .unwrap();
+    let expected = Mat4::from_cols(
+        [2.0, 0.0, 0.0, 0.0].into(),
+        [0.0, 1.0, 0.0, 0.0].into(),
+        [0.0, 0.0, 1.0, 0.0].into(),
+        [11.0, 7.0, 8.0, 1.0].into(),
+    );
+    mat_close(s.camera.to_world, expected);
+
+    // lookat: from +5 Z towards the origin → forward −Z, left = up × dir = −X.
+    let s = load(
+        r#"<sensor type="perspective"><transform name="to_world">
+            <lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>
+        </transform></sensor>"#,
+    )
+    .unwrap();
+    let expected = Mat4::from_cols(
+        [-1.0, 0.0, 0.0, 0.0].into(),
+        [0.0, 1.0, 0.0, 0.0].into(),
+        [0.0, 0.0, -1.0, 0.0].into(),
+        [0.0, 0.0, 5.0, 1.0].into(),
+    );
+    mat_close(s.camera.to_world, expected);
+    // rotate value= axis, 3x3 matrix.
+    let s = load(
+        r#"<sensor type="perspective"><transform name="to_world">
+            <rotate value="0 0 1" angle="90"/>
+            <matrix value="1 0 0 0 1 0 0 0 3"/>
+        </transform></sensor>"#,
+    )
+    .unwrap();
+    let expected = Mat4::from_cols(
+        [0.0, 1.0, 0.0, 0.0].into(),
+        [-1.0, 0.0, 0.0, 0.0].into(),
+        [0.0, 0.0, 3.0, 0.0].into(),
+        [0.0, 0.0, 0.0, 1.0].into(),
+    );
+    mat_close(s.camera.to_world, expected);
+    assert!(err(r#"<sensor type="perspective"><transform name="to_world"><lookat origin="0,0,0" target="0,0,0"/></transform></sensor>"#).contains("degenerate"));
+    assert!(err(r#"<sensor type="perspective"><transform name="to_world"><matrix value="1 2 3"/></transform></sensor>"#).contains("expected 9 or 16"));
+}
+
+#[test]
+fn refs_and_ids() {
+    let s = load(
+        r#"<texture type="checkerboard" id="checks">
+              <rgb name="color0" value="1, 0, 0"/>
+              <float name="color1" value="0.1"/>
+           </texture>
+           <bsdf type="diffuse" id="mat"><ref name="reflectance" id="checks"/></bsdf>
+           <shape type="rectangle"><ref id="mat"/></shape>
+           <shape type="cube"><ref name="bsdf" id="mat"/></shape>
+           <shape type="sphere"/>"#,
+    )
+    .unwrap();
+    assert_eq!(s.shapes.len(), 3);
+    assert_eq!(s.shapes[0].bsdf, s.shapes[1].bsdf);
+    assert_ne!(s.shapes[0].bsdf, s.shapes[2].bsdf);
+    match &s.bsdfs[s.shapes[0].bsdf] {
+        BsdfDesc::Diffuse {
+            reflectance: TextureDesc::Checkerboard { color0, color1, .. },
+        } => {
+            assert_eq!(*color0, SpectrumDesc::Rgb([1.0, 0.0, 0.0]));
+            assert_eq!(*color1, SpectrumDesc::Constant(0.1));
+        }
+        b => panic!("{b:?}"),
+    }
+    // The sphere got Mitsuba's default BSDF.
+    assert!(matches!(
+        &s.bsdfs[s.shapes[2].bsdf],
+        BsdfDesc::Diffuse { reflectance: TextureDesc::Value(SpectrumDesc::Constant(v)) } if *v == 0.5
+    ));
+    let e = err(r#"<shape type="cube"><ref id="nope"/></shape>"#);
+    assert!(
+        e.contains("unknown id \"nope\"") && e.contains("test.xml:2:"),
+        "{e}"
+    );
+    let e = err(r#"<bsdf type="diffuse" id="a"/><bsdf type="diffuse" id="a"/>"#);
+    assert!(e.contains("duplicate id"), "{e}");
+}
+
+#[test]
+fn errors_name_element_plugin_and_position() {
+    let e = err("<foo/>");
+    assert!(e.contains("test.xml:2:1") && e.contains("<foo>"), "{e}");
+    let e = err(r#"<shape type="cube" colour="red"/>"#);
+    assert!(
+        e.contains("test.xml:2:20") && e.contains("unknown attribute 'colour'"),
+        "{e}"
+    );
+    let e = err("<bsdf type=\"velvet\"/>");
+    assert!(
+        e.contains("test.xml:2:1") && e.contains("\"velvet\"") && e.contains("diffuse"),
+        "{e}"
+    );
+    let e = err("<shape type=\"cube\">\n  <bsdf type=\"diffuse\">\n    <float name=\"bogus\" value=\"1\"/>\n  </bsdf>\n</shape>");
+    assert!(
+        e.contains("test.xml:4:5")
+            && e.contains("'bogus'")
+            && e.contains("bsdf plugin \"diffuse\""),
+        "{e}"
+    );
+    let e = err(r#"<shape type="obj"><string name="filename" value="missing.obj"/></shape>"#);
+    assert!(e.contains("missing.obj") && e.contains("not found"), "{e}");
+    let e = err(r#"<emitter type="envmap"><string name="filename" value="sky.exr"/></emitter>"#);
+    assert!(e.contains("sky.exr") && e.contains("not found"), "{e}");
+    assert!(err(r#"<float name="x" value="abc"/>"#).contains("'abc' is not a number"));
+    assert!(
+        err(r#"<shape type="cube"><float name="x" value="abc"/></shape>"#).contains("not a number")
+    );
+    assert!(
+        err(r#"<shape type="cube"><boolean name="flip_normals" value="maybe"/></shape>"#)
+            .contains("boolean")
+    );
+    assert!(
+        err(r#"<shape type="cube"><float name="flip_normals" value="1"/></shape>"#)
+            .contains("must be a <boolean>")
+    );
+    let e = format!(
+        "{:#}",
+        load_str(
+            "<scene version=\"3.0.0\"><shape></scene>",
+            Path::new("."),
+            &[],
+            "bad.xml"
+        )
+        .unwrap_err()
+    );
+    assert!(e.contains("bad.xml") && e.contains("malformed XML"), "{e}");
+    let e = format!(
+        "{:#}",
+        load_str("<scene/>", Path::new("."), &[], "v.xml").unwrap_err()
+    );
+    assert!(e.contains("version"), "{e}");
+    let e = format!(
+        "{:#}",
+        load_str("<scene version=\"0.6.0\"/>", Path::new("."), &[], "v.xml").unwrap_err()
+    );
+    assert!(e.contains("Mitsuba 2/3"), "{e}");
+    assert!(err(r#"<medium type="homogeneous"/>"#).contains("<medium>"));
+    assert!(
+        err(r#"<shape type="cube"><bsdf type="diffuse"/><bsdf type="diffuse"/></shape>"#)
+            .contains("one BSDF")
+    );
+    assert!(err(r#"<emitter type="area"/>"#).contains("nested inside a <shape>"));
+}
+
+#[test]
+fn values_and_spectra() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("r.spd"),
+        "# test\n400 0.1\n500, 0.5\n600 0.9\n",
+    )
+    .unwrap();
+    std::fs::write(dir.path().join("bad.spd"), "400 0.1\n300 x\n").unwrap();
+    let s = load_in(
+        dir.path(),
+        r#"<shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" filename="r.spd"/></bsdf></shape>
+           <shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" value="400:0.2, 700:0.8"/></bsdf></shape>
+           <shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" value="0.3"/></bsdf></shape>
+           <shape type="cube"><bsdf type="diffuse"><rgb name="reflectance" value="0.2 0.4 0.6"/></bsdf></shape>
+           <emitter type="constant"><spectrum type="d65" name="radiance"><float name="scale" value="2"/></spectrum></emitter>"#,
+    )
+    .unwrap();
+    let refl = |i: usize| match &s.bsdfs[s.shapes[i].bsdf] {
+        BsdfDesc::Diffuse {
+            reflectance: TextureDesc::Value(v),
+        } => v.clone(),
+        b => panic!("{b:?}"),
+    };
+    assert_eq!(
+        refl(0),
+        SpectrumDesc::Tabulated(vec![(400.0, 0.1), (500.0, 0.5), (600.0, 0.9)])
+    );
+    assert_eq!(
+        refl(1),
+        SpectrumDesc::Tabulated(vec![(400.0, 0.2), (700.0, 0.8)])
+    );
+    assert_eq!(refl(2), SpectrumDesc::Constant(0.3));
+    assert_eq!(refl(3), SpectrumDesc::Rgb([0.2, 0.4, 0.6]));
+    assert!(
+        matches!(&s.emitters[0], EmitterDesc::Constant { radiance: SpectrumDesc::D65 { scale } } if *scale == 2.0)
+    );
+    let e = format!("{:#}", load_in(dir.path(), r#"<shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" filename="bad.spd"/></bsdf></shape>"#).unwrap_err());
+    assert!(e.contains("bad.spd:2"), "{e}");
+    assert!(err(r#"<shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" value="500:0.2, 400:0.8"/></bsdf></shape>"#).contains("increase"));
+    // point/vector forms and a point light.
+    let s = load(
+        r#"<emitter type="point"><point name="position" x="1" y="2" z="3"/><rgb name="intensity" value="5"/></emitter>
+           <emitter type="point"><transform name="to_world"><translate value="4 5 6"/></transform></emitter>"#,
+    )
+    .unwrap();
+    assert!(
+        matches!(&s.emitters[0], EmitterDesc::Point { position, intensity: SpectrumDesc::Rgb(c) } if *position == Vec3::new(1.0, 2.0, 3.0) && *c == [5.0; 3])
+    );
+    assert!(
+        matches!(&s.emitters[1], EmitterDesc::Point { position, .. } if *position == Vec3::new(4.0, 5.0, 6.0))
+    );
+}
+
+fn bsdf(body: &str) -> BsdfDesc {
+    let s = load(&format!("<shape type=\"cube\">{body}</shape>")).unwrap();
+    s.bsdfs[s.shapes[0].bsdf].clone()
+}
+
+#[test]
+fn bsdfs() {
+    match bsdf(
+        r#"<bsdf type="dielectric"><string name="int_ior" value="water"/><float name="ext_ior" value="1.0"/></bsdf>"#,
+    ) {
+        BsdfDesc::Dielectric {
+            int_ior,
+            ext_ior,
+            alpha,
+        } => {
+            assert_eq!(int_ior, Ior::real(1.333));
+            assert_eq!(ext_ior, Ior::real(1.0));
+            assert_eq!(alpha, 0.0);
+        }
+        b => panic!("{b:?}"),
+    }
+    // Mitsuba defaults: bk7 inside, air outside.
+    match bsdf(
+        r#"<bsdf type="roughdielectric"><string name="distribution" value="ggx"/><float name="alpha" value="0.2"/></bsdf>"#,
+    ) {
+        BsdfDesc::Dielectric {
+            int_ior,
+            ext_ior,
+            alpha,
+        } => {
+            assert_eq!(
+                (int_ior, ext_ior, alpha),
+                (Ior::real(1.5046), Ior::real(1.000277), 0.2)
+            );
+        }
+        b => panic!("{b:?}"),
+    }
+    match bsdf(
+        r#"<bsdf type="roughconductor"><string name="distribution" value="ggx"/><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/><float name="eta" value="0.2"/><float name="k" value="3"/></bsdf>"#,
+    ) {
+        BsdfDesc::Conductor {
+            eta,
+            alpha_u,
+            alpha_v,
+        } => {
+            assert_eq!(eta, Ior::Constant(Complex64::new(0.2, 3.0)));
+            assert_eq!((alpha_u, alpha_v), (0.1, 0.3));
+        }
+        b => panic!("{b:?}"),
+    }
+    // "none" = perfect mirror.
+    assert!(
+        matches!(bsdf(r#"<bsdf type="conductor"/>"#), BsdfDesc::Conductor { eta: Ior::Constant(c), alpha_u, .. } if c == Complex64::new(0.0, 1.0) && alpha_u == 0.0)
+    );
+    let e = err(
+        r#"<shape type="cube"><bsdf type="conductor"><string name="material" value="Unobtainium"/></bsdf></shape>"#,
+    );
+    assert!(e.contains("Unobtainium") && e.contains("available"), "{e}");
+    match bsdf(
+        r#"<bsdf type="roughplastic"><string name="distribution" value="ggx"/><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/><float name="int_ior" value="1.6"/><boolean name="nonlinear" value="true"/></bsdf>"#,
+    ) {
+        BsdfDesc::Plastic {
+            diffuse_reflectance: TextureDesc::Value(SpectrumDesc::Rgb(c)),
+            int_ior,
+            ext_ior,
+            alpha,
+            nonlinear,
+        } => {
+            assert_eq!(c, [0.1, 0.2, 0.3]);
+            assert_eq!(
+                (int_ior, ext_ior, alpha, nonlinear),
+                (1.6, 1.000277, 0.1, true)
+            );
+        }
+        b => panic!("{b:?}"),
+    }
+    assert!(
+        matches!(bsdf(r#"<bsdf type="plastic"/>"#), BsdfDesc::Plastic { int_ior, alpha, .. } if int_ior == 1.49 && alpha == 0.0)
+    );
+    match bsdf(r#"<bsdf type="twosided"><bsdf type="thinfilm"/></bsdf>"#) {
+        BsdfDesc::TwoSided(inner) => match *inner {
+            BsdfDesc::ThinFilm {
+                film_ior,
+                thickness_nm: TextureDesc::Value(SpectrumDesc::Constant(d)),
+                substrate_ior,
+                alpha,
+            } => {
+                // design.md defaults
+                assert_eq!(
+                    (film_ior, d, substrate_ior, alpha),
+                    (Ior::real(1.37), 400.0, Ior::real(1.64), 0.0)
+                );
+            }
+            b => panic!("{b:?}"),
+        },
+        b => panic!("{b:?}"),
+    }
+    match bsdf(
+        r#"<bsdf type="thinfilm"><float name="film_ior" value="2.37"/><float name="thickness" value="500"/><float name="substrate_ior" value="0.2"/><float name="substrate_k" value="3.1"/><float name="alpha" value="0.15"/></bsdf>"#,
+    ) {
+        BsdfDesc::ThinFilm {
+            film_ior,
+            thickness_nm: TextureDesc::Value(SpectrumDesc::Constant(d)),
+            substrate_ior,
+            alpha,
+        } => {
+            assert_eq!((film_ior, d, alpha), (Ior::real(2.37), 500.0, 0.15));
+            assert_eq!(substrate_ior, Ior::Constant(Complex64::new(0.2, 3.1)));
+        }
+        b => panic!("{b:?}"),
+    }
+    // Film index by name from Mitsuba's table when the dispersion library lacks it.
+    assert!(
+        matches!(bsdf(r#"<bsdf type="thinfilm"><string name="film_ior" value="water"/></bsdf>"#), BsdfDesc::ThinFilm { film_ior, .. } if film_ior == Ior::real(1.333))
+    );
+    assert!(err(r#"<shape type="cube"><bsdf type="thinfilm"><float name="thickness" value="-5"/></bsdf></shape>"#).contains("≥ 0"));
+    assert!(err(r#"<shape type="cube"><bsdf type="thinfilm"><string name="film_ior" value="cheese"/></bsdf></shape>"#).contains("cheese"));
+    assert!(err(r#"<shape type="cube"><bsdf type="dielectric"><string name="int_ior" value="cheese"/></bsdf></shape>"#).contains("unknown IOR name"));
+    assert!(err(r#"<shape type="cube"><bsdf type="roughconductor"><string name="distribution" value="phong"/></bsdf></shape>"#).contains("phong"));
+}
+
+#[test]
+fn textures() {
+    let dir = tempfile::tempdir().unwrap();
+    let th: Vec<f32> = (0..8).map(|i| 100.0 * i as f32).collect();
+    thinfilm::image_io::write_exr_channels(&dir.path().join("th.exr"), 4, 2, &[("thickness", &th)])
+        .unwrap();
+    // An 8-bit PNG: sRGB 188 ≈ linear 0.5.
+    image::RgbImage::from_pixel(2, 2, image::Rgb([188, 0, 255]))
+        .save(dir.path().join("c.png"))
+        .unwrap();
+    let s = load_in(
+        dir.path(),
+        r#"<shape type="rectangle"><bsdf type="thinfilm">
+             <texture type="bitmap" name="thickness">
+               <string name="filename" value="th.exr"/>
+               <boolean name="raw" value="true"/>
+               <string name="filter_type" value="nearest"/>
+               <string name="wrap_mode" value="clamp"/>
+               <transform name="to_uv"><scale x="0.5"/><translate x="0.25"/></transform>
+             </texture></bsdf></shape>
+           <shape type="rectangle"><bsdf type="diffuse">
+             <texture type="bitmap" name="reflectance"><string name="filename" value="c.png"/></texture>
+           </bsdf></shape>
+           <shape type="rectangle"><bsdf type="diffuse">
+             <texture type="bitmap" name="reflectance"><string name="filename" value="c.png"/><boolean name="raw" value="true"/></texture>
+           </bsdf></shape>"#,
+    )
+    .unwrap();
+    match &s.bsdfs[s.shapes[0].bsdf] {
+        BsdfDesc::ThinFilm {
+            thickness_nm: TextureDesc::Bitmap(b),
+            ..
+        } => {
+            assert_eq!((b.width, b.height, b.channels), (4, 2, 1));
+            assert_eq!(b.filter, TextureFilter::Nearest);
+            assert_eq!(b.wrap, WrapMode::Clamp);
+            // uv (0.5, 0.25) → to_uv → (0.5, 0.25) → texel (2, 0) = 200 nm.
+            assert_eq!(b.eval_scalar(Vec2::new(0.5, 0.25)), 200.0);
+            // uv (0, 0.75) → (0.25, 0.75) → texel (1, 1) = 500 nm.
+            assert_eq!(b.eval_scalar(Vec2::new(0.0, 0.75)), 500.0);
+        }
+        b => panic!("{b:?}"),
+    }
+    let texel = |i: usize| match &s.bsdfs[s.shapes[i].bsdf] {
+        BsdfDesc::Diffuse {
+            reflectance: TextureDesc::Bitmap(b),
+        } => b.eval(Vec2::new(0.5, 0.5)),
+        b => panic!("{b:?}"),
+    };
+    let lin = texel(1);
+    assert!(
+        (lin[0] - 0.5029).abs() < 1e-3 && lin[1] == 0.0 && (lin[2] - 1.0).abs() < 1e-6,
+        "{lin:?}"
+    );
+    let raw = texel(2);
+    assert!((raw[0] - 188.0 / 255.0).abs() < 1e-4, "{raw:?}");
+    assert!(err(r#"<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="c.png"/><string name="wrap_mode" value="tile"/></texture></bsdf></shape>"#).contains("not found"));
+    let e = format!("{:#}", load_in(dir.path(), r#"<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="c.png"/><string name="wrap_mode" value="tile"/></texture></bsdf></shape>"#).unwrap_err());
+    assert!(e.contains("wrap_mode \"tile\""), "{e}");
+    assert!(err(r#"<texture type="noise" id="n"/>"#).contains("\"noise\""));
+}
+
+#[test]
+fn shapes_and_emitters() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = thinfilm::image_io::RgbImage {
+        width: 4,
+        height: 2,
+        pixels: vec![[1.0, 0.5, 0.25]; 8],
+    };
+    thinfilm::image_io::write_exr_rgb(&dir.path().join("env.exr"), &env).unwrap();
+    let s = load_in(
+        dir.path(),
+        r#"<emitter type="envmap">
+             <string name="filename" value="env.exr"/>
+             <float name="scale" value="2"/>
+             <transform name="to_world"><rotate y="1" angle="90"/></transform>
+           </emitter>
+           <shape type="sphere">
+             <point name="center" x="1" y="0" z="0"/><float name="radius" value="0.5"/>
+             <transform name="to_world"><scale value="2"/><translate z="1"/></transform>
+             <boolean name="flip_normals" value="true"/>
+           </shape>
+           <shape type="rectangle" id="light">
+             <transform name="to_world"><translate z="3"/></transform>
+             <boolean name="flip_normals" value="true"/>
+             <emitter type="area"><rgb name="radiance" value="10"/></emitter>
+           </shape>
+           <shape type="disk"><boolean name="face_normals" value="true"/></shape>
+           <shape type="cube"><transform name="to_world"><scale x="2"/></transform></shape>"#,
+    )
+    .unwrap();
+    match &s.emitters[0] {
+        EmitterDesc::Envmap {
+            image,
+            scale,
+            to_world,
+            path,
+        } => {
+            assert_eq!((image.width, image.height, *scale), (4, 2, 2.0));
+            assert_eq!(image.pixels[0], [1.0, 0.5, 0.25]);
+            assert!(to_world.abs_diff_eq(Mat4::from_rotation_y(90f32.to_radians()), 1e-6));
+            assert!(path.as_ref().unwrap().ends_with("env.exr"));
+        }
+        e => panic!("{e:?}"),
+    }
+    match &s.shapes[0].geometry {
+        Geometry::Sphere {
+            center,
+            radius,
+            flip_normals,
+        } => {
+            assert!((*center - Vec3::new(2.0, 0.0, 1.0)).length() < 1e-6);
+            assert!((*radius - 1.0).abs() < 1e-6);
+            assert!(*flip_normals);
+        }
+        g => panic!("{g:?}"),
+    }
+    let light = &s.shapes[1];
+    assert_eq!(light.name.as_deref(), Some("light"));
+    assert_eq!(light.emission, Some(SpectrumDesc::Rgb([10.0; 3])));
+    match &light.geometry {
+        Geometry::Mesh(m) => {
+            assert!(m.positions.iter().all(|p| p.z == 3.0));
+            assert!(m.normals.iter().all(|n| *n == -Vec3::Z));
+            let [a, b, c] = m.indices[0].map(|i| m.positions[i as usize]);
+            assert!((b - a).cross(c - a).z < 0.0, "winding follows flip_normals");
+        }
+        g => panic!("{g:?}"),
+    }
+    match &s.shapes[2].geometry {
+        Geometry::Mesh(m) => assert!(m.normals.is_empty() && !m.uvs.is_empty()),
+        g => panic!("{g:?}"),
+    }
+    match &s.shapes[3].geometry {
+        Geometry::Mesh(m) => {
+            let (lo, hi) = m.bounds().unwrap();
+            assert_eq!(
+                (lo, hi),
+                (Vec3::new(-2.0, -1.0, -1.0), Vec3::new(2.0, 1.0, 1.0))
+            );
+            assert_eq!(m.indices.len(), 12);
+        }
+        g => panic!("{g:?}"),
+    }
+    let e = err(
+        r#"<shape type="sphere"><transform name="to_world"><scale x="2"/></transform></shape>"#,
+    );
+    assert!(e.contains("similarity"), "{e}");
+    assert!(err(r#"<shape type="torus"/>"#).contains("\"torus\""));
+    assert!(err(r#"<shape type="cube"><emitter type="constant"/></shape>"#).contains("area"));
+}

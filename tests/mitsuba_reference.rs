@@ -12,6 +12,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use thinfilm::compare::references::{load_manifest, Reference};
 use thinfilm::compare::{compare_images, downsample_box, ImageMetrics};
 use thinfilm::image_io::{read_exr_rgb, RgbImage};
 use thinfilm::render::{render, RenderOptions};
@@ -29,27 +30,8 @@ fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-struct Reference {
-    name: String,
-    scene: PathBuf,
-    exr: PathBuf,
-}
-
 fn references() -> Vec<Reference> {
-    let path = repo().join("tests/references/manifest.json");
-    let text = std::fs::read_to_string(&path).expect("tests/references/manifest.json");
-    let doc: serde_json::Value = serde_json::from_str(&text).expect("manifest parses");
-    let refs = doc["references"].as_object().expect("manifest: references");
-    let mut out: Vec<Reference> = refs
-        .iter()
-        .map(|(name, r)| Reference {
-            name: name.clone(),
-            scene: repo().join(r["scene"].as_str().expect("scene")),
-            exr: repo().join(r["exr"].as_str().expect("exr")),
-        })
-        .collect();
-    out.sort_by(|a, b| a.name.cmp(&b.name));
-    out
+    load_manifest(&repo()).expect("tests/references/manifest.json")
 }
 
 fn load(path: &Path) -> Scene {
@@ -109,7 +91,11 @@ fn every_reference_scene_matches_mitsuba() {
             failures.push(format!("{}: {}", r.name, describe(&m)));
         }
     }
-    assert!(failures.is_empty(), "scenes differing from Mitsuba:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "scenes differing from Mitsuba:\n{}",
+        failures.join("\n")
+    );
 }
 
 /// Scales every thin-film thickness in the scene (constants and bitmap textures).

@@ -1,8 +1,275 @@
-//! `thinfilm bench_render` (not yet built).
+//! `thinfilm bench render [--mitsuba]`: error against time on every Mitsuba reference scene.
+//!
+//! For each scene in `tests/references/manifest.json`, renders with our path tracer at each
+//! spp (16 … 1024 by default) at the reference's size, timing the render (BVH/light setup
+//! excluded) and measuring RMSE against the 4096-spp Mitsuba reference. With `--mitsuba` the
+//! same spp are rendered by Mitsuba 3 (`llvm_ad_spectral`, the Python thinfilm plugin) in the
+//! same run through `tools/mitsuba/render_references.py --bench` (warm JIT, render time only),
+//! and each of our rows gets "our time ÷ Mitsuba's time at equal error", interpolated on
+//! Mitsuba's curve in log–log. Prints a markdown table and writes an error-against-time plot.
+
+use anyhow::{bail, Context, Result};
+use std::path::PathBuf;
+use std::process::Command;
+use thinfilm::compare::metrics::compare_images;
+use thinfilm::compare::plot::{plot_error_vs_time, time_at_error, Series};
+use thinfilm::compare::references::load_manifest;
+use thinfilm::image_io::read_exr_rgb;
+use thinfilm::render::{render, RenderOptions};
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Also render with Mitsuba 3 (needs Python with `mitsuba`; see tools/mitsuba/).
+    #[arg(long)]
+    pub mitsuba: bool,
+    /// Samples per pixel to try, comma-separated.
+    #[arg(
+        long,
+        default_value = "16,32,64,128,256,512,1024",
+        value_delimiter = ','
+    )]
+    pub spp: Vec<u32>,
+    /// Only these reference scenes (names in the manifest); repeatable.
+    #[arg(long)]
+    pub only: Vec<String>,
+    /// Repository root (holds tests/references and tools/mitsuba).
+    #[arg(long, default_value = ".")]
+    pub root: PathBuf,
+    /// Error-against-time plot (PNG).
+    #[arg(long, default_value = "bench_render.png")]
+    pub plot: PathBuf,
+    /// Also write the markdown table here.
+    #[arg(long)]
+    pub table: Option<PathBuf>,
+    /// Python interpreter for the Mitsuba side.
+    #[arg(long, default_value = "python3")]
+    pub python: String,
+    /// Sampler seed for both renderers.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Worker threads for our renderer (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`bench render` is not built yet")
+#[derive(Debug, Clone)]
+struct Row {
+    spp: u32,
+    seconds: f64,
+    rmse: f64,
+    delta_e00: f64,
+}
+
+fn run_mitsuba(
+    args: &Args,
+    scene: &std::path::Path,
+    size: usize,
+    out_dir: &std::path::Path,
+) -> Result<(String, Vec<Row>)> {
+    let script = args.root.join("tools/mitsuba/render_references.py");
+    let spp: Vec<String> = args.spp.iter().map(|s| s.to_string()).collect();
+    let mut cmd = Command::new(&args.python);
+    cmd.arg(&script)
+        .arg("--bench")
+        .arg(scene)
+        .args(["--spp", &spp.join(",")])
+        .args(["--size", &size.to_string()])
+        .args(["--seed", &args.seed.to_string()])
+        .arg("--out-dir")
+        .arg(out_dir)
+        .args([
+            "--json",
+            "--skip-tmm-check",
+            "--variant",
+            "llvm_ad_spectral",
+        ]);
+    if std::env::var_os("DRJIT_LIBLLVM_PATH").is_none() {
+        cmd.env(
+            "DRJIT_LIBLLVM_PATH",
+            "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1",
+        );
+    }
+    let out = cmd
+        .output()
+        .with_context(|| format!("running {} {}", args.python, script.display()))?;
+    if !out.status.success() {
+        bail!(
+            "Mitsuba bench failed ({}): {}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .rev()
+                .take(5)
+                .collect::<Vec<_>>()
+                .join(" | ")
+        );
+    }
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).with_context(|| {
+        format!(
+            "parsing the Mitsuba bench JSON: {}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    })?;
+    let variant = doc["variant"].as_str().unwrap_or("?").to_string();
+    let runs = doc["runs"]
+        .as_array()
+        .context("Mitsuba bench JSON: no runs")?;
+    let mut rows = Vec::new();
+    for r in runs {
+        rows.push(Row {
+            spp: r["spp"].as_u64().context("run.spp")? as u32,
+            seconds: r["seconds"].as_f64().context("run.seconds")?,
+            rmse: f64::NAN,
+            delta_e00: f64::NAN,
+        });
+    }
+    Ok((variant, rows))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if args.spp.is_empty() || args.spp.contains(&0) {
+        bail!("--spp needs positive sample counts");
+    }
+    let mut refs = load_manifest(&args.root)?;
+    if !args.only.is_empty() {
+        for n in &args.only {
+            if !refs.iter().any(|r| &r.name == n) {
+                bail!("--only {n}: no such reference in the manifest");
+            }
+        }
+        refs.retain(|r| args.only.contains(&r.name));
+    }
+    let tmp = tempfile_dir()?;
+    let mut table = String::new();
+    let mut series = Vec::new();
+    let mut mitsuba_variant = None;
+    let mut summary = Vec::new();
+    table.push_str("| scene | spp | ours s | ours RMSE | ours ΔE00 | Mitsuba s | Mitsuba RMSE | our time ÷ Mitsuba's at equal error |\n");
+    table.push_str("|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    for (si, r) in refs.iter().enumerate() {
+        let reference = read_exr_rgb(&r.exr)?;
+        let scene = thinfilm::scene::load(&r.scene, &[])
+            .with_context(|| format!("loading {}", r.scene.display()))?;
+        let mut ours = Vec::new();
+        // Warm-up (page faults, thread pool) so the first timed row is not penalised.
+        render(
+            &scene,
+            &RenderOptions {
+                spp: Some(1),
+                resolution: Some((16, 16)),
+                threads: args.threads,
+                ..Default::default()
+            },
+        )?;
+        for &spp in &args.spp {
+            let out = render(
+                &scene,
+                &RenderOptions {
+                    spp: Some(spp),
+                    seed: Some(args.seed),
+                    threads: args.threads,
+                    resolution: Some((r.width as u32, r.height as u32)),
+                    ..Default::default()
+                },
+            )?;
+            let m = compare_images(&out.image, &reference)
+                .with_context(|| format!("{}: comparing with {}", r.name, r.exr.display()))?;
+            eprintln!(
+                "{:24} ours    {spp:5} spp {:8.3} s RMSE {:.5}",
+                r.name, out.stats.seconds, m.rmse
+            );
+            ours.push(Row {
+                spp,
+                seconds: out.stats.seconds,
+                rmse: m.rmse,
+                delta_e00: m.delta_e00_mean,
+            });
+        }
+        let mut theirs: Vec<Row> = Vec::new();
+        if args.mitsuba {
+            let dir = tmp.join(&r.name);
+            let (variant, mut rows) = run_mitsuba(&args, &r.scene, r.width.max(r.height), &dir)?;
+            for row in &mut rows {
+                let img = read_exr_rgb(&dir.join(format!("mitsuba_{}spp.exr", row.spp)))?;
+                let m = compare_images(&img, &reference)?;
+                row.rmse = m.rmse;
+                row.delta_e00 = m.delta_e00_mean;
+                eprintln!(
+                    "{:24} mitsuba {:5} spp {:8.3} s RMSE {:.5}",
+                    r.name, row.spp, row.seconds, row.rmse
+                );
+            }
+            mitsuba_variant = Some(variant);
+            theirs = rows;
+        }
+        let their_curve: Vec<(f64, f64)> = theirs.iter().map(|r| (r.seconds, r.rmse)).collect();
+        let mut last_ratio = None;
+        for row in &ours {
+            let t = theirs.iter().find(|t| t.spp == row.spp);
+            let ratio = time_at_error(&their_curve, row.rmse).map(|tm| row.seconds / tm);
+            last_ratio = ratio.or(last_ratio);
+            table.push_str(&format!(
+                "| {} | {} | {:.3} | {:.5} | {:.3} | {} | {} | {} |\n",
+                r.name,
+                row.spp,
+                row.seconds,
+                row.rmse,
+                row.delta_e00,
+                t.map(|t| format!("{:.3}", t.seconds))
+                    .unwrap_or_else(|| "–".into()),
+                t.map(|t| format!("{:.5}", t.rmse))
+                    .unwrap_or_else(|| "–".into()),
+                ratio
+                    .map(|x| format!("{x:.2}"))
+                    .unwrap_or_else(|| "–".into()),
+            ));
+        }
+        if let Some(x) = last_ratio {
+            summary.push((
+                r.name.clone(),
+                x,
+                ours.last().map(|r| r.delta_e00).unwrap_or(f64::NAN),
+            ));
+        }
+        series.push(Series {
+            label: format!("{} (ours)", r.name),
+            points: ours.iter().map(|r| (r.seconds, r.rmse)).collect(),
+            colour_index: si,
+            secondary: false,
+        });
+        if !theirs.is_empty() {
+            series.push(Series {
+                label: format!("{} (Mitsuba)", r.name),
+                points: their_curve,
+                colour_index: si,
+                secondary: true,
+            });
+        }
+    }
+    println!("{table}");
+    if let Some(v) = &mitsuba_variant {
+        println!("Mitsuba variant: {v}. Time ratio < 1: we reach the same RMSE faster.");
+        for (n, x, de) in &summary {
+            println!("- {n}: our time ÷ Mitsuba's at equal error (at {} spp) {x:.2}; our mean ΔE00 {de:.3}", args.spp.last().unwrap());
+        }
+    }
+    if let Some(p) = &args.table {
+        thinfilm::image_io::write_atomically(p, |tmp| Ok(std::fs::write(tmp, &table)?))?;
+    }
+    plot_error_vs_time(
+        &series,
+        "RMSE against render time (vs Mitsuba 3 references, 4096 spp)",
+        "RMSE",
+        &args.plot,
+        (1000, 700),
+    )?;
+    println!("plot: {}", args.plot.display());
+    let _ = std::fs::remove_dir_all(&tmp);
+    Ok(())
+}
+
+fn tempfile_dir() -> Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("thinfilm-bench-render-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    Ok(dir)
 }

@@ -13,7 +13,8 @@ use anyhow::{bail, Result};
 use std::path::Path;
 use std::sync::OnceLock;
 
-static FONT_BYTES: &[u8] = include_bytes!(concat!(
+/// DejaVu Sans, compiled in so figures never depend on system fonts.
+pub static FONT_BYTES: &[u8] = include_bytes!(concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/assets/fonts/DejaVuSans.ttf"
 ));

@@ -1,0 +1,149 @@
+//! Our renderer against the committed Mitsuba 3 references (`tests/references/`, made by
+//! `tools/mitsuba/render_references.py`, 4096 spp at 128×128 with a box filter).
+//!
+//! Each reference scene is rendered at low spp and half the size (64×64, same camera). Both
+//! images are box-downsampled to 16×16 — with a box pixel filter this averages exactly the
+//! same footprint — which averages out most of the Monte Carlo noise, so what remains is
+//! systematic: we assert mean ΔE00 ≤ 1.0 and a mean-colour bias < 1 % per channel.
+//! A deliberately wrong material (film 10 % too thick) must fail the same check, proving the
+//! check can fail.
+//!
+//! Run with `cargo test --release --test mitsuba_reference` (debug builds are much slower).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use thinfilm::compare::references::{load_manifest, Reference};
+use thinfilm::compare::{compare_images, downsample_box, ImageMetrics};
+use thinfilm::image_io::{read_exr_rgb, RgbImage};
+use thinfilm::render::{render, RenderOptions};
+use thinfilm::scene::{BsdfDesc, Scene, SpectrumDesc, TextureDesc};
+
+/// Our render: 64×64 at this many samples per pixel.
+const OUR_SIZE: u32 = 64;
+const OUR_SPP: u32 = 128;
+/// Both images are compared at 16×16.
+const COMPARE_SIZE: usize = 16;
+const MAX_MEAN_DELTA_E00: f64 = 1.0;
+const MAX_ABS_BIAS: f64 = 0.01;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn references() -> Vec<Reference> {
+    load_manifest(&repo()).expect("tests/references/manifest.json")
+}
+
+fn load(path: &Path) -> Scene {
+    thinfilm::scene::load(path, &[]).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()))
+}
+
+fn render_ours(scene: &Scene) -> RgbImage {
+    let options = RenderOptions {
+        spp: Some(OUR_SPP),
+        seed: Some(7),
+        resolution: Some((OUR_SIZE, OUR_SIZE)),
+        ..Default::default()
+    };
+    render(scene, &options).expect("render").image
+}
+
+fn metrics_against(ours: &RgbImage, reference: &RgbImage) -> ImageMetrics {
+    assert_eq!(reference.width % COMPARE_SIZE, 0);
+    let a = downsample_box(ours, ours.width / COMPARE_SIZE).unwrap();
+    let b = downsample_box(reference, reference.width / COMPARE_SIZE).unwrap();
+    compare_images(&a, &b).unwrap()
+}
+
+fn passes(m: &ImageMetrics) -> bool {
+    m.delta_e00_mean <= MAX_MEAN_DELTA_E00 && m.max_abs_bias() < MAX_ABS_BIAS
+}
+
+fn describe(m: &ImageMetrics) -> String {
+    format!(
+        "mean ΔE00 {:.3} (95th {:.3}), bias R {:+.2}% G {:+.2}% B {:+.2}%, relMSE {:.2e}",
+        m.delta_e00_mean,
+        m.delta_e00_p95,
+        100.0 * m.mean_bias_rgb[0],
+        100.0 * m.mean_bias_rgb[1],
+        100.0 * m.mean_bias_rgb[2],
+        m.rel_mse
+    )
+}
+
+#[test]
+fn every_reference_scene_matches_mitsuba() {
+    let refs = references();
+    assert!(refs.len() >= 2, "manifest lists {} references", refs.len());
+    let mut failures = Vec::new();
+    for r in &refs {
+        let reference = read_exr_rgb(&r.exr).unwrap();
+        assert_eq!(
+            (reference.width, reference.height),
+            (128, 128),
+            "{}: references are 128×128",
+            r.name
+        );
+        let ours = render_ours(&load(&r.scene));
+        let m = metrics_against(&ours, &reference);
+        eprintln!("{:24} {}", r.name, describe(&m));
+        if !passes(&m) {
+            failures.push(format!("{}: {}", r.name, describe(&m)));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "scenes differing from Mitsuba:\n{}",
+        failures.join("\n")
+    );
+}
+
+/// Scales every thin-film thickness in the scene (constants and bitmap textures).
+fn scale_thickness(scene: &mut Scene, factor: f32) -> usize {
+    let mut changed = 0;
+    for b in &mut scene.bsdfs {
+        let mut desc = b;
+        while let BsdfDesc::TwoSided(inner) = desc {
+            desc = inner;
+        }
+        if let BsdfDesc::ThinFilm { thickness_nm, .. } = desc {
+            match thickness_nm {
+                TextureDesc::Value(SpectrumDesc::Constant(v)) => *v *= factor,
+                TextureDesc::Bitmap(bmp) => {
+                    let mut t = (**bmp).clone();
+                    t.data.iter_mut().for_each(|v| *v *= factor);
+                    if let Some((lo, hi)) = &mut t.value_range {
+                        *lo *= factor;
+                        *hi *= factor;
+                    }
+                    *bmp = Arc::new(t);
+                }
+                other => panic!("unexpected thickness description {other:?}"),
+            }
+            changed += 1;
+        }
+    }
+    changed
+}
+
+#[test]
+fn film_ten_percent_too_thick_fails_the_check() {
+    // One constant-thickness teapot and the bitmap-textured estimator material.
+    let refs = references();
+    for name in ["teapot_mgf2_400", "material"] {
+        let r = refs
+            .iter()
+            .find(|r| r.name == name)
+            .unwrap_or_else(|| panic!("reference {name} missing from the manifest"));
+        let reference = read_exr_rgb(&r.exr).unwrap();
+        let mut scene = load(&r.scene);
+        assert!(scale_thickness(&mut scene, 1.1) > 0, "{name}: no thin film");
+        let m = metrics_against(&render_ours(&scene), &reference);
+        eprintln!("{name} with thickness ×1.1: {}", describe(&m));
+        assert!(
+            !passes(&m),
+            "{name}: a 10 % thickness error went unnoticed: {}",
+            describe(&m)
+        );
+    }
+}

@@ -1,7 +1,22 @@
 //! Hero-wavelength sampling (4 wavelengths per path) and 4-sample spectra.
+//!
+//! Wavelengths are importance-sampled over 360–830 nm with the pdf of pbrt-v4 / Mitsuba 3
+//! (`SampleVisibleWavelengths`, Radziszewski et al. 2009):
+//! p(λ) = 0.0039398042 / cosh²(0.0072 (λ − 538)), inverted in closed form as
+//! λ = 538 − atanh(0.85691062 − 1.82750197 u) / 0.0072. One random number drives all four
+//! wavelengths, rotated by k/4 (Wilkie et al. 2014, "Hero wavelength spectral sampling").
+
+use std::ops::{
+    Add, AddAssign, Div, DivAssign, Index, IndexMut, Mul, MulAssign, Neg, Sub, SubAssign,
+};
+
+use super::{cie_xyz_cmf, CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 
 /// Wavelengths carried by one path.
 pub const N_SPECTRUM_SAMPLES: usize = 4;
+
+/// Normalisation of the visible pdf: 0.0072 / (tanh(0.0072·178) + tanh(0.0072·292)).
+const VISIBLE_PDF_NORM: f32 = 0.003_939_804;
 
 /// Four wavelengths (nm) and their sampling pdfs (1/nm). A pdf of 0 marks a terminated
 /// secondary wavelength (after a dispersive refraction).
@@ -11,29 +26,67 @@ pub struct SampledWavelengths {
     pub pdf: [f32; N_SPECTRUM_SAMPLES],
 }
 
+/// Inverse CDF of the visible pdf: u ∈ [0,1] → λ ∈ [360, 830] nm.
+#[inline]
+pub fn sample_visible_wavelength(u: f32) -> f32 {
+    let l = 538.0 - 138.888_89 * (0.856_910_6 - 1.827_502 * u).atanh();
+    // f32 rounding can overshoot the ends by ~1e-4 nm; keep the sample inside the range
+    // where its pdf is defined (a clamped sample would otherwise get pdf 0 and be lost).
+    l.clamp(LAMBDA_MIN_NM as f32, LAMBDA_MAX_NM as f32)
+}
+
 impl SampledWavelengths {
     /// Mitsuba/pbrt visible-range importance sampling from one random number `u` ∈ [0,1),
     /// rotated by k/4 for the other three wavelengths.
     pub fn sample_visible(u: f32) -> Self {
-        let _ = u;
-        todo!("foundation")
+        let mut lambda = [0.0; N_SPECTRUM_SAMPLES];
+        let mut pdf = [0.0; N_SPECTRUM_SAMPLES];
+        for k in 0..N_SPECTRUM_SAMPLES {
+            let mut up = u + k as f32 / N_SPECTRUM_SAMPLES as f32;
+            if up > 1.0 {
+                up -= 1.0;
+            }
+            lambda[k] = sample_visible_wavelength(up);
+            pdf[k] = visible_wavelengths_pdf(lambda[k]);
+        }
+        SampledWavelengths { lambda, pdf }
+    }
+
+    /// Four fixed wavelengths with the given pdfs (tests, spectral films).
+    pub fn new(lambda: [f32; N_SPECTRUM_SAMPLES], pdf: [f32; N_SPECTRUM_SAMPLES]) -> Self {
+        SampledWavelengths { lambda, pdf }
     }
 
     /// Keep only the hero wavelength (index 0); its pdf is divided by 4 so the 4-sample
-    /// average stays unbiased.
+    /// average stays unbiased. Idempotent.
     pub fn terminate_secondary(&mut self) {
-        todo!("foundation")
+        if self.secondary_terminated() {
+            return;
+        }
+        for p in &mut self.pdf[1..] {
+            *p = 0.0;
+        }
+        self.pdf[0] /= N_SPECTRUM_SAMPLES as f32;
     }
 
     pub fn secondary_terminated(&self) -> bool {
         self.pdf[1..].iter().all(|&p| p == 0.0)
     }
+
+    /// The wavelengths as a spectrum (handy for λ-dependent formulas).
+    pub fn lambda_spectrum(&self) -> SampledSpectrum {
+        SampledSpectrum(self.lambda)
+    }
 }
 
-/// pdf (1/nm) of [`SampledWavelengths::sample_visible`] for one wavelength.
+/// pdf (1/nm) of [`SampledWavelengths::sample_visible`] for one wavelength
+/// (0 outside 360–830 nm and for NaN).
 pub fn visible_wavelengths_pdf(lambda_nm: f32) -> f32 {
-    let _ = lambda_nm;
-    todo!("foundation")
+    if !(LAMBDA_MIN_NM as f32..=LAMBDA_MAX_NM as f32).contains(&lambda_nm) {
+        return 0.0;
+    }
+    let c = (0.0072 * (lambda_nm - 538.0)).cosh();
+    VISIBLE_PDF_NORM / (c * c)
 }
 
 /// A spectral quantity at the four path wavelengths.
@@ -41,14 +94,266 @@ pub fn visible_wavelengths_pdf(lambda_nm: f32) -> f32 {
 pub struct SampledSpectrum(pub [f32; N_SPECTRUM_SAMPLES]);
 
 impl SampledSpectrum {
+    pub const ZERO: SampledSpectrum = SampledSpectrum([0.0; N_SPECTRUM_SAMPLES]);
+    pub const ONE: SampledSpectrum = SampledSpectrum([1.0; N_SPECTRUM_SAMPLES]);
+
     pub const fn splat(v: f32) -> Self {
         SampledSpectrum([v; N_SPECTRUM_SAMPLES])
+    }
+
+    pub fn from_fn(f: impl FnMut(usize) -> f32) -> Self {
+        SampledSpectrum(std::array::from_fn(f))
+    }
+
+    /// Evaluate `f(λ)` at each path wavelength.
+    pub fn from_wavelengths(w: &SampledWavelengths, mut f: impl FnMut(f32) -> f32) -> Self {
+        SampledSpectrum(w.lambda.map(&mut f))
+    }
+
+    pub fn map(self, f: impl FnMut(f32) -> f32) -> Self {
+        SampledSpectrum(self.0.map(f))
+    }
+
+    pub fn max_component(&self) -> f32 {
+        self.0.iter().copied().fold(f32::NEG_INFINITY, f32::max)
+    }
+
+    pub fn min_component(&self) -> f32 {
+        self.0.iter().copied().fold(f32::INFINITY, f32::min)
+    }
+
+    pub fn average(&self) -> f32 {
+        self.0.iter().sum::<f32>() / N_SPECTRUM_SAMPLES as f32
+    }
+
+    /// True when every sample is exactly zero.
+    pub fn is_black(&self) -> bool {
+        self.0.iter().all(|&v| v == 0.0)
+    }
+
+    pub fn has_nan(&self) -> bool {
+        self.0.iter().any(|v| v.is_nan())
+    }
+
+    pub fn is_finite(&self) -> bool {
+        self.0.iter().all(|v| v.is_finite())
+    }
+
+    pub fn exp(self) -> Self {
+        self.map(f32::exp)
+    }
+
+    pub fn sqrt(self) -> Self {
+        self.map(f32::sqrt)
+    }
+
+    /// √max(v, 0): no NaN from tiny negative round-off.
+    pub fn safe_sqrt(self) -> Self {
+        self.map(|v| v.max(0.0).sqrt())
+    }
+
+    pub fn powf(self, e: f32) -> Self {
+        self.map(|v| v.powf(e))
+    }
+
+    pub fn abs(self) -> Self {
+        self.map(f32::abs)
+    }
+
+    pub fn clamp(self, lo: f32, hi: f32) -> Self {
+        self.map(|v| v.clamp(lo, hi))
+    }
+
+    pub fn clamp_zero(self) -> Self {
+        self.map(|v| v.max(0.0))
+    }
+
+    /// Element-wise a/b with 0 where b == 0 (pbrt's SafeDiv).
+    pub fn safe_div(self, rhs: SampledSpectrum) -> Self {
+        SampledSpectrum(std::array::from_fn(|i| {
+            if rhs.0[i] != 0.0 {
+                self.0[i] / rhs.0[i]
+            } else {
+                0.0
+            }
+        }))
     }
 
     /// Monte-Carlo estimate of CIE XYZ: mean over the 4 samples of cmf(λ)·L(λ)/pdf(λ),
     /// divided by [`super::CIE_Y_INTEGRAL`] (zero-pdf samples contribute 0).
     pub fn to_xyz(&self, wavelengths: &SampledWavelengths) -> [f32; 3] {
-        let _ = wavelengths;
-        todo!("foundation")
+        let mut xyz = [0.0f32; 3];
+        for k in 0..N_SPECTRUM_SAMPLES {
+            let pdf = wavelengths.pdf[k];
+            if pdf == 0.0 {
+                continue;
+            }
+            let cmf = cie_xyz_cmf(wavelengths.lambda[k] as f64);
+            let w = self.0[k] / pdf;
+            for c in 0..3 {
+                xyz[c] += cmf[c] as f32 * w;
+            }
+        }
+        let norm = 1.0 / (N_SPECTRUM_SAMPLES as f64 * CIE_Y_INTEGRAL) as f32;
+        xyz.map(|v| v * norm)
+    }
+
+    /// Monte-Carlo estimate of linear sRGB (XYZ → Rec.709, D65), as the film records it.
+    pub fn to_linear_srgb(&self, wavelengths: &SampledWavelengths) -> [f32; 3] {
+        let xyz = self.to_xyz(wavelengths);
+        super::xyz_to_linear_srgb(xyz.map(f64::from)).map(|v| v as f32)
+    }
+}
+
+impl Index<usize> for SampledSpectrum {
+    type Output = f32;
+    fn index(&self, i: usize) -> &f32 {
+        &self.0[i]
+    }
+}
+
+impl IndexMut<usize> for SampledSpectrum {
+    fn index_mut(&mut self, i: usize) -> &mut f32 {
+        &mut self.0[i]
+    }
+}
+
+impl From<f32> for SampledSpectrum {
+    fn from(v: f32) -> Self {
+        SampledSpectrum::splat(v)
+    }
+}
+
+macro_rules! elementwise_op {
+    ($tr:ident, $f:ident, $tra:ident, $fa:ident, $op:tt) => {
+        impl $tr for SampledSpectrum {
+            type Output = SampledSpectrum;
+            #[inline]
+            fn $f(self, rhs: SampledSpectrum) -> SampledSpectrum {
+                SampledSpectrum(std::array::from_fn(|i| self.0[i] $op rhs.0[i]))
+            }
+        }
+        impl $tr<f32> for SampledSpectrum {
+            type Output = SampledSpectrum;
+            #[inline]
+            fn $f(self, rhs: f32) -> SampledSpectrum {
+                SampledSpectrum(self.0.map(|v| v $op rhs))
+            }
+        }
+        impl $tr<SampledSpectrum> for f32 {
+            type Output = SampledSpectrum;
+            #[inline]
+            fn $f(self, rhs: SampledSpectrum) -> SampledSpectrum {
+                SampledSpectrum(rhs.0.map(|v| self $op v))
+            }
+        }
+        impl $tra for SampledSpectrum {
+            #[inline]
+            fn $fa(&mut self, rhs: SampledSpectrum) {
+                for i in 0..N_SPECTRUM_SAMPLES {
+                    self.0[i] = self.0[i] $op rhs.0[i];
+                }
+            }
+        }
+        impl $tra<f32> for SampledSpectrum {
+            #[inline]
+            fn $fa(&mut self, rhs: f32) {
+                for v in &mut self.0 {
+                    *v = *v $op rhs;
+                }
+            }
+        }
+    };
+}
+
+elementwise_op!(Add, add, AddAssign, add_assign, +);
+elementwise_op!(Sub, sub, SubAssign, sub_assign, -);
+elementwise_op!(Mul, mul, MulAssign, mul_assign, *);
+elementwise_op!(Div, div, DivAssign, div_assign, /);
+
+impl Neg for SampledSpectrum {
+    type Output = SampledSpectrum;
+    fn neg(self) -> SampledSpectrum {
+        self.map(|v| -v)
+    }
+}
+
+impl std::iter::Sum for SampledSpectrum {
+    fn sum<I: Iterator<Item = SampledSpectrum>>(iter: I) -> Self {
+        iter.fold(SampledSpectrum::ZERO, |a, b| a + b)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sample_visible_ends_and_rotation() {
+        let w = SampledWavelengths::sample_visible(0.0);
+        assert!((w.lambda[0] - 360.0).abs() < 1e-3, "{:?}", w.lambda);
+        // u = 0.5 maps to 545.9 nm (pbrt's documented value).
+        assert!((w.lambda[2] - 545.9).abs() < 0.1, "{:?}", w.lambda);
+        let w2 = SampledWavelengths::sample_visible(0.25);
+        assert_eq!(w.lambda[1], w2.lambda[0]);
+        let end = sample_visible_wavelength(1.0);
+        assert!((end - 830.0).abs() < 1e-3, "{end}");
+        for l in w.lambda {
+            assert!((360.0..=830.0).contains(&l));
+        }
+    }
+
+    #[test]
+    fn pdf_zero_outside_and_nan() {
+        assert_eq!(visible_wavelengths_pdf(359.9), 0.0);
+        assert_eq!(visible_wavelengths_pdf(830.1), 0.0);
+        assert_eq!(visible_wavelengths_pdf(f32::NAN), 0.0);
+        assert!(visible_wavelengths_pdf(538.0) > 0.0039);
+    }
+
+    #[test]
+    fn terminate_secondary_is_idempotent_and_unbiased() {
+        let mut w = SampledWavelengths::sample_visible(0.3);
+        let p0 = w.pdf[0];
+        assert!(!w.secondary_terminated());
+        w.terminate_secondary();
+        assert!(w.secondary_terminated());
+        assert_eq!(w.pdf[0], p0 / 4.0);
+        w.terminate_secondary();
+        assert_eq!(w.pdf[0], p0 / 4.0);
+        // The 4-sample average of L/pdf equals L0/p0 alone.
+        let l = SampledSpectrum([2.0, 5.0, 7.0, 9.0]);
+        let xyz = l.to_xyz(&w);
+        let cmf = cie_xyz_cmf(w.lambda[0] as f64);
+        let expect = cmf[1] as f32 * 2.0 / p0 / CIE_Y_INTEGRAL as f32;
+        assert!((xyz[1] - expect).abs() <= 1e-5 * expect.abs().max(1e-6));
+    }
+
+    #[test]
+    fn arithmetic() {
+        let a = SampledSpectrum([1.0, 2.0, 3.0, 4.0]);
+        let b = SampledSpectrum::splat(2.0);
+        assert_eq!((a + b).0, [3.0, 4.0, 5.0, 6.0]);
+        assert_eq!((a - b).0, [-1.0, 0.0, 1.0, 2.0]);
+        assert_eq!((a * b).0, [2.0, 4.0, 6.0, 8.0]);
+        assert_eq!((a / 2.0).0, [0.5, 1.0, 1.5, 2.0]);
+        assert_eq!((2.0 * a).0, [2.0, 4.0, 6.0, 8.0]);
+        let mut c = a;
+        c *= b;
+        c += 1.0;
+        c /= SampledSpectrum::splat(3.0);
+        assert_eq!(c.0, [1.0, 5.0 / 3.0, 7.0 / 3.0, 3.0]);
+        assert_eq!(a.max_component(), 4.0);
+        assert_eq!(a.min_component(), 1.0);
+        assert_eq!(a.average(), 2.5);
+        assert!(SampledSpectrum::ZERO.is_black());
+        assert!(!a.is_black());
+        assert_eq!(
+            a.safe_div(SampledSpectrum([0.0, 1.0, 0.0, 2.0])).0,
+            [0.0, 2.0, 0.0, 2.0]
+        );
+        assert!(SampledSpectrum::splat(-1.0).sqrt().has_nan());
+        assert!(!SampledSpectrum::splat(-1.0).safe_sqrt().has_nan());
+        assert_eq!(SampledSpectrum::ZERO.exp().0, [1.0; 4]);
     }
 }

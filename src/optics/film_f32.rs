@@ -135,7 +135,11 @@ impl ThinFilmX4 {
             let eiy_m1 = Complex32::new(-2.0 * sh * sh, 2.0 * sh * ch);
             let em1x = ((-2.0 * beta.im) as f32).exp_m1();
             let plus = eiy_m1 * em1x + em1x + eiy_m1; // e^{x} e^{iy} − 1
-            let e_minus_1 = if (k as i64) % 2 == 0 { plus } else { -plus - 2.0 };
+            let e_minus_1 = if (k as i64) % 2 == 0 {
+                plus
+            } else {
+                -plus - 2.0
+            };
             let decay = (-beta.im).exp() as f32; // |e^{iβ}|
 
             let n2c = Complex32::new(n2c_64.re as f32, n2c_64.im as f32);
@@ -164,11 +168,7 @@ impl ThinFilmX4 {
             let n1x = Complex32::new(n1, 0.0);
             let a_s = Complex32::new(n1c, 0.0);
             let (rs, ts, cond_s) = airy(a_s, n2c, n3c);
-            let (rp, tp0, cond_p) = airy(
-                a_s / (n1x * n1x),
-                n2c / (n2 * n2),
-                n3c / (n3 * n3),
-            );
+            let (rp, tp0, cond_p) = airy(a_s / (n1x * n1x), n2c / (n2 * n2), n3c / (n3 * n3));
             let tp = tp0 * n1x / n3;
             // A sharp resonance (high finesse: near-grazing incidence, or a film between two
             // strong reflectors) amplifies f32 rounding of the phase and admittances beyond

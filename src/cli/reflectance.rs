@@ -192,10 +192,10 @@ impl System {
                 a.substrate_ior
             );
         }
-        if a.ambient_ior.is_dispersive() || a.ambient_ior.at(550.0).im != 0.0 {
-            if (360..=830).any(|l| a.ambient_ior.at(l as f64).im != 0.0) {
-                bail!("--ambient-ior '{}' must be lossless (k = 0)", a.ambient_ior);
-            }
+        // Light arrives through the ambient, so it must be lossless (k = 0) over the
+        // visible range in which colours are computed.
+        if (360..=830).any(|l| a.ambient_ior.at(l as f64).im != 0.0) {
+            bail!("--ambient-ior '{}' must be lossless (k = 0)", a.ambient_ior);
         }
         Ok(System {
             ambient: a.ambient_ior.clone(),

@@ -108,6 +108,7 @@ impl ThinFilmX4 {
     /// Evaluate at four wavelengths (nm) for `cos θ1` in the ambient. No validation: inputs
     /// must satisfy [`ThinFilm::validate`] (the renderer checks materials at load time).
     #[inline]
+    #[allow(clippy::needless_range_loop)] // lane i indexes four parallel arrays
     pub fn response(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> FilmResponseX4 {
         let cos1 = cos_theta1.clamp(0.0, 1.0);
         let n1 = self.ambient_ior;
@@ -173,7 +174,8 @@ impl ThinFilmX4 {
             // A sharp resonance (high finesse: near-grazing incidence, or a film between two
             // strong reflectors) amplifies f32 rounding of the phase and admittances beyond
             // 1e-5; such lanes are evaluated in f64 instead (rare in practice; always correct).
-            if !(cond_s.max(cond_p) <= F32_MAX_CONDITION) {
+            let well_conditioned = cond_s <= F32_MAX_CONDITION && cond_p <= F32_MAX_CONDITION;
+            if !well_conditioned {
                 let r = self.lane_f64(i, lambda_nm[i], cos1);
                 out.r_s[i] = r.r_s as f32;
                 out.r_p[i] = r.r_p as f32;

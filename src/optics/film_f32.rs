@@ -134,14 +134,18 @@ impl ThinFilmX4 {
             let y = (two_beta - k * PI) as f32;
             let (sh, ch) = (0.5 * y).sin_cos();
             let eiy_m1 = Complex32::new(-2.0 * sh * sh, 2.0 * sh * ch);
-            let em1x = ((-2.0 * beta.im) as f32).exp_m1();
+            // Lossless film (the common case): x = 0, skip the exponentials.
+            let (em1x, decay) = if beta.im == 0.0 {
+                (0.0, 1.0)
+            } else {
+                (((-2.0 * beta.im) as f32).exp_m1(), (-beta.im).exp() as f32)
+            };
             let plus = eiy_m1 * em1x + em1x + eiy_m1; // e^{x} e^{iy} − 1
             let e_minus_1 = if (k as i64) % 2 == 0 {
                 plus
             } else {
                 -plus - 2.0
             };
-            let decay = (-beta.im).exp() as f32; // |e^{iβ}|
 
             let n2c = Complex32::new(n2c_64.re as f32, n2c_64.im as f32);
             // n3² − n1² sin²θ1 written as (n3 − n1)(n3 + n1) + (n1 cosθ1)²: no cancellation
@@ -164,7 +168,8 @@ impl ThinFilmX4 {
                 // Condition number of the denominator: how much the cancellation in N
                 // amplifies f32 rounding (≈ finesse of the resonance).
                 let big = (2.0 * b * (a + cc)).norm() + ((a - b) * (b - cc) * e_minus_1).norm();
-                (num / den, 4.0 * a * b * decay / den, big / den.norm())
+                let inv = den.inv();
+                (num * inv, 4.0 * a * b * decay * inv, big * inv.norm())
             };
             let n1x = Complex32::new(n1, 0.0);
             let a_s = Complex32::new(n1c, 0.0);

@@ -167,9 +167,12 @@ impl ThinFilmX4 {
                 let den = 2.0 * b * (a + cc) + (a - b) * (b - cc) * e_minus_1;
                 // Condition number of the denominator: how much the cancellation in N
                 // amplifies f32 rounding (≈ finesse of the resonance).
-                let big = (2.0 * b * (a + cc)).norm() + ((a - b) * (b - cc) * e_minus_1).norm();
+                // (|x| + |y|)² ≤ 2(|x|² + |y|²): a squared upper bound without hypot().
+                let big2 = 2.0
+                    * ((2.0 * b * (a + cc)).norm_sqr()
+                        + ((a - b) * (b - cc) * e_minus_1).norm_sqr());
                 let inv = den.inv();
-                (num * inv, 4.0 * a * b * decay * inv, big * inv.norm())
+                (num * inv, 4.0 * a * b * decay * inv, big2 * inv.norm_sqr())
             };
             let n1x = Complex32::new(n1, 0.0);
             let a_s = Complex32::new(n1c, 0.0);
@@ -179,7 +182,8 @@ impl ThinFilmX4 {
             // A sharp resonance (high finesse: near-grazing incidence, or a film between two
             // strong reflectors) amplifies f32 rounding of the phase and admittances beyond
             // 1e-5; such lanes are evaluated in f64 instead (rare in practice; always correct).
-            let well_conditioned = cond_s <= F32_MAX_CONDITION && cond_p <= F32_MAX_CONDITION;
+            let max2 = F32_MAX_CONDITION * F32_MAX_CONDITION;
+            let well_conditioned = cond_s <= max2 && cond_p <= max2;
             if !well_conditioned {
                 let r = self.lane_f64(i, lambda_nm[i], cos1);
                 out.r_s[i] = r.r_s as f32;

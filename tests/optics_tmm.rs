@@ -22,7 +22,10 @@ fn cases() -> Vec<Case> {
         }
         let f: Vec<&str> = line.split(',').collect();
         assert_eq!(f.len(), 11, "line {}", i + 1);
-        let num = |s: &str| s.parse::<f64>().unwrap_or_else(|e| panic!("line {}: {s}: {e}", i + 1));
+        let num = |s: &str| {
+            s.parse::<f64>()
+                .unwrap_or_else(|e| panic!("line {}: {s}: {e}", i + 1))
+        };
         let layers = f[6]
             .split(';')
             .filter(|s| !s.is_empty())
@@ -31,7 +34,11 @@ fn cases() -> Vec<Case> {
                 Layer {
                     ior: Complex64::new(num(p[0]), num(p[1])),
                     thickness_nm: num(p[2]),
-                    coherence: if p[3] == "i" { Coherence::Incoherent } else { Coherence::Coherent },
+                    coherence: if p[3] == "i" {
+                        Coherence::Incoherent
+                    } else {
+                        Coherence::Coherent
+                    },
                 }
             })
             .collect();

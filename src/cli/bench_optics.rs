@@ -2,11 +2,11 @@
 //! wavelengths = one hero bundle), f64 Airy, f64 transfer matrix and the renderer's f32 path.
 //! Single thread; build with `--release` for meaningful numbers.
 
-use thinfilm::optics::film_f32::ThinFilmX4;
-use thinfilm::optics::{Stack, ThinFilm};
 use num_complex::{Complex32, Complex64};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
+use thinfilm::optics::film_f32::ThinFilmX4;
+use thinfilm::optics::{Stack, ThinFilm};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -86,12 +86,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..black_box(x4)
         };
         let r = f.response(l32, cos_of(i) as f32);
-        (0..4).map(|k| r.r_s[k] + r.r_p[k] + r.t_s[k] + r.t_p[k]).sum()
+        (0..4)
+            .map(|k| r.r_s[k] + r.r_p[k] + r.t_s[k] + r.t_p[k])
+            .sum()
     });
     println!("single-film evaluations per second (4 wavelengths, R_s R_p T_s T_p; 1 thread):");
-    println!("  f64 Airy (ThinFilm::response ×4)  {:>8.2} M/s", f64_airy / 1e6);
-    println!("  f64 TMM  (Stack::response ×4)     {:>8.2} M/s", f64_tmm / 1e6);
-    println!("  f32 Airy (ThinFilmX4::response)   {:>8.2} M/s", f32_x4 / 1e6);
+    println!(
+        "  f64 Airy (ThinFilm::response ×4)  {:>8.2} M/s",
+        f64_airy / 1e6
+    );
+    println!(
+        "  f64 TMM  (Stack::response ×4)     {:>8.2} M/s",
+        f64_tmm / 1e6
+    );
+    println!(
+        "  f32 Airy (ThinFilmX4::response)   {:>8.2} M/s",
+        f32_x4 / 1e6
+    );
     if cfg!(debug_assertions) {
         println!("  (debug build: numbers are not representative; use --release)");
     }

@@ -2,12 +2,12 @@
 //! one (or several) incident angles, as CSV or JSON, with the colour under D65 and an
 //! optional plot (the seed paper's Fig. 2 is made this way, see README).
 
-use thinfilm::image_io::write_png_rgb8;
-use thinfilm::optics::{Coherence, FilmResponse, Ior, Layer, Stack};
-use thinfilm::spectrum;
 use anyhow::{bail, Context, Result};
 use num_complex::Complex64;
 use std::path::PathBuf;
+use thinfilm::image_io::write_png_rgb8;
+use thinfilm::optics::{Coherence, FilmResponse, Ior, Layer, Stack};
+use thinfilm::spectrum;
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
@@ -22,7 +22,12 @@ pub struct Args {
     #[arg(long, value_name = "IOR", conflicts_with = "layer")]
     pub film_ior: Option<Ior>,
     /// Film thickness in nm (single film).
-    #[arg(long, value_name = "NM", requires = "film_ior")]
+    #[arg(
+        long,
+        value_name = "NM",
+        requires = "film_ior",
+        allow_hyphen_values = true
+    )]
     pub thickness: Option<f64>,
     /// A stack layer `IOR:NM` (repeat, top first); append `:i` for an incoherent (thick)
     /// layer, e.g. `--layer ZnS:60 --layer MgF2:100 --layer BK7:1000000:i`.
@@ -32,17 +37,33 @@ pub struct Args {
     #[arg(long, value_name = "IOR", default_value = "1.64")]
     pub substrate_ior: Ior,
     /// Substrate extinction coefficient k, added to a real --substrate-ior.
-    #[arg(long, value_name = "K", default_value_t = 0.0)]
+    #[arg(
+        long,
+        value_name = "K",
+        default_value_t = 0.0,
+        allow_hyphen_values = true
+    )]
     pub substrate_k: f64,
     /// Ambient index (must be lossless).
     #[arg(long, value_name = "IOR", default_value = "1")]
     pub ambient_ior: Ior,
     /// Incident angle in degrees, in [0, 90). Repeat (or comma-separate) for several curves
     /// in the plot; CSV then gains a leading `angle_deg` column and JSON becomes an array.
-    #[arg(long, value_name = "DEG", default_value = "0", value_delimiter = ',')]
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value = "0",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     pub angle: Vec<f64>,
     /// Wavelengths in nm: `start:stop:step` (stop included) or a list `400,512.5,700`.
-    #[arg(long, value_name = "SPEC", default_value = "380:780:5")]
+    #[arg(
+        long,
+        value_name = "SPEC",
+        default_value = "380:780:5",
+        allow_hyphen_values = true
+    )]
     pub wavelengths: String,
     /// Output format on stdout.
     #[arg(long, value_enum, default_value_t = Format::Csv)]
@@ -150,22 +171,31 @@ impl System {
                 }]
             }
             (Some(_), None, _) => bail!("--film-ior needs --thickness NM"),
-            (None, _, false) => a.layer.iter().map(|s| parse_layer(s)).collect::<Result<_>>()?,
+            (None, _, false) => a
+                .layer
+                .iter()
+                .map(|s| parse_layer(s))
+                .collect::<Result<_>>()?,
             _ => bail!("give a film (--film-ior X --thickness NM) or one or more --layer IOR:NM"),
         };
         if !(a.substrate_k.is_finite() && a.substrate_k >= 0.0) {
-            bail!("--substrate-k must be finite and ≥ 0, got {}", a.substrate_k);
+            bail!(
+                "--substrate-k must be finite and ≥ 0, got {}",
+                a.substrate_k
+            );
         }
-        if a.substrate_k > 0.0 && (a.substrate_ior.is_dispersive() || a.substrate_ior.at(550.0).im > 0.0) {
+        if a.substrate_k > 0.0
+            && (a.substrate_ior.is_dispersive() || a.substrate_ior.at(550.0).im > 0.0)
+        {
             bail!(
                 "--substrate-k applies to a real --substrate-ior; '{}' already has its own k",
                 a.substrate_ior
             );
         }
-        if a.ambient_ior.is_dispersive() || a.ambient_ior.at(550.0).im != 0.0 {
-            if (360..=830).any(|l| a.ambient_ior.at(l as f64).im != 0.0) {
-                bail!("--ambient-ior '{}' must be lossless (k = 0)", a.ambient_ior);
-            }
+        // Light arrives through the ambient, so it must be lossless (k = 0) over the
+        // visible range in which colours are computed.
+        if (360..=830).any(|l| a.ambient_ior.at(l as f64).im != 0.0) {
+            bail!("--ambient-ior '{}' must be lossless (k = 0)", a.ambient_ior);
         }
         Ok(System {
             ambient: a.ambient_ior.clone(),
@@ -321,14 +351,14 @@ fn describe(s: &System) -> String {
     let layers: Vec<String> = s
         .layers
         .iter()
-        .map(|l| format!("{} / {} nm", l.ior, l.thickness_nm))
+        .map(|l| format!("n = {}, d = {} nm", l.ior, l.thickness_nm))
         .collect();
     let sub = if s.substrate_k > 0.0 {
         format!("{}+{}i", s.substrate, s.substrate_k)
     } else {
         s.substrate.to_string()
     };
-    format!("film {}  on substrate {}", layers.join(" | "), sub)
+    format!("film {}  on substrate n = {}", layers.join(" | "), sub)
 }
 
 /// Draws R(λ) (unpolarised) for each angle in the style of a paper figure.
@@ -344,16 +374,22 @@ pub fn plot(path: &std::path::Path, spectra: &[Spectrum], title: &str) -> Result
         .iter()
         .flat_map(|s| s.wavelength_nm.iter())
         .fold((f64::MAX, f64::MIN), |(a, b), &l| (a.min(l), b.max(l)));
-    let (lmin, lmax) = if lmax > lmin { (lmin, lmax) } else { (lmin - 1.0, lmax + 1.0) };
+    let (lmin, lmax) = if lmax > lmin {
+        (lmin, lmax)
+    } else {
+        (lmin - 1.0, lmax + 1.0)
+    };
     let rmax = spectra
         .iter()
         .flat_map(|s| s.response.iter().map(|r| r.r()))
         .fold(0.0f64, f64::max);
     // Round the R axis up to a tidy value so curves do not touch the frame.
-    let top = [0.02, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]
-        .into_iter()
-        .find(|&t| t >= rmax * 1.08)
-        .unwrap_or(1.0);
+    let top = [
+        0.02, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0,
+    ]
+    .into_iter()
+    .find(|&t| t >= rmax * 1.08)
+    .unwrap_or(1.0);
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         let err = |e: DrawingAreaErrorKind<_>| anyhow::anyhow!("plot: {e:?}");
@@ -368,6 +404,8 @@ pub fn plot(path: &std::path::Path, spectra: &[Spectrum], title: &str) -> Result
         chart
             .configure_mesh()
             .x_desc("wavelength λ (nm)")
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.2}"))
             .y_desc("R")
             .axis_desc_style(("sans-serif", 24))
             .label_style(("sans-serif", 18))
@@ -395,7 +433,9 @@ pub fn plot(path: &std::path::Path, spectra: &[Spectrum], title: &str) -> Result
                 .draw_series(LineSeries::new(pts, c.stroke_width(3)))
                 .map_err(|e| anyhow::anyhow!("plot: {e:?}"))?
                 .label(format!("θ = {}°", sp.angle_deg))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 30, y)], c.stroke_width(3)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 30, y)], c.stroke_width(3))
+                });
         }
         chart
             .configure_series_labels()
@@ -416,10 +456,27 @@ mod tests {
 
     #[test]
     fn wavelength_specs() {
-        assert_eq!(parse_wavelengths("400:700:100").unwrap(), vec![400.0, 500.0, 600.0, 700.0]);
-        assert_eq!(parse_wavelengths("400,512.5,700").unwrap(), vec![400.0, 512.5, 700.0]);
-        assert_eq!(parse_wavelengths("400:410:3").unwrap(), vec![400.0, 403.0, 406.0, 409.0]);
-        for bad in ["0:700:5", "400:300:5", "400:700", "-1,500", "400,x", "400:700:0", ""] {
+        assert_eq!(
+            parse_wavelengths("400:700:100").unwrap(),
+            vec![400.0, 500.0, 600.0, 700.0]
+        );
+        assert_eq!(
+            parse_wavelengths("400,512.5,700").unwrap(),
+            vec![400.0, 512.5, 700.0]
+        );
+        assert_eq!(
+            parse_wavelengths("400:410:3").unwrap(),
+            vec![400.0, 403.0, 406.0, 409.0]
+        );
+        for bad in [
+            "0:700:5",
+            "400:300:5",
+            "400:700",
+            "-1,500",
+            "400,x",
+            "400:700:0",
+            "",
+        ] {
             assert!(parse_wavelengths(bad).is_err(), "{bad}");
         }
     }
@@ -428,7 +485,10 @@ mod tests {
     fn layer_specs() {
         let l = parse_layer("MgF2:100").unwrap();
         assert_eq!(l.thickness_nm, 100.0);
-        assert_eq!(parse_layer("1.5+0.1i:5:i").unwrap().coherence, Coherence::Incoherent);
+        assert_eq!(
+            parse_layer("1.5+0.1i:5:i").unwrap().coherence,
+            Coherence::Incoherent
+        );
         for bad in ["1.5", "1.5:-3", "x:3", "1.5:3:q", "1.5:nan"] {
             assert!(parse_layer(bad).is_err(), "{bad}");
         }

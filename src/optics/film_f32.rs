@@ -108,6 +108,7 @@ impl ThinFilmX4 {
     /// Evaluate at four wavelengths (nm) for `cos θ1` in the ambient. No validation: inputs
     /// must satisfy [`ThinFilm::validate`] (the renderer checks materials at load time).
     #[inline]
+    #[allow(clippy::needless_range_loop)] // lane i indexes four parallel arrays
     pub fn response(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> FilmResponseX4 {
         let cos1 = cos_theta1.clamp(0.0, 1.0);
         let n1 = self.ambient_ior;
@@ -133,10 +134,18 @@ impl ThinFilmX4 {
             let y = (two_beta - k * PI) as f32;
             let (sh, ch) = (0.5 * y).sin_cos();
             let eiy_m1 = Complex32::new(-2.0 * sh * sh, 2.0 * sh * ch);
-            let em1x = ((-2.0 * beta.im) as f32).exp_m1();
+            // Lossless film (the common case): x = 0, skip the exponentials.
+            let (em1x, decay) = if beta.im == 0.0 {
+                (0.0, 1.0)
+            } else {
+                (((-2.0 * beta.im) as f32).exp_m1(), (-beta.im).exp() as f32)
+            };
             let plus = eiy_m1 * em1x + em1x + eiy_m1; // e^{x} e^{iy} − 1
-            let e_minus_1 = if (k as i64) % 2 == 0 { plus } else { -plus - 2.0 };
-            let decay = (-beta.im).exp() as f32; // |e^{iβ}|
+            let e_minus_1 = if (k as i64) % 2 == 0 {
+                plus
+            } else {
+                -plus - 2.0
+            };
 
             let n2c = Complex32::new(n2c_64.re as f32, n2c_64.im as f32);
             // n3² − n1² sin²θ1 written as (n3 − n1)(n3 + n1) + (n1 cosθ1)²: no cancellation
@@ -158,22 +167,24 @@ impl ThinFilmX4 {
                 let den = 2.0 * b * (a + cc) + (a - b) * (b - cc) * e_minus_1;
                 // Condition number of the denominator: how much the cancellation in N
                 // amplifies f32 rounding (≈ finesse of the resonance).
-                let big = (2.0 * b * (a + cc)).norm() + ((a - b) * (b - cc) * e_minus_1).norm();
-                (num / den, 4.0 * a * b * decay / den, big / den.norm())
+                // (|x| + |y|)² ≤ 2(|x|² + |y|²): a squared upper bound without hypot().
+                let big2 = 2.0
+                    * ((2.0 * b * (a + cc)).norm_sqr()
+                        + ((a - b) * (b - cc) * e_minus_1).norm_sqr());
+                let inv = den.inv();
+                (num * inv, 4.0 * a * b * decay * inv, big2 * inv.norm_sqr())
             };
             let n1x = Complex32::new(n1, 0.0);
             let a_s = Complex32::new(n1c, 0.0);
             let (rs, ts, cond_s) = airy(a_s, n2c, n3c);
-            let (rp, tp0, cond_p) = airy(
-                a_s / (n1x * n1x),
-                n2c / (n2 * n2),
-                n3c / (n3 * n3),
-            );
+            let (rp, tp0, cond_p) = airy(a_s / (n1x * n1x), n2c / (n2 * n2), n3c / (n3 * n3));
             let tp = tp0 * n1x / n3;
             // A sharp resonance (high finesse: near-grazing incidence, or a film between two
             // strong reflectors) amplifies f32 rounding of the phase and admittances beyond
             // 1e-5; such lanes are evaluated in f64 instead (rare in practice; always correct).
-            if !(cond_s.max(cond_p) <= F32_MAX_CONDITION) {
+            let max2 = F32_MAX_CONDITION * F32_MAX_CONDITION;
+            let well_conditioned = cond_s <= max2 && cond_p <= max2;
+            if !well_conditioned {
                 let r = self.lane_f64(i, lambda_nm[i], cos1);
                 out.r_s[i] = r.r_s as f32;
                 out.r_p[i] = r.r_p as f32;

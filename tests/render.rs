@@ -8,13 +8,29 @@ use thinfilm::render::{render, RenderOptions};
 use thinfilm::scene::*;
 
 fn camera(origin: Vec3, target: Vec3, fov: f32) -> Camera {
-    Camera { to_world: look_at(origin, target, Vec3::Y), fov_deg: fov, fov_axis: FovAxis::X, near_clip: 0.01, far_clip: 1000.0 }
+    Camera {
+        to_world: look_at(origin, target, Vec3::Y),
+        fov_deg: fov,
+        fov_axis: FovAxis::X,
+        near_clip: 0.01,
+        far_clip: 1000.0,
+    }
 }
 
-fn base_scene(shapes: Vec<Shape>, bsdfs: Vec<BsdfDesc>, emitters: Vec<EmitterDesc>, res: u32, spp: u32) -> Scene {
+fn base_scene(
+    shapes: Vec<Shape>,
+    bsdfs: Vec<BsdfDesc>,
+    emitters: Vec<EmitterDesc>,
+    res: u32,
+    spp: u32,
+) -> Scene {
     Scene {
         camera: camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 40.0),
-        film: FilmSettings { width: res, height: res, filter: ReconstructionFilter::Box },
+        film: FilmSettings {
+            width: res,
+            height: res,
+            filter: ReconstructionFilter::Box,
+        },
         integrator: IntegratorSettings::default(),
         spp,
         seed: 0,
@@ -31,7 +47,16 @@ fn constant(v: f32) -> TextureDesc {
 }
 
 fn sphere(bsdf: usize) -> Shape {
-    Shape { geometry: Geometry::Sphere { center: Vec3::ZERO, radius: 1.0, flip_normals: false }, bsdf, emission: None, name: Some("ball".into()) }
+    Shape {
+        geometry: Geometry::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+            flip_normals: false,
+        },
+        bsdf,
+        emission: None,
+        name: Some("ball".into()),
+    }
 }
 
 /// A quad (two triangles) in the plane y = `y`, facing +Y, with UVs.
@@ -44,23 +69,45 @@ fn floor(y: f32, half: f32, bsdf: usize) -> Shape {
             Vec3::new(-half, y, half),
         ],
         normals: vec![Vec3::Y; 4],
-        uvs: vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)],
+        uvs: vec![
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(0.0, 1.0),
+        ],
         indices: vec![[0, 2, 1], [0, 3, 2]],
     };
-    Shape { geometry: Geometry::Mesh(mesh), bsdf, emission: None, name: Some("floor".into()) }
+    Shape {
+        geometry: Geometry::Mesh(mesh),
+        bsdf,
+        emission: None,
+        name: Some("floor".into()),
+    }
 }
 
 fn white_env() -> EmitterDesc {
-    EmitterDesc::Constant { radiance: SpectrumDesc::Constant(1.0) }
+    EmitterDesc::Constant {
+        radiance: SpectrumDesc::Constant(1.0),
+    }
 }
 
 fn thin_film(alpha: f32, thickness: f32) -> BsdfDesc {
-    BsdfDesc::ThinFilm { film_ior: Ior::real(1.37), thickness_nm: constant(thickness), substrate_ior: Ior::real(1.64), alpha }
+    BsdfDesc::ThinFilm {
+        film_ior: Ior::real(1.37),
+        thickness_nm: constant(thickness),
+        substrate_ior: Ior::real(1.64),
+        alpha,
+    }
 }
 
 fn assert_all_finite(img: &thinfilm::image_io::RgbImage, what: &str) {
     for (i, p) in img.pixels.iter().enumerate() {
-        assert!(p.iter().all(|v| v.is_finite()), "{what}: pixel ({}, {}) = {p:?}", i % img.width, i / img.width);
+        assert!(
+            p.iter().all(|v| v.is_finite()),
+            "{what}: pixel ({}, {}) = {p:?}",
+            i % img.width,
+            i / img.width
+        );
     }
 }
 
@@ -77,7 +124,10 @@ fn furnace_deviation(scene: &Scene, uvs: &[Vec2], n: u32, expect: f32) -> f32 {
         let mut sum = [0.0f64; 4];
         for s in 0..n {
             let mut sampler = Sampler::for_sample(k as u32, 0, s, 1);
-            let mut wl = SampledWavelengths { lambda: [400.0, 500.0, 600.0, 700.0], pdf: [1.0; 4] };
+            let mut wl = SampledWavelengths {
+                lambda: [400.0, 500.0, 600.0, 700.0],
+                pdf: [1.0; 4],
+            };
             let ray = prepared.camera.generate_ray(*uv);
             let l = integrator::li(&prepared, ray, &mut wl, &mut sampler, &mut counters);
             for c in 0..4 {
@@ -93,19 +143,41 @@ fn furnace_deviation(scene: &Scene, uvs: &[Vec2], n: u32, expect: f32) -> f32 {
 }
 
 fn film_grid(k: usize) -> Vec<Vec2> {
-    (0..k * k).map(|i| Vec2::new(((i % k) as f32 + 0.5) / k as f32, ((i / k) as f32 + 0.5) / k as f32)).collect()
+    (0..k * k)
+        .map(|i| {
+            Vec2::new(
+                ((i % k) as f32 + 0.5) / k as f32,
+                ((i / k) as f32 + 0.5) / k as f32,
+            )
+        })
+        .collect()
 }
 
 /// White furnace: a diffuse albedo-1 sphere in a constant environment of radiance 1 renders
 /// 1 ± 1 % at every pixel (and every wavelength), so it is invisible.
 #[test]
 fn furnace_diffuse_sphere_is_invisible() {
-    let scene = base_scene(vec![sphere(0)], vec![BsdfDesc::Diffuse { reflectance: constant(1.0) }], vec![white_env()], 24, 1);
+    let scene = base_scene(
+        vec![sphere(0)],
+        vec![BsdfDesc::Diffuse {
+            reflectance: constant(1.0),
+        }],
+        vec![white_env()],
+        24,
+        1,
+    );
     // Film positions inside the sphere's silhouette (it spans the central ~70 %) and outside.
     let dev = furnace_deviation(&scene, &film_grid(5), 20_000, 1.0);
     assert!(dev < 0.01, "furnace deviation {dev}");
     // The image itself: sphere pixels average like the background, and nothing is invalid.
-    let out = render(&scene, &RenderOptions { spp: Some(64), ..Default::default() }).unwrap();
+    let out = render(
+        &scene,
+        &RenderOptions {
+            spp: Some(64),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert!(out.stats.rays > out.stats.samples);
     assert_eq!(out.stats.invalid_samples, 0);
     assert_all_finite(&out.image, "furnace");
@@ -118,7 +190,9 @@ fn furnace_diffuse_sphere_is_invisible() {
 fn furnace_two_sided_diffuse_quad() {
     let mut scene = base_scene(
         vec![floor(-0.5, 3.0, 0)],
-        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse { reflectance: constant(1.0) }))],
+        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse {
+            reflectance: constant(1.0),
+        }))],
         vec![white_env()],
         16,
         1,
@@ -133,10 +207,20 @@ fn furnace_two_sided_diffuse_quad() {
 fn film_scene(res: u32, spp: u32) -> Scene {
     let mut scene = base_scene(
         vec![sphere(0), floor(-1.0, 4.0, 1)],
-        vec![thin_film(0.15, 400.0), BsdfDesc::Diffuse { reflectance: constant(0.6) }],
         vec![
-            EmitterDesc::Constant { radiance: SpectrumDesc::Constant(0.8) },
-            EmitterDesc::Point { position: Vec3::new(2.0, 3.0, -2.0), intensity: SpectrumDesc::Constant(5.0) },
+            thin_film(0.15, 400.0),
+            BsdfDesc::Diffuse {
+                reflectance: constant(0.6),
+            },
+        ],
+        vec![
+            EmitterDesc::Constant {
+                radiance: SpectrumDesc::Constant(0.8),
+            },
+            EmitterDesc::Point {
+                position: Vec3::new(2.0, 3.0, -2.0),
+                intensity: SpectrumDesc::Constant(5.0),
+            },
         ],
         res,
         spp,
@@ -146,17 +230,42 @@ fn film_scene(res: u32, spp: u32) -> Scene {
 }
 
 fn bits(img: &thinfilm::image_io::RgbImage) -> Vec<u32> {
-    img.pixels.iter().flat_map(|p| p.map(f32::to_bits)).collect()
+    img.pixels
+        .iter()
+        .flat_map(|p| p.map(f32::to_bits))
+        .collect()
 }
 
 /// Same seed and spp: bit-identical images with 1 and 2 threads.
 #[test]
 fn deterministic_across_thread_counts() {
     let scene = film_scene(20, 8);
-    let one = render(&scene, &RenderOptions { threads: Some(1), ..Default::default() }).unwrap();
-    let two = render(&scene, &RenderOptions { threads: Some(2), ..Default::default() }).unwrap();
+    let one = render(
+        &scene,
+        &RenderOptions {
+            threads: Some(1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let two = render(
+        &scene,
+        &RenderOptions {
+            threads: Some(2),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(bits(&one.image), bits(&two.image));
-    let other_seed = render(&scene, &RenderOptions { threads: Some(2), seed: Some(9), ..Default::default() }).unwrap();
+    let other_seed = render(
+        &scene,
+        &RenderOptions {
+            threads: Some(2),
+            seed: Some(9),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_ne!(bits(&one.image), bits(&other_seed.image));
 }
 
@@ -165,9 +274,32 @@ fn deterministic_across_thread_counts() {
 #[test]
 fn sample_ranges_merge_exactly() {
     let scene = film_scene(12, 64);
-    let full = render(&scene, &RenderOptions { sample_range: Some((0, 64)), ..Default::default() }).unwrap();
-    let a = render(&scene, &RenderOptions { sample_range: Some((0, 32)), threads: Some(1), ..Default::default() }).unwrap();
-    let b = render(&scene, &RenderOptions { sample_range: Some((32, 64)), threads: Some(2), ..Default::default() }).unwrap();
+    let full = render(
+        &scene,
+        &RenderOptions {
+            sample_range: Some((0, 64)),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let a = render(
+        &scene,
+        &RenderOptions {
+            sample_range: Some((0, 32)),
+            threads: Some(1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let b = render(
+        &scene,
+        &RenderOptions {
+            sample_range: Some((32, 64)),
+            threads: Some(2),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let (pa, pb) = (dir.path().join("a.exr"), dir.path().join("b.exr"));
     thinfilm::image_io::write_exr_rgb(&pa, &a.image).unwrap();
@@ -177,7 +309,11 @@ fn sample_ranges_merge_exactly() {
     for i in 0..full.image.pixels.len() {
         for c in 0..3 {
             let merged = (32.0 * ra.pixels[i][c] + 32.0 * rb.pixels[i][c]) / 64.0;
-            assert_eq!(merged.to_bits(), full.image.pixels[i][c].to_bits(), "pixel {i} channel {c}");
+            assert_eq!(
+                merged.to_bits(),
+                full.image.pixels[i][c].to_bits(),
+                "pixel {i} channel {c}"
+            );
         }
     }
     // The default range is the same as an explicit 0:spp.
@@ -192,8 +328,14 @@ fn effect_analysis_switches_interference() {
     let plain = base_scene(
         vec![sphere(0), floor(-1.0, 4.0, 1)],
         vec![
-            BsdfDesc::Conductor { eta: "0.2+3.9i".parse().unwrap(), alpha_u: 0.2, alpha_v: 0.2 },
-            BsdfDesc::Diffuse { reflectance: constant(0.5) },
+            BsdfDesc::Conductor {
+                eta: "0.2+3.9i".parse().unwrap(),
+                alpha_u: 0.2,
+                alpha_v: 0.2,
+            },
+            BsdfDesc::Diffuse {
+                reflectance: constant(0.5),
+            },
             // Declared but used by no shape: must not switch interference on.
             thin_film(0.0, 300.0),
         ],
@@ -204,13 +346,21 @@ fn effect_analysis_switches_interference() {
     let out = render(&plain, &RenderOptions::default()).unwrap();
     assert!(!out.effects.interference && out.effects.rough && !out.effects.dispersion);
     assert_eq!(out.stats.film_evals, 0);
-    assert!(out.effects.reasons.iter().any(|r| r.starts_with("interference: off")));
+    assert!(out
+        .effects
+        .reasons
+        .iter()
+        .any(|r| r.starts_with("interference: off")));
 
     let film = film_scene(12, 4);
     let out = render(&film, &RenderOptions::default()).unwrap();
     assert!(out.effects.interference);
     assert!(out.stats.film_evals > 0);
-    assert!(out.effects.reasons.iter().any(|r| r.starts_with("interference: ON")));
+    assert!(out
+        .effects
+        .reasons
+        .iter()
+        .any(|r| r.starts_with("interference: ON")));
 
     let mut polarised = film_scene(4, 1);
     polarised.polarizer = Some(Polarizer::S);
@@ -239,8 +389,13 @@ fn no_nan_at_grazing_views_and_zero_thickness() {
     // Camera inside a diffuse sphere lit by a point light.
     let mut scene = base_scene(
         vec![sphere(0)],
-        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse { reflectance: constant(0.9) }))],
-        vec![EmitterDesc::Point { position: Vec3::new(0.2, 0.1, 0.0), intensity: SpectrumDesc::Constant(1.0) }],
+        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse {
+            reflectance: constant(0.9),
+        }))],
+        vec![EmitterDesc::Point {
+            position: Vec3::new(0.2, 0.1, 0.0),
+            intensity: SpectrumDesc::Constant(1.0),
+        }],
         12,
         8,
     );
@@ -250,7 +405,16 @@ fn no_nan_at_grazing_views_and_zero_thickness() {
     assert!(out.image.pixels.iter().all(|p| p[1] > 0.0));
     let glass = base_scene(
         vec![sphere(0), floor(-1.0, 4.0, 1)],
-        vec![BsdfDesc::Dielectric { int_ior: Ior::real(1.5), ext_ior: Ior::real(1.0), alpha: 0.0 }, BsdfDesc::Diffuse { reflectance: constant(0.5) }],
+        vec![
+            BsdfDesc::Dielectric {
+                int_ior: Ior::real(1.5),
+                ext_ior: Ior::real(1.0),
+                alpha: 0.0,
+            },
+            BsdfDesc::Diffuse {
+                reflectance: constant(0.5),
+            },
+        ],
         vec![white_env()],
         12,
         8,
@@ -263,8 +427,23 @@ fn no_nan_at_grazing_views_and_zero_thickness() {
 /// max_depth 1 shows only directly visible emitters: the sphere is black, the sky is not.
 #[test]
 fn max_depth_one_shows_only_emitters() {
-    let scene = base_scene(vec![sphere(0)], vec![BsdfDesc::Diffuse { reflectance: constant(1.0) }], vec![white_env()], 16, 2);
-    let out = render(&scene, &RenderOptions { max_depth: Some(1), ..Default::default() }).unwrap();
+    let scene = base_scene(
+        vec![sphere(0)],
+        vec![BsdfDesc::Diffuse {
+            reflectance: constant(1.0),
+        }],
+        vec![white_env()],
+        16,
+        2,
+    );
+    let out = render(
+        &scene,
+        &RenderOptions {
+            max_depth: Some(1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(out.image.get(8, 8), [0.0; 3]);
     assert!(out.image.get(0, 0)[1] > 0.5);
 }
@@ -272,11 +451,28 @@ fn max_depth_one_shows_only_emitters() {
 /// Tent and Gaussian reconstruction: deterministic and finite; a flat scene stays flat.
 #[test]
 fn splatting_filters_are_deterministic() {
-    for filter in [ReconstructionFilter::Tent { radius: 1.0 }, ReconstructionFilter::Gaussian { stddev: 0.5 }] {
+    for filter in [
+        ReconstructionFilter::Tent { radius: 1.0 },
+        ReconstructionFilter::Gaussian { stddev: 0.5 },
+    ] {
         let mut scene = film_scene(10, 4);
         scene.film.filter = filter;
-        let one = render(&scene, &RenderOptions { threads: Some(1), ..Default::default() }).unwrap();
-        let two = render(&scene, &RenderOptions { threads: Some(2), ..Default::default() }).unwrap();
+        let one = render(
+            &scene,
+            &RenderOptions {
+                threads: Some(1),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let two = render(
+            &scene,
+            &RenderOptions {
+                threads: Some(2),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(bits(&one.image), bits(&two.image));
         assert_all_finite(&one.image, "filter");
     }
@@ -286,20 +482,161 @@ fn splatting_filters_are_deterministic() {
 #[test]
 fn bad_inputs_are_errors() {
     let scene = film_scene(8, 4);
-    assert!(render(&scene, &RenderOptions { resolution: Some((0, 8)), ..Default::default() }).is_err());
-    assert!(render(&scene, &RenderOptions { sample_range: Some((5, 5)), ..Default::default() }).is_err());
-    assert!(render(&scene, &RenderOptions { max_depth: Some(0), ..Default::default() }).is_err());
-    assert!(render(&scene, &RenderOptions { threads: Some(0), ..Default::default() }).is_err());
+    assert!(render(
+        &scene,
+        &RenderOptions {
+            resolution: Some((0, 8)),
+            ..Default::default()
+        }
+    )
+    .is_err());
+    assert!(render(
+        &scene,
+        &RenderOptions {
+            sample_range: Some((5, 5)),
+            ..Default::default()
+        }
+    )
+    .is_err());
+    assert!(render(
+        &scene,
+        &RenderOptions {
+            max_depth: Some(0),
+            ..Default::default()
+        }
+    )
+    .is_err());
+    assert!(render(
+        &scene,
+        &RenderOptions {
+            threads: Some(0),
+            ..Default::default()
+        }
+    )
+    .is_err());
     let mut bad = film_scene(8, 4);
     bad.shapes[0].bsdf = 99;
     assert!(render(&bad, &RenderOptions::default()).is_err());
     let mut bad = film_scene(8, 4);
     bad.shapes.push(Shape {
-        geometry: Geometry::Mesh(TriangleMesh { positions: vec![Vec3::ZERO; 3], normals: vec![], uvs: vec![], indices: vec![[0, 1, 7]] }),
+        geometry: Geometry::Mesh(TriangleMesh {
+            positions: vec![Vec3::ZERO; 3],
+            normals: vec![],
+            uvs: vec![],
+            indices: vec![[0, 1, 7]],
+        }),
         bsdf: 0,
         emission: None,
         name: Some("broken".into()),
     });
     let err = render(&bad, &RenderOptions::default()).unwrap_err();
     assert!(format!("{err:#}").contains("broken"));
+}
+
+/// An inward-facing emissive cube of half-size `h` (12 triangles, normals pointing inwards).
+fn emissive_box(h: f32, bsdf: usize) -> Shape {
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let corner = |a: f32, b: f32| {
+                let mut p = [0.0f32; 3];
+                p[axis] = sign * h;
+                p[u] = a * h;
+                p[v] = b * h;
+                Vec3::from_array(p)
+            };
+            let base = positions.len() as u32;
+            positions.extend([
+                corner(-1.0, -1.0),
+                corner(1.0, -1.0),
+                corner(1.0, 1.0),
+                corner(-1.0, 1.0),
+            ]);
+            let (a, b, c) = (
+                positions[base as usize],
+                positions[base as usize + 1],
+                positions[base as usize + 2],
+            );
+            let inward = (b - a).cross(c - a).dot(-a) > 0.0;
+            if inward {
+                indices.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
+            } else {
+                indices.extend([[base, base + 2, base + 1], [base, base + 3, base + 2]]);
+            }
+        }
+    }
+    Shape {
+        geometry: Geometry::Mesh(TriangleMesh {
+            positions,
+            normals: vec![],
+            uvs: vec![],
+            indices,
+        }),
+        bsdf,
+        emission: Some(SpectrumDesc::Constant(1.0)),
+        name: Some("light box".into()),
+    }
+}
+
+/// Area lights: a diffuse albedo-0.5 sphere inside a black enclosure that emits radiance 1
+/// inwards sees radiance 1 from every direction, so it renders 0.5 ± 1 % (light sampling of
+/// spheres and of triangle meshes, MIS with BSDF sampling, one-sided emission).
+#[test]
+fn area_light_enclosure() {
+    let black = BsdfDesc::Diffuse {
+        reflectance: constant(0.0),
+    };
+    let grey = BsdfDesc::Diffuse {
+        reflectance: constant(0.5),
+    };
+    let centre: Vec<Vec2> = (0..9)
+        .map(|i| Vec2::new(0.45 + 0.05 * (i % 3) as f32, 0.45 + 0.05 * (i / 3) as f32))
+        .collect();
+    let mut sphere_light = Shape {
+        geometry: Geometry::Sphere {
+            center: Vec3::ZERO,
+            radius: 10.0,
+            flip_normals: true,
+        },
+        bsdf: 1,
+        emission: Some(SpectrumDesc::Constant(1.0)),
+        name: Some("light sphere".into()),
+    };
+    let scene = base_scene(
+        vec![sphere(0), sphere_light.clone()],
+        vec![grey.clone(), black.clone()],
+        vec![],
+        8,
+        1,
+    );
+    let dev = furnace_deviation(&scene, &centre, 20_000, 0.5);
+    assert!(dev < 0.01, "sphere light: {dev}");
+    let scene = base_scene(
+        vec![sphere(0), emissive_box(10.0, 1)],
+        vec![grey, black.clone()],
+        vec![],
+        8,
+        1,
+    );
+    let dev = furnace_deviation(&scene, &centre, 20_000, 0.5);
+    assert!(dev < 0.01, "mesh light: {dev}");
+    // Emission is one-sided: with outward normals the enclosure is dark inside.
+    if let Geometry::Sphere { flip_normals, .. } = &mut sphere_light.geometry {
+        *flip_normals = false;
+    }
+    let scene = base_scene(
+        vec![sphere(0), sphere_light],
+        vec![
+            BsdfDesc::Diffuse {
+                reflectance: constant(0.5),
+            },
+            black,
+        ],
+        vec![],
+        8,
+        1,
+    );
+    assert!((furnace_deviation(&scene, &centre, 200, 1.0) - 1.0).abs() < 1e-6);
 }

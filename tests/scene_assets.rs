@@ -134,23 +134,7 @@ fn every_scene_loads() {
             ("spp".to_string(), "4".to_string()),
             ("res".to_string(), "32".to_string()),
         ];
-        let s = match load(&path, &defaults) {
-            Ok(s) => s,
-            Err(e) => {
-                let msg = format!("{e:#}");
-                // The gold scene needs "Au" from the optics dispersion library; until that
-                // library is merged the loader must say exactly that.
-                if thinfilm::optics::dispersion::lookup("Au").is_none() && msg.contains("\"Au\"") {
-                    eprintln!(
-                        "note: {} needs the optics library's Au: {msg}",
-                        path.display()
-                    );
-                    n += 1;
-                    continue;
-                }
-                panic!("{}: {msg}", path.display());
-            }
-        };
+        let s = load(&path, &defaults).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
         assert_eq!(
             (s.spp, s.film.width, s.film.height),
             (4, 32, 32),
@@ -164,6 +148,11 @@ fn every_scene_loads() {
             [EmitterDesc::Envmap { .. }]
         ));
         assert!(!s.shapes.is_empty());
+        if path.ends_with("teapot_gold.xml") {
+            assert!(
+                matches!(&s.bsdfs[s.shapes[0].bsdf], BsdfDesc::Conductor { eta: thinfilm::optics::Ior::Material(m), .. } if m.name == "Au")
+            );
+        }
         // The camera sees the geometry's centre.
         let (lo, hi) = shapes_bounds(&s.shapes).unwrap();
         let eye = s.camera.to_world.transform_point3(Vec3::ZERO);
@@ -191,7 +180,11 @@ fn camera_matches_mitsuba() {
     let m = s.camera.to_world;
     for (r, row) in mitsuba_rows.iter().enumerate() {
         for (c, &v) in row.iter().enumerate() {
-            assert!((m.col(c)[r] - v).abs() < 1e-5, "({r},{c}): {} vs {v}", m.col(c)[r]);
+            assert!(
+                (m.col(c)[r] - v).abs() < 1e-5,
+                "({r},{c}): {} vs {v}",
+                m.col(c)[r]
+            );
         }
     }
     assert_eq!((s.spp, s.film.width), (64, 256));

@@ -41,9 +41,17 @@ pub struct Args {
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("'{s}' is not WxH (e.g. 256x256)"))?;
-    let w: u32 = w.trim().parse().map_err(|_| format!("bad width in '{s}'"))?;
-    let h: u32 = h.trim().parse().map_err(|_| format!("bad height in '{s}'"))?;
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{s}' is not WxH (e.g. 256x256)"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in '{s}'"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in '{s}'"))?;
     if w == 0 || h == 0 {
         return Err(format!("resolution '{s}' must be at least 1x1"));
     }
@@ -51,8 +59,13 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 }
 
 fn parse_range(s: &str) -> Result<(u32, u32), String> {
-    let (a, b) = s.split_once(':').ok_or_else(|| format!("'{s}' is not START:END (e.g. 0:32)"))?;
-    let a: u32 = a.trim().parse().map_err(|_| format!("bad START in '{s}'"))?;
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("'{s}' is not START:END (e.g. 0:32)"))?;
+    let a: u32 = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad START in '{s}'"))?;
     let b: u32 = b.trim().parse().map_err(|_| format!("bad END in '{s}'"))?;
     if a >= b {
         return Err(format!("sample range '{s}' is empty: START must be < END"));
@@ -61,7 +74,9 @@ fn parse_range(s: &str) -> Result<(u32, u32), String> {
 }
 
 fn parse_define(s: &str) -> Result<(String, String), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}' is not key=value"))?;
+    let (k, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("'{s}' is not key=value"))?;
     if k.trim().is_empty() {
         return Err(format!("empty key in '{s}'"));
     }
@@ -69,7 +84,12 @@ fn parse_define(s: &str) -> Result<(String, String), String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let ext = args.output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = args
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     if ext != "exr" {
         bail!("output {} must end in .exr", args.output.display());
     }
@@ -84,7 +104,8 @@ pub fn run(args: Args) -> Result<()> {
         sample_range: args.sample_range,
         progress: true,
     };
-    let out = render(&scene, &options).with_context(|| format!("rendering {}", args.scene.display()))?;
+    let out =
+        render(&scene, &options).with_context(|| format!("rendering {}", args.scene.display()))?;
     eprintln!("effects:\n{}", out.effects);
     thinfilm::image_io::write_exr_rgb(&args.output, &out.image)?;
     let png = args.output.with_extension("png");
@@ -92,7 +113,14 @@ pub fn run(args: Args) -> Result<()> {
     let s = &out.stats;
     println!(
         "rendered {}×{} samples {}:{} in {:.3} s (+{:.3} s setup, {} threads, {} triangles)",
-        out.image.width, out.image.height, out.sample_range.0, out.sample_range.1, s.seconds, s.setup_seconds, s.threads, s.triangles
+        out.image.width,
+        out.image.height,
+        out.sample_range.0,
+        out.sample_range.1,
+        s.seconds,
+        s.setup_seconds,
+        s.threads,
+        s.triangles
     );
     println!(
         "{:.3} Msamples/s, {:.3} Mrays/s ({} camera/bounce + {} shadow rays), {} thin-film evaluations",
@@ -103,10 +131,16 @@ pub fn run(args: Args) -> Result<()> {
         s.film_evals
     );
     if s.invalid_samples > 0 {
-        eprintln!("warning: {} samples were NaN/inf and were discarded", s.invalid_samples);
+        eprintln!(
+            "warning: {} samples were NaN/inf and were discarded",
+            s.invalid_samples
+        );
     }
     if s.degenerate_triangles > 0 {
-        eprintln!("note: {} degenerate triangles were skipped", s.degenerate_triangles);
+        eprintln!(
+            "note: {} degenerate triangles were skipped",
+            s.degenerate_triangles
+        );
     }
     println!("wrote {} and {}", args.output.display(), png.display());
     Ok(())

@@ -117,8 +117,16 @@ fn parse_dielectrics(text: &'static str) -> Result<Vec<Material>, String> {
         if f.len() != 6 {
             return Err(ctx(format!("expected 6 '|' fields, got {}", f.len())));
         }
-        let range: Vec<f64> = f[3].split(',').map(parse_number).collect::<Result<_, _>>().map_err(ctx)?;
-        let c: Vec<f64> = f[4].split(',').map(parse_number).collect::<Result<_, _>>().map_err(ctx)?;
+        let range: Vec<f64> = f[3]
+            .split(',')
+            .map(parse_number)
+            .collect::<Result<_, _>>()
+            .map_err(ctx)?;
+        let c: Vec<f64> = f[4]
+            .split(',')
+            .map(parse_number)
+            .collect::<Result<_, _>>()
+            .map_err(ctx)?;
         if range.len() != 2 {
             return Err(ctx("range must be 'min,max'".into()));
         }
@@ -140,7 +148,11 @@ fn parse_dielectrics(text: &'static str) -> Result<Vec<Material>, String> {
         };
         out.push(Material {
             name: f[0],
-            aliases: f[1].split(',').map(str::trim).filter(|s| !s.is_empty()).collect(),
+            aliases: f[1]
+                .split(',')
+                .map(str::trim)
+                .filter(|s| !s.is_empty())
+                .collect(),
             source: f[5],
             valid_range_nm: (range[0], range[1]),
             model,
@@ -163,7 +175,10 @@ fn parse_metal(
         }
         if !header_seen {
             if line != "wavelength_nm,n,k" {
-                return Err(format!("data/{name}.csv line {}: bad header '{line}'", no + 1));
+                return Err(format!(
+                    "data/{name}.csv line {}: bad header '{line}'",
+                    no + 1
+                ));
             }
             header_seen = true;
             continue;
@@ -174,12 +189,17 @@ fn parse_metal(
             .collect::<Result<_, _>>()
             .map_err(|e| format!("data/{name}.csv line {}: {e}", no + 1))?;
         if v.len() != 3 {
-            return Err(format!("data/{name}.csv line {}: expected 3 columns", no + 1));
+            return Err(format!(
+                "data/{name}.csv line {}: expected 3 columns",
+                no + 1
+            ));
         }
         rows.push((v[0], v[1], v[2]));
     }
     if rows.len() < 2 || rows.windows(2).any(|w| w[1].0 <= w[0].0) {
-        return Err(format!("data/{name}.csv: need ≥ 2 rows with ascending wavelength"));
+        return Err(format!(
+            "data/{name}.csv: need ≥ 2 rows with ascending wavelength"
+        ));
     }
     Ok(Material {
         name,
@@ -227,14 +247,20 @@ mod tests {
     #[test]
     fn builtin_data_parses() {
         let all = build().unwrap();
-        for want in ["MgF2", "ZnS", "SiO2", "TiO2", "water", "PET", "BK7", "Al", "Ag", "Au", "Cu"] {
+        for want in [
+            "MgF2", "ZnS", "SiO2", "TiO2", "water", "PET", "BK7", "Al", "Ag", "Au", "Cu",
+        ] {
             assert!(all.iter().any(|m| m.name == want), "{want} missing");
         }
         // Every material finite and physical over the visible range 360–830 nm.
         for m in &all {
             for l in 360..=830 {
                 let v = m.nk(l as f64);
-                assert!(v.re.is_finite() && v.re > 0.0 && v.im >= 0.0, "{} at {l}: {v}", m.name);
+                assert!(
+                    v.re.is_finite() && v.re > 0.0 && v.im >= 0.0,
+                    "{} at {l}: {v}",
+                    m.name
+                );
             }
         }
     }

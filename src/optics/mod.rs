@@ -14,8 +14,8 @@ pub mod stack;
 
 pub use film::{FilmResponse, ThinFilm};
 pub use ior::Ior;
-pub use stack::{Coherence, Layer, Stack};
 pub use num_complex::Complex64;
+pub use stack::{Coherence, Layer, Stack};
 
 /// Why an optical computation was refused (never a NaN instead).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

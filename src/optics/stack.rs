@@ -266,12 +266,19 @@ impl Stack {
         );
         inc.push(m.len() - 1);
         let d_of = |a: usize, b: usize| -> Vec<f64> {
-            self.layers[a..b - 1].iter().map(|l| l.thickness_nm).collect()
+            self.layers[a..b - 1]
+                .iter()
+                .map(|l| l.thickness_nm)
+                .collect()
         };
 
         // Last group (from the deepest incoherent medium to the substrate): forward only.
         let g = inc.len() - 2;
-        let mut below = coherent_powers(&m[inc[g]..=inc[g + 1]], &d_of(inc[g], inc[g + 1]), lambda_nm);
+        let mut below = coherent_powers(
+            &m[inc[g]..=inc[g + 1]],
+            &d_of(inc[g], inc[g + 1]),
+            lambda_nm,
+        );
         for g in (0..inc.len() - 2).rev() {
             let (a, b) = (inc[g], inc[g + 1]);
             let fwd = coherent_powers(&m[a..=b], &d_of(a, b), lambda_nm);
@@ -382,8 +389,16 @@ mod tests {
                 for l in [380.0, 550.0, 779.0] {
                     let a = f.response(l, cos1);
                     let b = s.response(l, cos1);
-                    for (x, y) in [(a.r_s, b.r_s), (a.r_p, b.r_p), (a.t_s, b.t_s), (a.t_p, b.t_p)] {
-                        assert!((x - y).abs() < 1e-13, "{x} vs {y} at {deg}° {l} nm {n2} {n3}");
+                    for (x, y) in [
+                        (a.r_s, b.r_s),
+                        (a.r_p, b.r_p),
+                        (a.t_s, b.t_s),
+                        (a.t_p, b.t_p),
+                    ] {
+                        assert!(
+                            (x - y).abs() < 1e-13,
+                            "{x} vs {y} at {deg}° {l} nm {n2} {n3}"
+                        );
                     }
                 }
             }
@@ -412,13 +427,25 @@ mod tests {
             layers: vec![Layer::coherent(c(1.5, 0.0), -1.0)],
             substrate_ior: c(1.5, 0.0),
         };
-        assert!(matches!(s.response_at_angle(500.0, 0.0), Err(OpticsError::BadThickness(_))));
+        assert!(matches!(
+            s.response_at_angle(500.0, 0.0),
+            Err(OpticsError::BadThickness(_))
+        ));
         s.layers[0].thickness_nm = 10.0;
         s.layers[0].ior = c(f64::NAN, 0.0);
-        assert!(matches!(s.response_at_angle(500.0, 0.0), Err(OpticsError::BadIndex(_))));
+        assert!(matches!(
+            s.response_at_angle(500.0, 0.0),
+            Err(OpticsError::BadIndex(_))
+        ));
         s.layers[0].ior = c(1.5, 0.0);
-        assert!(matches!(s.response_at_angle(0.0, 0.0), Err(OpticsError::BadWavelength(_))));
-        assert!(matches!(s.response_at_angle(500.0, 90.0), Err(OpticsError::BadAngle(_))));
+        assert!(matches!(
+            s.response_at_angle(0.0, 0.0),
+            Err(OpticsError::BadWavelength(_))
+        ));
+        assert!(matches!(
+            s.response_at_angle(500.0, 90.0),
+            Err(OpticsError::BadAngle(_))
+        ));
         assert!(s.response_at_angle(500.0, 89.99).is_ok());
     }
 }

@@ -5,7 +5,7 @@
 use super::camera::Ray;
 use super::geometry::{Frame, SurfaceInteraction};
 use crate::scene::{Geometry, Scene, TriangleMesh};
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{Vec2, Vec3};
 use obvhs::cwbvh::CwBvh;
 use obvhs::triangle::Triangle;
 
@@ -59,10 +59,18 @@ impl Accel {
                 Geometry::Mesh(m) => {
                     let name = shape.name.as_deref().unwrap_or("<unnamed>");
                     if !m.normals.is_empty() && m.normals.len() != m.positions.len() {
-                        anyhow::bail!("mesh '{name}' (shape {si}): {} normals for {} vertices", m.normals.len(), m.positions.len());
+                        anyhow::bail!(
+                            "mesh '{name}' (shape {si}): {} normals for {} vertices",
+                            m.normals.len(),
+                            m.positions.len()
+                        );
                     }
                     if !m.uvs.is_empty() && m.uvs.len() != m.positions.len() {
-                        anyhow::bail!("mesh '{name}' (shape {si}): {} uvs for {} vertices", m.uvs.len(), m.positions.len());
+                        anyhow::bail!(
+                            "mesh '{name}' (shape {si}): {} uvs for {} vertices",
+                            m.uvs.len(),
+                            m.positions.len()
+                        );
                     }
                     for (ti, idx) in m.indices.iter().enumerate() {
                         if idx.iter().any(|&i| i as usize >= m.positions.len()) {
@@ -74,20 +82,38 @@ impl Accel {
                         }
                         let [a, b, c] = idx.map(|i| m.positions[i as usize]);
                         let area2 = (b - a).cross(c - a).length();
-                        if !(a.is_finite() && b.is_finite() && c.is_finite()) || area2 <= 0.0 || !area2.is_finite() {
+                        if !(a.is_finite() && b.is_finite() && c.is_finite())
+                            || area2 <= 0.0
+                            || !area2.is_finite()
+                        {
                             dropped += 1;
                             continue;
                         }
-                        tris.push(Triangle { v0: a.into(), v1: b.into(), v2: c.into() });
+                        tris.push(Triangle {
+                            v0: a.into(),
+                            v1: b.into(),
+                            v2: c.into(),
+                        });
                         tri_ref.push((si as u32, ti as u32));
                     }
                     meshes.push(Some(m.clone()));
                 }
-                Geometry::Sphere { center, radius, flip_normals } => {
+                Geometry::Sphere {
+                    center,
+                    radius,
+                    flip_normals,
+                } => {
                     if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
-                        anyhow::bail!("sphere shape {si}: radius must be finite and > 0, got {radius}");
+                        anyhow::bail!(
+                            "sphere shape {si}: radius must be finite and > 0, got {radius}"
+                        );
                     }
-                    spheres.push(SphereGeom { center: *center, radius: *radius, flip_normals: *flip_normals, shape: si as u32 });
+                    spheres.push(SphereGeom {
+                        center: *center,
+                        radius: *radius,
+                        flip_normals: *flip_normals,
+                        shape: si as u32,
+                    });
                     meshes.push(None);
                 }
             }
@@ -102,11 +128,28 @@ impl Accel {
                 &mut core_time,
             );
             // Reorder once so leaf primitive ids index the triangle arrays directly.
-            tris = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
-            tri_ref = bvh.primitive_indices.iter().map(|&i| tri_ref[i as usize]).collect();
+            tris = bvh
+                .primitive_indices
+                .iter()
+                .map(|&i| tris[i as usize])
+                .collect();
+            tri_ref = bvh
+                .primitive_indices
+                .iter()
+                .map(|&i| tri_ref[i as usize])
+                .collect();
             Some(bvh)
         };
-        Ok((Accel { bvh, tris, tri_ref, spheres, meshes }, dropped))
+        Ok((
+            Accel {
+                bvh,
+                tris,
+                tri_ref,
+                spheres,
+                meshes,
+            },
+            dropped,
+        ))
     }
 
     pub fn triangle_count(&self) -> usize {
@@ -123,14 +166,20 @@ impl Accel {
             let mut hit = obvhs::ray::RayHit::none();
             if bvh.ray_traverse(r, &mut hit, |r, id| self.tris[id].intersect(r)) {
                 tmax = hit.t;
-                best = Some(Hit { t: hit.t, prim: Prim::Triangle(hit.primitive_id) });
+                best = Some(Hit {
+                    t: hit.t,
+                    prim: Prim::Triangle(hit.primitive_id),
+                });
             }
         }
         for (i, s) in self.spheres.iter().enumerate() {
             let t = sphere_intersect(s, ray.origin, ray.dir, ray.tmin, tmax);
             if t < tmax {
                 tmax = t;
-                best = Some(Hit { t, prim: Prim::Sphere(i as u32) });
+                best = Some(Hit {
+                    t,
+                    prim: Prim::Sphere(i as u32),
+                });
             }
         }
         best
@@ -180,7 +229,9 @@ impl Accel {
                 let b0 = 1.0 - b1 - b2;
                 let p = v0 * b0 + v1 * b1 + v2 * b2;
                 let ng = e1.cross(e2).normalize();
-                let mesh = self.meshes[shape as usize].as_ref().expect("triangle of a mesh shape");
+                let mesh = self.meshes[shape as usize]
+                    .as_ref()
+                    .expect("triangle of a mesh shape");
                 let idx = mesh.indices[local as usize];
                 let mut ns = ng;
                 if !mesh.normals.is_empty() {
@@ -196,9 +247,18 @@ impl Accel {
                     // Mitsuba's default parameterisation without UVs: the barycentrics.
                     Vec2::new(b1, b2)
                 } else {
-                    mesh.uvs[idx[0] as usize] * b0 + mesh.uvs[idx[1] as usize] * b1 + mesh.uvs[idx[2] as usize] * b2
+                    mesh.uvs[idx[0] as usize] * b0
+                        + mesh.uvs[idx[1] as usize] * b1
+                        + mesh.uvs[idx[2] as usize] * b2
                 };
-                SurfaceInteraction { p, t: hit.t, ng, shading: Frame::from_normal(ns), uv, shape }
+                SurfaceInteraction {
+                    p,
+                    t: hit.t,
+                    ng,
+                    shading: Frame::from_normal(ns),
+                    uv,
+                    shape,
+                }
             }
             Prim::Sphere(i) => {
                 let s = &self.spheres[i as usize];
@@ -215,7 +275,14 @@ impl Accel {
                 if s.flip_normals {
                     n = -n;
                 }
-                SurfaceInteraction { p, t: hit.t, ng: n, shading: Frame::from_normal(n), uv, shape: s.shape }
+                SurfaceInteraction {
+                    p,
+                    t: hit.t,
+                    ng: n,
+                    shading: Frame::from_normal(n),
+                    uv,
+                    shape: s.shape,
+                }
             }
         }
     }
@@ -258,19 +325,18 @@ fn sphere_intersect(s: &SphereGeom, origin: Vec3, dir: Vec3, tmin: f32, tmax: f3
     }
 }
 
-/// Unused-import guard for `Vec3A` conversions in builds without meshes.
-#[allow(dead_code)]
-fn _vec3a(v: Vec3) -> Vec3A {
-    v.into()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn sphere_hits_from_outside_and_inside() {
-        let s = SphereGeom { center: Vec3::ZERO, radius: 1.0, flip_normals: false, shape: 0 };
+        let s = SphereGeom {
+            center: Vec3::ZERO,
+            radius: 1.0,
+            flip_normals: false,
+            shape: 0,
+        };
         let t = sphere_intersect(&s, Vec3::new(0.0, 0.0, -3.0), Vec3::Z, 0.0, f32::INFINITY);
         assert!((t - 2.0).abs() < 1e-5);
         let t = sphere_intersect(&s, Vec3::ZERO, Vec3::Z, 1e-4, f32::INFINITY);

@@ -73,10 +73,18 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     let mut dispersive = Vec::new();
     for d in &all {
         match d {
-            BsdfDesc::ThinFilm { thickness_nm, alpha, film_ior, substrate_ior } => {
+            BsdfDesc::ThinFilm {
+                thickness_nm,
+                alpha,
+                film_ior,
+                substrate_ior,
+            } => {
                 films += 1;
                 e.interference = true;
-                if matches!(thickness_nm, TextureDesc::Bitmap(_) | TextureDesc::Checkerboard { .. }) {
+                if matches!(
+                    thickness_nm,
+                    TextureDesc::Bitmap(_) | TextureDesc::Checkerboard { .. }
+                ) {
                     e.thickness_texture = true;
                 }
                 if *alpha > 0.0 {
@@ -84,14 +92,18 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
                 }
                 let _ = (film_ior, substrate_ior);
             }
-            BsdfDesc::Conductor { alpha_u, alpha_v, .. } if *alpha_u > 0.0 || *alpha_v > 0.0 => {
+            BsdfDesc::Conductor {
+                alpha_u, alpha_v, ..
+            } if *alpha_u > 0.0 || *alpha_v > 0.0 => {
                 rough.push(format!("roughconductor α=({alpha_u}, {alpha_v})"))
             }
-            BsdfDesc::Plastic { alpha, .. } if *alpha > 0.0 => rough.push(format!("roughplastic α={alpha}")),
-            BsdfDesc::Dielectric { int_ior, ext_ior, .. } => {
-                if int_ior.is_dispersive() || ext_ior.is_dispersive() {
-                    dispersive.push(format!("dielectric {int_ior}/{ext_ior}"));
-                }
+            BsdfDesc::Plastic { alpha, .. } if *alpha > 0.0 => {
+                rough.push(format!("roughplastic α={alpha}"))
+            }
+            BsdfDesc::Dielectric {
+                int_ior, ext_ior, ..
+            } if int_ior.is_dispersive() || ext_ior.is_dispersive() => {
+                dispersive.push(format!("dielectric {int_ior}/{ext_ior}"));
             }
             _ => {}
         }
@@ -99,7 +111,11 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     e.reasons.push(if e.interference {
         format!(
             "interference: ON — {films} thin-film material(s){}",
-            if e.thickness_texture { ", thickness from a texture" } else { "" }
+            if e.thickness_texture {
+                ", thickness from a texture"
+            } else {
+                ""
+            }
         )
     } else {
         "interference: off — no thin-film material in use".into()
@@ -116,6 +132,7 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     } else {
         "microfacet sampling: off — all BSDFs smooth or diffuse".into()
     });
-    e.reasons.push("polarisation: off — no polariser in the scene".into());
+    e.reasons
+        .push("polarisation: off — no polariser in the scene".into());
     Ok(e)
 }

@@ -31,7 +31,11 @@ pub fn tree_sum(values: &[[f32; 3]]) -> [f32; 3] {
         1 => values[0],
         n => {
             // Largest power of two strictly below n (n ≥ 2).
-            let half = if n.is_power_of_two() { n / 2 } else { 1usize << (usize::BITS - 1 - n.leading_zeros()) };
+            let half = if n.is_power_of_two() {
+                n / 2
+            } else {
+                1usize << (usize::BITS - 1 - n.leading_zeros())
+            };
             let a = tree_sum(&values[..half]);
             let b = tree_sum(&values[half..]);
             [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
@@ -62,7 +66,10 @@ impl Filter {
                     anyhow::bail!("gaussian filter stddev must be > 0, got {stddev}");
                 }
                 // Mitsuba: radius = 4 σ.
-                Filter::Gaussian { stddev, radius: 4.0 * stddev }
+                Filter::Gaussian {
+                    stddev,
+                    radius: 4.0 * stddev,
+                }
             }
         })
     }
@@ -106,7 +113,15 @@ mod tests {
 
     #[test]
     fn tree_sum_of_halves_is_exact() {
-        let vals: Vec<[f32; 3]> = (0..64).map(|i| [(i as f32 * 0.377).sin() * 1e3, 0.1 * i as f32, 1.0 / (i as f32 + 1.0)]).collect();
+        let vals: Vec<[f32; 3]> = (0..64)
+            .map(|i| {
+                [
+                    (i as f32 * 0.377).sin() * 1e3,
+                    0.1 * i as f32,
+                    1.0 / (i as f32 + 1.0),
+                ]
+            })
+            .collect();
         let whole = tree_sum(&vals);
         let a = tree_sum(&vals[..32]);
         let b = tree_sum(&vals[32..]);

@@ -16,7 +16,13 @@ use glam::Vec3;
 
 /// Radiance along `ray` at the path's wavelengths. May terminate secondary wavelengths in
 /// `wl` (dispersion).
-pub fn li(scene: &PreparedScene, mut ray: Ray, wl: &mut SampledWavelengths, sampler: &mut Sampler, counters: &mut Counters) -> Spec {
+pub fn li(
+    scene: &PreparedScene,
+    mut ray: Ray,
+    wl: &mut SampledWavelengths,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> Spec {
     let max_depth = scene.settings.max_depth;
     let rr_depth = scene.settings.rr_depth.max(0) as u32;
     let lights = &scene.lights;
@@ -44,7 +50,11 @@ pub fn li(scene: &PreparedScene, mut ray: Ray, wl: &mut SampledWavelengths, samp
                     let w = if prev_bsdf_delta {
                         1.0
                     } else {
-                        mis_power(prev_bsdf_pdf, sel_pdf * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO))
+                        mis_power(
+                            prev_bsdf_pdf,
+                            sel_pdf
+                                * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
+                        )
                     };
                     radiance += throughput * le * w;
                 }
@@ -60,7 +70,10 @@ pub fn li(scene: &PreparedScene, mut ray: Ray, wl: &mut SampledWavelengths, samp
                     let w = if prev_bsdf_delta {
                         1.0
                     } else {
-                        mis_power(prev_bsdf_pdf, sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng))
+                        mis_power(
+                            prev_bsdf_pdf,
+                            sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng),
+                        )
                     };
                     radiance += throughput * le.eval(wl) * w;
                 }
@@ -85,12 +98,25 @@ pub fn li(scene: &PreparedScene, mut ray: Ray, wl: &mut SampledWavelengths, samp
                 let f = bsdf.eval(&ctx, wi, wo, counters);
                 if ls.pdf > 0.0 && f.max_element() > 0.0 && ls.radiance.max_element() > 0.0 {
                     let origin = offset_ray_origin(si.p, si.ng, ls.wi);
-                    let tmax = if ls.dist.is_finite() { (ls.dist * (1.0 - 1e-4)).max(0.0) } else { f32::INFINITY };
-                    let shadow = Ray { origin, dir: ls.wi, tmin: 0.0, tmax };
+                    let tmax = if ls.dist.is_finite() {
+                        (ls.dist * (1.0 - 1e-4)).max(0.0)
+                    } else {
+                        f32::INFINITY
+                    };
+                    let shadow = Ray {
+                        origin,
+                        dir: ls.wi,
+                        tmin: 0.0,
+                        tmax,
+                    };
                     counters.shadow_rays += 1;
                     if !scene.accel.occluded(&shadow) {
                         let light_pdf = sel_pdf * ls.pdf;
-                        let w = if ls.delta { 1.0 } else { mis_power(light_pdf, bsdf.pdf(wi, wo)) };
+                        let w = if ls.delta {
+                            1.0
+                        } else {
+                            mis_power(light_pdf, bsdf.pdf(wi, wo))
+                        };
                         radiance += throughput * f * ls.radiance * (w / light_pdf);
                     }
                 }
@@ -104,14 +130,19 @@ pub fn li(scene: &PreparedScene, mut ray: Ray, wl: &mut SampledWavelengths, samp
         // ---- BSDF sampling ----
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
-        let Some(bs) = bsdf.sample(&ctx, wi, u1, u2, counters) else { break };
+        let Some(bs) = bsdf.sample(&ctx, wi, u1, u2, counters) else {
+            break;
+        };
         let wo_world = si.shading.to_world(bs.wo);
         // Reject directions on the wrong side of the geometric surface for their lobe
         // (shading-normal light leaks), like Mitsuba's one-sided handling.
         let geo_cos_o = si.ng.dot(wo_world);
         let geo_cos_i = si.ng.dot(-ray.dir);
         let reflected = bs.wo.z * wi.z > 0.0;
-        if geo_cos_o == 0.0 || (reflected && geo_cos_o * geo_cos_i < 0.0) || (!reflected && geo_cos_o * geo_cos_i > 0.0) {
+        if geo_cos_o == 0.0
+            || (reflected && geo_cos_o * geo_cos_i < 0.0)
+            || (!reflected && geo_cos_o * geo_cos_i > 0.0)
+        {
             break;
         }
         if bs.terminate_secondary && !wl.secondary_terminated() {
@@ -125,12 +156,17 @@ pub fn li(scene: &PreparedScene, mut ray: Ray, wl: &mut SampledWavelengths, samp
         prev_p = si.p;
         prev_bsdf_pdf = bs.pdf;
         prev_bsdf_delta = bs.delta;
-        ray = Ray { origin: offset_ray_origin(si.p, si.ng, wo_world), dir: wo_world, tmin: 0.0, tmax: f32::INFINITY };
+        ray = Ray {
+            origin: offset_ray_origin(si.p, si.ng, wo_world),
+            dir: wo_world,
+            tmin: 0.0,
+            tmax: f32::INFINITY,
+        };
         depth += 1;
 
         // ---- Russian roulette ----
         let tmax_component = throughput.max_element();
-        if !(tmax_component > 0.0) || !tmax_component.is_finite() {
+        if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
             break;
         }
         if depth >= rr_depth {

@@ -25,7 +25,9 @@ impl Distribution1D {
         let func: Vec<f32> = if func.is_empty() {
             vec![0.0]
         } else {
-            func.iter().map(|f| if f.is_finite() { f.abs() } else { 0.0 }).collect()
+            func.iter()
+                .map(|f| if f.is_finite() { f.abs() } else { 0.0 })
+                .collect()
         };
         let mut cdf = vec![0.0f64; n + 1];
         for i in 0..n {
@@ -37,7 +39,11 @@ impl Distribution1D {
         } else {
             (0..=n).map(|i| i as f32 / n as f32).collect()
         };
-        Distribution1D { func, cdf, integral: integral as f32 }
+        Distribution1D {
+            func,
+            cdf,
+            integral: integral as f32,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -54,7 +60,11 @@ impl Distribution1D {
         let n = self.func.len();
         let i = (self.cdf.partition_point(|&c| c <= u).max(1) - 1).min(n - 1);
         let width = self.cdf[i + 1] - self.cdf[i];
-        let du = if width > 0.0 { ((u - self.cdf[i]) / width).clamp(0.0, 1.0) } else { 0.5 };
+        let du = if width > 0.0 {
+            ((u - self.cdf[i]) / width).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
         let x = ((i as f32 + du) / n as f32).min(1.0 - f32::EPSILON);
         (x, self.pdf_cell(i), i)
     }
@@ -91,9 +101,15 @@ pub struct Distribution2D {
 impl Distribution2D {
     /// `func` is row-major with `nu` columns and `nv` rows.
     pub fn new(func: &[f32], nu: usize, nv: usize) -> Self {
-        let conditional: Vec<Distribution1D> = (0..nv).map(|v| Distribution1D::new(&func[v * nu..(v + 1) * nu])).collect();
-        let marginal = Distribution1D::new(&conditional.iter().map(|c| c.integral()).collect::<Vec<_>>());
-        Distribution2D { conditional, marginal }
+        let conditional: Vec<Distribution1D> = (0..nv)
+            .map(|v| Distribution1D::new(&func[v * nu..(v + 1) * nu]))
+            .collect();
+        let marginal =
+            Distribution1D::new(&conditional.iter().map(|c| c.integral()).collect::<Vec<_>>());
+        Distribution2D {
+            conditional,
+            marginal,
+        }
     }
 
     /// Returns ((u, v), pdf).
@@ -137,7 +153,12 @@ impl EnvMap {
         if !(scale.is_finite() && scale >= 0.0) {
             anyhow::bail!("environment map scale must be finite and ≥ 0, got {scale}");
         }
-        if let Some((i, p)) = image.pixels.iter().enumerate().find(|(_, p)| p.iter().any(|v| !v.is_finite() || *v < 0.0)) {
+        if let Some((i, p)) = image
+            .pixels
+            .iter()
+            .enumerate()
+            .find(|(_, p)| p.iter().any(|v| !v.is_finite() || *v < 0.0))
+        {
             anyhow::bail!(
                 "environment map texel ({}, {}) is {:?}: radiance must be finite and ≥ 0",
                 i % w,
@@ -148,7 +169,11 @@ impl EnvMap {
         if to_world.determinant().abs() < 1e-12 || !to_world.is_finite() {
             anyhow::bail!("environment map to_world is singular");
         }
-        let texels: Vec<RgbIlluminantSpectrum> = image.pixels.iter().map(|p| RgbIlluminantSpectrum::new(*p)).collect();
+        let texels: Vec<RgbIlluminantSpectrum> = image
+            .pixels
+            .iter()
+            .map(|p| RgbIlluminantSpectrum::new(*p))
+            .collect();
         // Cells between lattice rows (v = i/(H−1)) and around texel columns (u = (j+½)/W).
         // A cell's value bounds the bilinear interpolant over it (max of the texels it
         // touches), times sin θ at its centre, so the pdf is positive wherever light is.
@@ -251,16 +276,31 @@ impl EnvMap {
 /// Geometry of an area light, for sampling points on it.
 #[derive(Debug, Clone)]
 pub enum AreaGeometry {
-    Triangles { tris: Vec<[Vec3; 3]>, dist: Distribution1D, area: f32 },
-    Sphere { center: Vec3, radius: f32, flip: bool },
+    Triangles {
+        tris: Vec<[Vec3; 3]>,
+        dist: Distribution1D,
+        area: f32,
+    },
+    Sphere {
+        center: Vec3,
+        radius: f32,
+        flip: bool,
+    },
 }
 
 #[derive(Debug, Clone)]
 pub enum Light {
     Env(Box<EnvMap>),
     Constant(Spectrum),
-    Point { position: Vec3, intensity: Spectrum },
-    Area { shape: u32, radiance: Spectrum, geometry: AreaGeometry },
+    Point {
+        position: Vec3,
+        intensity: Spectrum,
+    },
+    Area {
+        shape: u32,
+        radiance: Spectrum,
+        geometry: AreaGeometry,
+    },
 }
 
 /// A light sample seen from a reference point.
@@ -319,22 +359,45 @@ impl Light {
         match self {
             Light::Env(e) => {
                 let (wi, pdf) = e.sample_direction(u)?;
-                Some(LightSample { wi, dist: f32::INFINITY, radiance: e.eval(wi, wl), pdf, delta: false })
+                Some(LightSample {
+                    wi,
+                    dist: f32::INFINITY,
+                    radiance: e.eval(wi, wl),
+                    pdf,
+                    delta: false,
+                })
             }
             Light::Constant(s) => {
                 let wi = square_to_uniform_sphere(u);
-                Some(LightSample { wi, dist: f32::INFINITY, radiance: s.eval(wl), pdf: 1.0 / (4.0 * PI), delta: false })
+                Some(LightSample {
+                    wi,
+                    dist: f32::INFINITY,
+                    radiance: s.eval(wl),
+                    pdf: 1.0 / (4.0 * PI),
+                    delta: false,
+                })
             }
-            Light::Point { position, intensity } => {
+            Light::Point {
+                position,
+                intensity,
+            } => {
                 let d = *position - p;
                 let dist2 = d.length_squared();
                 if dist2 <= 0.0 {
                     return None;
                 }
                 let dist = dist2.sqrt();
-                Some(LightSample { wi: d / dist, dist, radiance: intensity.eval(wl) / dist2, pdf: 1.0, delta: true })
+                Some(LightSample {
+                    wi: d / dist,
+                    dist,
+                    radiance: intensity.eval(wl) / dist2,
+                    pdf: 1.0,
+                    delta: true,
+                })
             }
-            Light::Area { radiance, geometry, .. } => {
+            Light::Area {
+                radiance, geometry, ..
+            } => {
                 let (q, n, pdf_area) = match geometry {
                     AreaGeometry::Triangles { tris, dist, area } => {
                         let (x, _, i) = dist.sample(u.x);
@@ -347,9 +410,17 @@ impl Light {
                         let n = (bb - a).cross(c - a).normalize();
                         (q, n, 1.0 / area)
                     }
-                    AreaGeometry::Sphere { center, radius, flip } => {
+                    AreaGeometry::Sphere {
+                        center,
+                        radius,
+                        flip,
+                    } => {
                         let n = square_to_uniform_sphere(u);
-                        (*center + n * *radius, if *flip { -n } else { n }, 1.0 / (4.0 * PI * radius * radius))
+                        (
+                            *center + n * *radius,
+                            if *flip { -n } else { n },
+                            1.0 / (4.0 * PI * radius * radius),
+                        )
                     }
                 };
                 let d = q - p;
@@ -364,7 +435,13 @@ impl Light {
                 if cos_l <= 0.0 {
                     return None;
                 }
-                Some(LightSample { wi, dist, radiance: radiance.eval(wl), pdf: pdf_area * dist2 / cos_l, delta: false })
+                Some(LightSample {
+                    wi,
+                    dist,
+                    radiance: radiance.eval(wl),
+                    pdf: pdf_area * dist2 / cos_l,
+                    delta: false,
+                })
             }
         }
     }
@@ -384,44 +461,89 @@ impl LightSet {
         let mut lights = Vec::new();
         for (i, e) in scene.emitters.iter().enumerate() {
             lights.push(match e {
-                EmitterDesc::Envmap { image, scale, to_world, path } => {
+                EmitterDesc::Envmap {
+                    image,
+                    scale,
+                    to_world,
+                    path,
+                } => {
                     let m = Mat3::from_mat4(*to_world);
                     Light::Env(Box::new(EnvMap::new(image, *scale, m).map_err(|err| {
                         anyhow::anyhow!(
                             "emitter {i} (envmap{}): {err}",
-                            path.as_ref().map(|p| format!(" {}", p.display())).unwrap_or_default()
+                            path.as_ref()
+                                .map(|p| format!(" {}", p.display()))
+                                .unwrap_or_default()
                         )
                     })?))
                 }
-                EmitterDesc::Constant { radiance } => Light::Constant(Spectrum::illuminant(radiance)),
-                EmitterDesc::Point { position, intensity } => {
-                    Light::Point { position: *position, intensity: Spectrum::illuminant(intensity) }
+                EmitterDesc::Constant { radiance } => {
+                    Light::Constant(Spectrum::illuminant(radiance))
                 }
+                EmitterDesc::Point {
+                    position,
+                    intensity,
+                } => Light::Point {
+                    position: *position,
+                    intensity: Spectrum::illuminant(intensity),
+                },
             });
         }
         let mut shape_light = vec![None; scene.shapes.len()];
         for (si, shape) in scene.shapes.iter().enumerate() {
-            let Some(radiance) = &shape.emission else { continue };
+            let Some(radiance) = &shape.emission else {
+                continue;
+            };
             let geometry = match &shape.geometry {
-                Geometry::Sphere { center, radius, flip_normals } => {
-                    AreaGeometry::Sphere { center: *center, radius: *radius, flip: *flip_normals }
-                }
+                Geometry::Sphere {
+                    center,
+                    radius,
+                    flip_normals,
+                } => AreaGeometry::Sphere {
+                    center: *center,
+                    radius: *radius,
+                    flip: *flip_normals,
+                },
                 Geometry::Mesh(_) => {
                     let mesh = accel.mesh(si as u32).expect("mesh shape");
-                    let tris: Vec<[Vec3; 3]> = mesh.indices.iter().map(|i| i.map(|k| mesh.positions[k as usize])).collect();
-                    let areas: Vec<f32> = tris.iter().map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length()).collect();
+                    let tris: Vec<[Vec3; 3]> = mesh
+                        .indices
+                        .iter()
+                        .map(|i| i.map(|k| mesh.positions[k as usize]))
+                        .collect();
+                    let areas: Vec<f32> = tris
+                        .iter()
+                        .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length())
+                        .collect();
                     let area: f32 = areas.iter().filter(|a| a.is_finite()).sum();
-                    if !(area > 0.0) {
+                    if area.is_nan() || area <= 0.0 {
                         anyhow::bail!("area light on shape {si} has zero surface area");
                     }
-                    AreaGeometry::Triangles { dist: Distribution1D::new(&areas), tris, area }
+                    AreaGeometry::Triangles {
+                        dist: Distribution1D::new(&areas),
+                        tris,
+                        area,
+                    }
                 }
             };
             shape_light[si] = Some(lights.len() as u32);
-            lights.push(Light::Area { shape: si as u32, radiance: Spectrum::illuminant(radiance), geometry });
+            lights.push(Light::Area {
+                shape: si as u32,
+                radiance: Spectrum::illuminant(radiance),
+                geometry,
+            });
         }
-        let infinite = lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
-        Ok(LightSet { lights, shape_light, infinite })
+        let infinite = lights
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| l.is_infinite())
+            .map(|(i, _)| i as u32)
+            .collect();
+        Ok(LightSet {
+            lights,
+            shape_light,
+            infinite,
+        })
     }
 
     /// Probability of choosing any one light (uniform selection, as Mitsuba does).
@@ -472,7 +594,11 @@ mod tests {
             for j in 0..2 * n {
                 let theta = PI * (i as f32 + 0.5) / n as f32;
                 let phi = 2.0 * PI * (j as f32 + 0.5) / (2 * n) as f32;
-                let d = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                let d = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                );
                 let dw = (PI / n as f32) * (2.0 * PI / (2 * n) as f32) * theta.sin();
                 sum += (env.pdf_direction(d) * dw) as f64;
             }

@@ -108,7 +108,9 @@ pub struct PreparedScene {
 /// Validates the scene and options, runs effect analysis, builds the BVH and light tables.
 pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> {
     let effects = effects::analyze(scene)?;
-    let (width, height) = options.resolution.unwrap_or((scene.film.width, scene.film.height));
+    let (width, height) = options
+        .resolution
+        .unwrap_or((scene.film.width, scene.film.height));
     if width == 0 || height == 0 || width > 65536 || height > 65536 {
         bail!("image resolution must be between 1×1 and 65536×65536, got {width}×{height}");
     }
@@ -132,7 +134,10 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         settings.max_depth = d;
     }
     if settings.max_depth == 0 || settings.max_depth < -1 {
-        bail!("max_depth must be −1 (unlimited) or ≥ 1, got {}", settings.max_depth);
+        bail!(
+            "max_depth must be −1 (unlimited) or ≥ 1, got {}",
+            settings.max_depth
+        );
     }
     let mut bsdfs = Vec::with_capacity(scene.bsdfs.len());
     for (i, d) in scene.bsdfs.iter().enumerate() {
@@ -162,7 +167,13 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
 /// One camera sample: wavelengths, film position, path. Returns (film position in pixels,
 /// spectral radiance, wavelengths).
 #[inline]
-fn trace_sample(scene: &PreparedScene, x: u32, y: u32, s: u32, counters: &mut Counters) -> (Vec2, SampledSpectrum, SampledWavelengths) {
+fn trace_sample(
+    scene: &PreparedScene,
+    x: u32,
+    y: u32,
+    s: u32,
+    counters: &mut Counters,
+) -> (Vec2, SampledSpectrum, SampledWavelengths) {
     let mut sampler = sampler::Sampler::for_sample(x, y, s, scene.seed);
     let mut wl = SampledWavelengths::sample_visible(sampler.next_1d());
     let jitter = sampler.next_2d();
@@ -191,7 +202,9 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
     let n = (s1 - s0) as usize;
     let pb = if options.progress {
         let pb = indicatif::ProgressBar::new(h as u64);
-        if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40.cyan/blue} {pos}/{len} rows ({eta})") {
+        if let Ok(style) = indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40.cyan/blue} {pos}/{len} rows ({eta})",
+        ) {
             pb.set_style(style);
         }
         pb
@@ -200,7 +213,11 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
     };
     let filter = scene.filter;
     let radius = filter.radius();
-    let reach = if matches!(filter, Filter::Box) { 0 } else { radius.ceil() as i64 };
+    let reach = if matches!(filter, Filter::Box) {
+        0
+    } else {
+        radius.ceil() as i64
+    };
 
     // Per row: (pixels of the row for the box filter | splat rows y−reach..=y+reach, counters).
     let render_row = |y: usize| -> (Vec<[f32; 4]>, Counters) {
@@ -229,7 +246,8 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
                         for px in x_lo..=x_hi {
                             let wgt = wy * filter.eval_1d(px as f32 + 0.5 - pos.x);
                             if wgt > 0.0 {
-                                let cell = &mut buf[(py - y as i64 + reach) as usize * w + px as usize];
+                                let cell =
+                                    &mut buf[(py - y as i64 + reach) as usize * w + px as usize];
                                 cell[0] += wgt * rgb[0];
                                 cell[1] += wgt * rgb[1];
                                 cell[2] += wgt * rgb[2];
@@ -248,13 +266,17 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         (buf, counters)
     };
 
-    let run = || -> Vec<(Vec<[f32; 4]>, Counters)> { (0..h).into_par_iter().map(render_row).collect() };
+    let run =
+        || -> Vec<(Vec<[f32; 4]>, Counters)> { (0..h).into_par_iter().map(render_row).collect() };
     let (rows, threads) = match options.threads {
         Some(t) => {
             if t == 0 {
                 bail!("--threads must be ≥ 1");
             }
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build().context("creating the thread pool")?;
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .context("creating the thread pool")?;
             (pool.install(run), t)
         }
         None => (run(), rayon::current_num_threads()),
@@ -267,9 +289,8 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
     if reach == 0 {
         for (y, (row, c)) in rows.iter().enumerate() {
             counters.add(c);
-            for x in 0..w {
-                let p = row[x];
-                image.pixels[y * w + x] = [p[0] / p[3], p[1] / p[3], p[2] / p[3]];
+            for (dst, p) in image.pixels[y * w..(y + 1) * w].iter_mut().zip(row) {
+                *dst = [p[0] / p[3], p[1] / p[3], p[2] / p[3]];
             }
         }
     } else {
@@ -291,7 +312,11 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
             }
         }
         for (i, p) in acc.iter().enumerate() {
-            image.pixels[i] = if p[3] > 0.0 { [p[0] / p[3], p[1] / p[3], p[2] / p[3]] } else { [0.0; 3] };
+            image.pixels[i] = if p[3] > 0.0 {
+                [p[0] / p[3], p[1] / p[3], p[2] / p[3]]
+            } else {
+                [0.0; 3]
+            };
         }
     }
     let seconds = start.elapsed().as_secs_f64();

@@ -103,7 +103,11 @@ fn tabulated(t: &[(f32, f32)], lambda: f32) -> f32 {
     let i = t.partition_point(|p| p.0 <= lambda).clamp(1, t.len() - 1);
     let (l0, v0) = t[i - 1];
     let (l1, v1) = t[i];
-    let f = if l1 > l0 { (lambda - l0) / (l1 - l0) } else { 0.0 };
+    let f = if l1 > l0 {
+        (lambda - l0) / (l1 - l0)
+    } else {
+        0.0
+    };
     v0 + f * (v1 - v0)
 }
 
@@ -255,8 +259,8 @@ fn bitmap_lookup(b: &BitmapTexture, uv: Vec2) -> [f32; 4] {
         let tx = wrap_index(ix, w, b.wrap);
         let ty = wrap_index(iy, h, b.wrap);
         let base = (ty * w + tx) * b.channels;
-        for k in 0..c {
-            o[k] += weight * b.data[base + k];
+        for (ok, v) in o.iter_mut().zip(&b.data[base..base + c]) {
+            *ok += weight * v;
         }
     };
     match b.filter {

@@ -3,7 +3,8 @@
 //! Supported: `<scene version>`, `<default>` / `$param` substitution (with `-D` overrides),
 //! `id` / `<ref>`, transforms (`lookat`, `translate`, `rotate`, `scale`, `matrix`, composed in
 //! document order: each new operation is applied after the previous ones, M ← op · M),
-//! `perspective` sensor (`fov`, `fov_axis`, `near_clip`, `far_clip`, `to_world`) with `hdrfilm`
+//! `perspective` sensor (`fov`, `fov_axis`, `focal_length`, `near_clip`, `far_clip`, `to_world`)
+//! with `hdrfilm`
 //! (`width`, `height`, `rfilter` box/tent/gaussian; format options accepted and ignored since
 //! they do not change pixel values) and any sampler (`sample_count`, `seed`), `path`
 //! integrator (`max_depth`, `rr_depth`, `hide_emitters`), shapes `obj`, `ply`, `sphere`,
@@ -870,18 +871,19 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     (Some(m), None, None) => self.conductor_material(p.node, &m)?,
                     (None, None, None) => self.conductor_material(p.node, "none")?,
                     (None, eta, k) => {
-                        let e = match eta {
-                            Some(e) => self.real(&e, "eta")?,
-                            None => 0.0,
+                        // Mitsuba's conductor defaults when eta/k are given: eta 0, k 1.
+                        let n = match eta {
+                            Some(e) => self.spectral(&e, "eta")?,
+                            None => Spectral::Const(0.0),
                         };
                         let kk = match k {
-                            Some(k) => self.real(&k, "k")?,
-                            None => 1.0,
+                            Some(k) => self.spectral(&k, "k")?,
+                            None => Spectral::Const(1.0),
                         };
-                        if !(e >= 0.0 && kk >= 0.0) {
+                        if !(n.min() >= 0.0 && kk.min() >= 0.0) {
                             return Err(self.err(p.node, "eta and k must be ≥ 0"));
                         }
-                        Ior::Constant(Complex64::new(e, kk))
+                        combine_ior(&format!("{} eta/k", self.loc(p.node)), &n, &kk)
                     }
                 };
                 BsdfDesc::Conductor {
@@ -990,26 +992,37 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         }
                     },
                 };
-                let substrate = match p.take("substrate_ior") {
-                    None => Ior::real(1.64),
-                    Some(q) => self.named_or_real_ior(&q, "substrate_ior")?,
-                };
-                let substrate_ior = match p.take("substrate_k") {
-                    None => substrate,
+                let substrate = p.take("substrate_ior");
+                let substrate_k = match p.take("substrate_k") {
+                    None => None,
                     Some(q) => {
-                        let k = self.real(&q, "substrate_k")?;
-                        if !(k >= 0.0) {
+                        let k = self.spectral(&q, "substrate_k")?;
+                        if !(k.min() >= 0.0) {
                             return Err(self.err(q.node, "substrate_k must be ≥ 0"));
                         }
-                        match substrate {
-                            Ior::Constant(c) => Ior::Constant(Complex64::new(c.re, k)),
-                            Ior::Material(_) => {
-                                return Err(self.err(
-                                    q.node,
-                                    "substrate_k cannot be combined with a named substrate material (its k is tabulated)",
-                                ))
-                            }
+                        Some((k, q.node))
+                    }
+                };
+                let substrate_ior = match (substrate, substrate_k) {
+                    (None, None) => Ior::real(1.64),
+                    (None, Some((k, _))) => combine_ior(
+                        &format!("{} substrate", self.loc(p.node)),
+                        &Spectral::Const(1.64),
+                        &k,
+                    ),
+                    (Some(q), None) => self.named_or_real_ior(&q, "substrate_ior")?,
+                    (Some(q), Some((k, knode))) => {
+                        if matches!(q.val, Val::Str(_)) {
+                            return Err(self.err(
+                                knode,
+                                "substrate_k cannot be combined with a named substrate material (its k is tabulated)",
+                            ));
                         }
+                        let n = self.spectral(&q, "substrate_ior")?;
+                        if !(n.min() > 0.0) {
+                            return Err(self.err(q.node, "substrate_ior must be > 0"));
+                        }
+                        combine_ior(&format!("{} substrate", self.loc(q.node)), &n, &k)
                     }
                 };
                 let alpha = p.float(self, "alpha", 0.0)? as f32;
@@ -1089,15 +1102,17 @@ impl<'a, 'i> Ctx<'a, 'i> {
         })
     }
 
-    fn real(&self, q: &Prop, what: &str) -> Result<f64> {
+    /// A real value that may depend on wavelength: a number or a tabulated `<spectrum>`.
+    fn spectral(&self, q: &Prop, what: &str) -> Result<Spectral> {
         match &q.val {
-            Val::Float(v) => Ok(*v),
-            Val::Int(v) => Ok(*v as f64),
-            Val::Spectrum(SpectrumDesc::Constant(v)) => Ok(*v as f64),
+            Val::Float(v) if v.is_finite() => Ok(Spectral::Const(*v)),
+            Val::Int(v) => Ok(Spectral::Const(*v as f64)),
+            Val::Spectrum(SpectrumDesc::Constant(v)) => Ok(Spectral::Const(*v as f64)),
+            Val::Spectrum(SpectrumDesc::Tabulated(t)) => Ok(Spectral::Table(t.clone())),
             v => Err(self.err(
                 q.node,
                 format!(
-                    "{what} must be a single number here, not a {} (wavelength-dependent values: use a named material)",
+                    "{what} must be a number or a <spectrum> of λ:value pairs, not {} (RGB indices have no physical meaning)",
                     v.kind()
                 ),
             )),
@@ -1118,7 +1133,17 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         .map_err(|e| self.err(q.node, format!("{what}: {e}")))?
                 }
             }
-            _ => Ior::real(self.real(q, what)?),
+            _ => {
+                let n = self.spectral(q, what)?;
+                if !(n.min() > 0.0) {
+                    return Err(self.err(q.node, format!("{what} must be > 0")));
+                }
+                combine_ior(
+                    &format!("{} {what}", self.loc(q.node)),
+                    &n,
+                    &Spectral::Const(0.0),
+                )
+            }
         };
         if let Ior::Constant(c) = ior {
             if !(c.re > 0.0 && c.re.is_finite()) {
@@ -1348,7 +1373,33 @@ impl<'a, 'i> Ctx<'a, 'i> {
         if p.plugin != "perspective" {
             return Err(self.unknown_plugin(p, &["perspective"]));
         }
-        let fov = p.float(self, "fov", 45.0)? as f32;
+        // Mitsuba: `fov` (degrees, along `fov_axis`) or `focal_length` ("50mm" default, 35 mm
+        // film equivalent: fov_x = 2·atan(36 / (2f))) — checked against Mitsuba 3.9.1.
+        let focal = p.string(self, "focal_length")?;
+        let fov = match (p.float_opt(self, "fov")?, focal) {
+            (Some(_), Some(_)) => {
+                return Err(self.err(p.node, "give either 'fov' or 'focal_length', not both"))
+            }
+            (Some(f), None) => f as f32,
+            (None, f) => {
+                let f = f.unwrap_or_else(|| "50mm".to_string());
+                let mm = f
+                    .trim()
+                    .strip_suffix("mm")
+                    .unwrap_or(f.trim())
+                    .trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| *v > 0.0 && v.is_finite())
+                    .ok_or_else(|| {
+                        self.err(
+                            p.node,
+                            format!("focal_length \"{f}\" is not a length like \"50mm\""),
+                        )
+                    })?;
+                (2.0 * (36.0 / (2.0 * mm)).atan()).to_degrees() as f32
+            }
+        };
         if !(fov > 0.0 && fov < 180.0) {
             return Err(self.err(p.node, format!("fov {fov}° must be in (0, 180)")));
         }
@@ -1492,6 +1543,76 @@ impl<'a, 'i> Ctx<'a, 'i> {
             hide_emitters: p.bool(self, "hide_emitters", false)?,
         })
     }
+}
+
+/// A real quantity that may depend on wavelength.
+#[derive(Debug, Clone)]
+enum Spectral {
+    Const(f64),
+    /// (λ nm, value), strictly increasing λ.
+    Table(Vec<(f32, f32)>),
+}
+
+impl Spectral {
+    /// Linear interpolation, constant beyond the ends (Mitsuba's `regular`/`irregular`
+    /// spectra clamp the same way for conductor data).
+    fn at(&self, lambda_nm: f64) -> f64 {
+        match self {
+            Spectral::Const(v) => *v,
+            Spectral::Table(t) => {
+                let l = lambda_nm as f32;
+                let i = t.partition_point(|p| p.0 < l);
+                let v = if i == 0 {
+                    t[0].1
+                } else if i == t.len() {
+                    t[t.len() - 1].1
+                } else {
+                    let (a, b) = (t[i - 1], t[i]);
+                    a.1 + (b.1 - a.1) * (l - a.0) / (b.0 - a.0)
+                };
+                v as f64
+            }
+        }
+    }
+
+    fn min(&self) -> f64 {
+        match self {
+            Spectral::Const(v) => *v,
+            Spectral::Table(t) => t.iter().map(|p| p.1 as f64).fold(f64::INFINITY, f64::min),
+        }
+    }
+}
+
+/// n + ik from two real spectra: a constant if both are constant, otherwise a tabulated
+/// material on the union of their wavelength grids. The material is leaked to obtain the
+/// `&'static` that [`Ior::Material`] holds: a few hundred bytes per spectral index per loaded
+/// scene.
+fn combine_ior(label: &str, n: &Spectral, k: &Spectral) -> Ior {
+    if let (Spectral::Const(n), Spectral::Const(k)) = (n, k) {
+        return Ior::Constant(Complex64::new(*n, *k));
+    }
+    let mut grid: Vec<f32> = [n, k]
+        .iter()
+        .flat_map(|s| match s {
+            Spectral::Table(t) => t.iter().map(|p| p.0).collect(),
+            Spectral::Const(_) => Vec::new(),
+        })
+        .collect();
+    grid.sort_by(f32::total_cmp);
+    grid.dedup();
+    let rows: Vec<(f64, f64, f64)> = grid
+        .iter()
+        .map(|&l| (l as f64, n.at(l as f64), k.at(l as f64)))
+        .collect();
+    let range = (rows[0].0, rows[rows.len() - 1].0);
+    let material = dispersion::Material {
+        name: Box::leak(label.to_string().into_boxed_str()),
+        aliases: Vec::new(),
+        source: "tabulated in the scene file",
+        valid_range_nm: range,
+        model: dispersion::Model::Table(rows),
+    };
+    Ior::Material(Box::leak(Box::new(material)))
 }
 
 /// True when `$name` occurs as a whole parameter reference somewhere in the text.

@@ -255,8 +255,8 @@ use std::path::Path;
 
 /// Loads a scene file, choosing the reader by extension: `.xml` (Mitsuba 3 subset),
 /// `.gltf`/`.glb`, `.obj`, `.ply`. `defaults` are `-D key=value` overrides of the XML's
-/// `<default>` parameters (an override for a name the file does not declare is an error
-/// for XML, and ignored by the other formats only if empty).
+/// `<default>` parameters. For XML, an override of a parameter the file neither declares nor
+/// uses is an error (a typo); other formats have no parameters, so any override is an error.
 pub fn load(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
     if !path.is_file() {
         bail!("scene file {} does not exist", path.display());
@@ -318,9 +318,10 @@ pub fn default_environment() -> EmitterDesc {
     }
 }
 
-/// A camera that frames the bounding box `(lo, hi)`: looking at its centre from the front
-/// (+Z side) and slightly above, with a 40° vertical... (`fov_axis` x as Mitsuba's default) field
-/// of view and the box's bounding sphere filling ~80 % of the view.
+/// A camera that frames the bounding box `(lo, hi)`: it looks at the box centre from the
+/// front (+Z side), a little above and to the right, with a 40° field of view along x
+/// (Mitsuba's default `fov_axis`), at a distance where the box's bounding sphere fills about
+/// 80 % of the view.
 pub fn default_camera(bounds: (Vec3, Vec3)) -> Camera {
     let (lo, hi) = bounds;
     let center = (lo + hi) * 0.5;

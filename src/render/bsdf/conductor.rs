@@ -25,7 +25,9 @@ impl Conductor {
     }
 
     pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
-        let Some(ggx) = self.ggx else { return Spec::ZERO };
+        let Some(ggx) = self.ggx else {
+            return Spec::ZERO;
+        };
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return Spec::ZERO;
         }
@@ -56,7 +58,10 @@ impl Conductor {
             return None;
         }
         match self.ggx {
-            None => Some(BsdfSample::delta(reflect_local(wi), self.fresnel(ctx, wi.z))),
+            None => Some(BsdfSample::delta(
+                reflect_local(wi),
+                self.fresnel(ctx, wi.z),
+            )),
             Some(ggx) => {
                 let m = ggx.sample_visible(wi, u);
                 let wo = reflect(wi, m);

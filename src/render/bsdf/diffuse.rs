@@ -33,6 +33,10 @@ impl Diffuse {
         if pdf <= 0.0 {
             return None;
         }
-        Some(BsdfSample::smooth(wo, self.reflectance.eval(ctx.uv, ctx.wl), pdf))
+        Some(BsdfSample::smooth(
+            wo,
+            self.reflectance.eval(ctx.uv, ctx.wl),
+            pdf,
+        ))
     }
 }

@@ -10,7 +10,11 @@ use glam::Vec3;
 #[inline]
 pub fn fresnel_dielectric(cos_theta_i: f32, eta: f32) -> (f32, f32, f32, f32) {
     let outside = cos_theta_i >= 0.0;
-    let (eta_it, eta_ti) = if outside { (eta, 1.0 / eta) } else { (1.0 / eta, eta) };
+    let (eta_it, eta_ti) = if outside {
+        (eta, 1.0 / eta)
+    } else {
+        (1.0 / eta, eta)
+    };
     let cos_theta_t_sqr = 1.0 - eta_ti * eta_ti * (1.0 - cos_theta_i * cos_theta_i).max(0.0);
     let cos_i = cos_theta_i.abs();
     let cos_t = cos_theta_t_sqr.max(0.0).sqrt();
@@ -59,7 +63,8 @@ pub fn fresnel_diffuse_reflectance(eta: f32) -> f32 {
     if eta < 1.0 {
         -1.4399 * eta * eta + 0.7099 * eta + 0.6681 + 0.0636 * inv
     } else {
-        0.919317 + inv * (-3.4793 + inv * (6.75335 + inv * (-7.80989 + inv * (4.98554 - inv * 1.36881))))
+        0.919317
+            + inv * (-3.4793 + inv * (6.75335 + inv * (-7.80989 + inv * (4.98554 - inv * 1.36881))))
     }
 }
 

@@ -14,7 +14,10 @@ pub struct Ggx {
 impl Ggx {
     pub fn new(alpha_u: f32, alpha_v: f32) -> Self {
         // Very small α makes D overflow in f32; clamp like Mitsuba's 1e-4 floor.
-        Ggx { alpha_u: alpha_u.max(1e-4), alpha_v: alpha_v.max(1e-4) }
+        Ggx {
+            alpha_u: alpha_u.max(1e-4),
+            alpha_v: alpha_v.max(1e-4),
+        }
     }
 
     /// D(m) for a local microfacet normal m.
@@ -73,7 +76,11 @@ impl Ggx {
         // Section 3.2: transform the view direction to the hemisphere configuration.
         let vh = Vec3::new(self.alpha_u * wi.x, self.alpha_v * wi.y, wi.z).normalize();
         let lensq = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if lensq > 0.0 { Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt() } else { Vec3::X };
+        let t1 = if lensq > 0.0 {
+            Vec3::new(-vh.y, vh.x, 0.0) / lensq.sqrt()
+        } else {
+            Vec3::X
+        };
         let t2 = vh.cross(t1);
         // Section 4.2: parameterisation of the projected area.
         let r = u.x.sqrt();
@@ -106,7 +113,8 @@ mod tests {
                 let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / n as f64;
                 let st = (1.0 - ct * ct).sqrt();
                 let m = Vec3::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
-                sum += g.d(m) as f64 * ct * (1.0 / n as f64) * (2.0 * std::f64::consts::PI / n as f64);
+                sum +=
+                    g.d(m) as f64 * ct * (1.0 / n as f64) * (2.0 * std::f64::consts::PI / n as f64);
             }
         }
         assert!((sum - 1.0).abs() < 0.01, "{sum}");

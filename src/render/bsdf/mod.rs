@@ -73,11 +73,25 @@ pub struct BsdfSample {
 impl BsdfSample {
     #[inline]
     pub fn smooth(wo: Vec3, weight: Spec, pdf: f32) -> Self {
-        BsdfSample { wo, weight, pdf, delta: false, eta: 1.0, terminate_secondary: false }
+        BsdfSample {
+            wo,
+            weight,
+            pdf,
+            delta: false,
+            eta: 1.0,
+            terminate_secondary: false,
+        }
     }
     #[inline]
     pub fn delta(wo: Vec3, weight: Spec) -> Self {
-        BsdfSample { wo, weight, pdf: 1.0, delta: true, eta: 1.0, terminate_secondary: false }
+        BsdfSample {
+            wo,
+            weight,
+            pdf: 1.0,
+            delta: true,
+            eta: 1.0,
+            terminate_secondary: false,
+        }
     }
 }
 
@@ -97,8 +111,14 @@ impl Bsdf {
     /// Prepares a scene BSDF. Errors name what is unsupported.
     pub fn from_desc(desc: &BsdfDesc) -> anyhow::Result<Self> {
         Ok(match desc {
-            BsdfDesc::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse { reflectance: Texture::new(reflectance) }),
-            BsdfDesc::Conductor { eta, alpha_u, alpha_v } => {
+            BsdfDesc::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse {
+                reflectance: Texture::new(reflectance),
+            }),
+            BsdfDesc::Conductor {
+                eta,
+                alpha_u,
+                alpha_v,
+            } => {
                 check_alpha(*alpha_u, "conductor alpha_u")?;
                 check_alpha(*alpha_v, "conductor alpha_v")?;
                 Bsdf::Conductor(Conductor {
@@ -106,7 +126,11 @@ impl Bsdf {
                     ggx: (*alpha_u > 0.0 || *alpha_v > 0.0).then(|| Ggx::new(*alpha_u, *alpha_v)),
                 })
             }
-            BsdfDesc::Dielectric { int_ior, ext_ior, alpha } => {
+            BsdfDesc::Dielectric {
+                int_ior,
+                ext_ior,
+                alpha,
+            } => {
                 if *alpha > 0.0 {
                     anyhow::bail!("bsdf 'roughdielectric' (dielectric with alpha = {alpha}) is not supported by the renderer");
                 }
@@ -116,16 +140,32 @@ impl Bsdf {
                     dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
                 })
             }
-            BsdfDesc::Plastic { diffuse_reflectance, int_ior, ext_ior, alpha, nonlinear } => {
+            BsdfDesc::Plastic {
+                diffuse_reflectance,
+                int_ior,
+                ext_ior,
+                alpha,
+                nonlinear,
+            } => {
                 check_alpha(*alpha, "plastic alpha")?;
                 let eta = int_ior / ext_ior;
                 if !(eta.is_finite() && eta > 0.0) {
                     anyhow::bail!("plastic: int_ior/ext_ior must be positive and finite, got {int_ior}/{ext_ior}");
                 }
-                Bsdf::Plastic(Plastic::new(Texture::new(diffuse_reflectance), eta, *nonlinear, *alpha))
+                Bsdf::Plastic(Plastic::new(
+                    Texture::new(diffuse_reflectance),
+                    eta,
+                    *nonlinear,
+                    *alpha,
+                ))
             }
             BsdfDesc::TwoSided(inner) => Bsdf::TwoSided(Box::new(Bsdf::from_desc(inner)?)),
-            BsdfDesc::ThinFilm { film_ior, thickness_nm, substrate_ior, alpha } => {
+            BsdfDesc::ThinFilm {
+                film_ior,
+                thickness_nm,
+                substrate_ior,
+                alpha,
+            } => {
                 check_alpha(*alpha, "thinfilm alpha")?;
                 Bsdf::ThinFilm(ThinFilmBsdf {
                     film_ior: film_ior.clone(),
@@ -168,7 +208,14 @@ impl Bsdf {
     }
 
     /// Samples `wo` from `wi` using `u1` (lobe choice) and `u2` (direction).
-    pub fn sample(&self, ctx: &ShadingCtx, wi: Vec3, u1: f32, u2: Vec2, c: &mut Counters) -> Option<BsdfSample> {
+    pub fn sample(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        u1: f32,
+        u2: Vec2,
+        c: &mut Counters,
+    ) -> Option<BsdfSample> {
         let s = match self {
             Bsdf::Diffuse(b) => b.sample(ctx, wi, u2),
             Bsdf::Conductor(b) => b.sample(ctx, wi, u2),

@@ -7,7 +7,7 @@
 //! base uses the smooth Fresnel term instead of Mitsuba's precomputed rough transmittance
 //! table (a small difference at grazing angles for large α).
 
-use super::fresnel::{fresnel_diffuse_reflectance, fresnel_dielectric, reflect, reflect_local};
+use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance, reflect, reflect_local};
 use super::microfacet::Ggx;
 use super::{BsdfSample, ShadingCtx};
 use crate::render::geometry::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
@@ -116,7 +116,11 @@ impl Plastic {
                     if pdf <= 0.0 {
                         return None;
                     }
-                    Some(BsdfSample::smooth(wo, self.diffuse_value(ctx, f_i, wo) / pdf, pdf))
+                    Some(BsdfSample::smooth(
+                        wo,
+                        self.diffuse_value(ctx, f_i, wo) / pdf,
+                        pdf,
+                    ))
                 }
             }
             Some(ggx) => {

@@ -206,7 +206,16 @@ pub fn run(args: Args) -> Result<()> {
         let mut last_ratio = None;
         for row in &ours {
             let t = theirs.iter().find(|t| t.spp == row.spp);
-            let ratio = time_at_error(&their_curve, row.rmse).map(|tm| row.seconds / tm);
+            // Only interpolate (or extrapolate by at most 2× in error) on Mitsuba's measured
+            // curve: a biased render's error never reaches Mitsuba's, and a ratio read off a
+            // far extrapolation would mean nothing.
+            let (lo, hi) = their_curve
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p.1), h.max(p.1)));
+            let in_range = row.rmse >= 0.5 * lo && row.rmse <= 2.0 * hi;
+            let ratio = time_at_error(&their_curve, row.rmse)
+                .filter(|_| in_range)
+                .map(|tm| row.seconds / tm);
             last_ratio = ratio.or(last_ratio);
             table.push_str(&format!(
                 "| {} | {} | {:.3} | {:.5} | {:.3} | {} | {} | {} |\n",

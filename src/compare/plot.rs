@@ -54,6 +54,20 @@ pub fn time_at_error(points: &[(f64, f64)], error: f64) -> Option<f64> {
     Some((a.0 + f * (b.0 - a.0)).exp())
 }
 
+/// Three significant digits without float noise (0.0100000000001 → 0.01).
+fn short_number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    let s = format!("{v:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
 const PALETTE: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
@@ -108,6 +122,8 @@ pub fn plot_error_vs_time(
             .x_desc("render time, s")
             .y_desc(y_label)
             .label_style(("sans-serif", 13))
+            .x_label_formatter(&|v| short_number(*v))
+            .y_label_formatter(&|v| short_number(*v))
             .draw()
             .map_err(|e| anyhow!("plot: {e}"))?;
         for s in series {
@@ -172,6 +188,14 @@ mod tests {
         assert!(time_at_error(&pts[..1], 0.5).is_none());
         assert!(time_at_error(&pts, f64::NAN).is_none());
         assert!(time_at_error(&[(1.0, 0.0), (2.0, 0.1)], 0.1).is_none());
+    }
+
+    #[test]
+    fn axis_numbers_are_short() {
+        assert_eq!(short_number(0.0100000000001), "0.01");
+        assert_eq!(short_number(0.00123456), "0.00123");
+        assert_eq!(short_number(12.5), "12.5");
+        assert_eq!(short_number(100.0), "100");
     }
 
     #[test]

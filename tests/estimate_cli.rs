@@ -61,7 +61,7 @@ fn estimate_writes_every_output_and_reports_truth_errors() {
     let de = &v["delta_e_ab_d65_mean"];
     assert!(de
         .as_f64()
-        .map(|d| d >= 0.0 && d < 5.0)
+        .map(|d| (0.0..5.0).contains(&d))
         .unwrap_or(v["delta_e_reason"].is_string()));
     let (w, h, d) =
         thinfilm::image_io::read_exr_channel(&out.join("thickness.exr"), "thickness").unwrap();

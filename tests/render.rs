@@ -130,12 +130,12 @@ fn furnace_deviation(scene: &Scene, uvs: &[Vec2], n: u32, expect: f32) -> f32 {
             };
             let ray = prepared.camera.generate_ray(*uv);
             let l = integrator::li(&prepared, ray, &mut wl, &mut sampler, &mut counters);
-            for c in 0..4 {
-                sum[c] += l[c] as f64;
+            for (s, v) in sum.iter_mut().zip(l.to_array()) {
+                *s += v as f64;
             }
         }
-        for c in 0..4 {
-            worst = worst.max((sum[c] / n as f64 - expect as f64).abs() as f32 / expect);
+        for s in sum {
+            worst = worst.max((s / n as f64 - expect as f64).abs() as f32 / expect);
         }
     }
     assert_eq!(counters.invalid_samples, 0);

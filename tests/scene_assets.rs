@@ -43,7 +43,8 @@ fn teapot_mesh_sanity() {
         let q = (p * 1e4).round();
         (q.x as i64, q.y as i64, q.z as i64)
     };
-    let mut edges: HashMap<((i64, i64, i64), (i64, i64, i64)), u32> = HashMap::new();
+    type Key = (i64, i64, i64);
+    let mut edges: HashMap<(Key, Key), u32> = HashMap::new();
     for t in &m.indices {
         for k in 0..3 {
             let (a, b) = (

@@ -227,6 +227,7 @@ fn checker_is_first(to_uv: Mat3, uv: Vec2) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::{TextureFilter, WrapMode};
 
     #[test]
     fn tabulated_interpolates_and_clamps() {

@@ -124,7 +124,10 @@ impl Accel {
             let mut core_time = std::time::Duration::default();
             let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
                 &tris,
-                obvhs::BvhBuildParams::medium_build(),
+                // slow_build (pre-split, wider PLOC search, more reinsertion): ~+50 ms setup on
+                // the 36k-triangle teapot for ~20 % faster traversal (the largest render cost);
+                // the teapot images came out bit-identical to medium_build's.
+                obvhs::BvhBuildParams::slow_build(),
                 &mut core_time,
             );
             // Reorder once so leaf primitive ids index the triangle arrays directly.

@@ -132,6 +132,21 @@ const D65_UNIT: RgbIlluminantSpectrum = RgbIlluminantSpectrum {
     poly: crate::spectrum::RgbSigmoidPolynomial { c: [0.0; 3] },
 };
 
+/// [`crate::spectrum::RgbSigmoidPolynomial::eval`] at four wavelengths at once (SIMD lanes).
+/// Same operations in the same order (IEEE `sqrt`/`/` are exact in both forms), so the
+/// result is bit-identical to four scalar calls; the envmap lookup is a hot spot (4 texels
+/// × 4 wavelengths per escaped ray). Infinite polynomial values (black/white coefficients)
+/// take the scalar path, which maps S(±∞) to 1 or 0.
+#[inline]
+fn sigmoid_poly4(poly: &crate::spectrum::RgbSigmoidPolynomial, lambda: Spec) -> Spec {
+    let [c0, c1, c2] = poly.c;
+    let x = (Spec::splat(c0) * lambda + Spec::splat(c1)) * lambda + Spec::splat(c2);
+    if !x.is_finite() {
+        return Spec::from_array(lambda.to_array().map(|l| poly.eval(l)));
+    }
+    Spec::splat(0.5) + x / (Spec::splat(2.0) * (Spec::ONE + x * x).sqrt())
+}
+
 /// Lat-long environment map.
 #[derive(Debug, Clone)]
 pub struct EnvMap {
@@ -229,6 +244,7 @@ impl EnvMap {
         let fy = y - r0 as f32;
         // The four texels share the D65 factor: evaluate it once per wavelength.
         let d65 = Spec::from_array(wl.lambda.map(|l| D65_UNIT.eval(l)));
+        let lambda = Spec::from_array(wl.lambda);
         let mut out = Spec::ZERO;
         for (r, c, wgt) in [
             (r0, c0, (1.0 - fx) * (1.0 - fy)),
@@ -238,7 +254,7 @@ impl EnvMap {
         ] {
             let t = &self.texels[r * w + c];
             if wgt > 0.0 && t.scale > 0.0 {
-                out += Spec::from_array(wl.lambda.map(|l| t.poly.eval(l))) * (wgt * t.scale);
+                out += sigmoid_poly4(&t.poly, lambda) * (wgt * t.scale);
             }
         }
         out *= d65;
@@ -560,6 +576,29 @@ impl LightSet {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sigmoid_poly4_is_bit_identical_to_scalar() {
+        use crate::spectrum::RgbSigmoidPolynomial;
+        let lambda = Spec::new(360.0, 451.3, 612.9, 830.0);
+        let mut polys = vec![RgbSigmoidPolynomial::BLACK, RgbSigmoidPolynomial::WHITE];
+        for rgb in [
+            [0.9, 0.1, 0.2],
+            [0.0, 0.5, 1.0],
+            [0.3, 0.3, 0.31],
+            [1.0, 0.0, 0.0],
+        ] {
+            polys.push(RgbIlluminantSpectrum::new(rgb).poly);
+        }
+        polys.push(RgbSigmoidPolynomial {
+            c: [1e-3, -0.9, 180.0],
+        });
+        for poly in polys {
+            let fast = sigmoid_poly4(&poly, lambda).to_array();
+            let scalar = lambda.to_array().map(|l| poly.eval(l));
+            assert_eq!(fast.map(f32::to_bits), scalar.map(f32::to_bits), "{poly:?}");
+        }
+    }
 
     #[test]
     fn distribution_1d_samples_proportionally() {

@@ -86,7 +86,7 @@ impl Default for Options {
             grid_thickness_step_nm: 2.0,
             grid_pixel_stride: 1,
             band_integration: true,
-            joint_pixels: 1024,
+            joint_pixels: 256,
             progress: false,
         }
     }
@@ -274,6 +274,10 @@ fn score_step(bands: usize) -> usize {
 /// Thickness search context for one film index.
 struct DSolver<'a> {
     model: &'a FilmModel,
+    /// Point-sampled model (no band quadrature) used for the coarse scan only: the scan
+    /// just has to land in the right basin, and the quadrature triples its cost. The
+    /// Gauss–Newton refinement always uses `model`.
+    scan_model: Option<FilmModel>,
     d_min: f64,
     d_max: f64,
     /// Coarse scan step: 1/8 of a fringe at the shortest wavelength, so some scan point
@@ -292,8 +296,14 @@ impl<'a> DSolver<'a> {
             .fold(f64::INFINITY, f64::min);
         let n_eff = (model.film_ior.powi(2) - kx_min * kx_min).max(1e-6).sqrt();
         let fringe = geom.lambda_min() / (2.0 * n_eff); // d change for one whole order
+        let scan_model = geom.band_integration.then(|| {
+            let mut point = geom.clone();
+            point.band_integration = false;
+            point.model(model.film_ior)
+        });
         DSolver {
             model,
+            scan_model,
             d_min: opts.min_thickness_nm,
             d_max: opts.max_thickness_nm,
             scan_step: fringe / 8.0,
@@ -336,9 +346,10 @@ impl<'a> DSolver<'a> {
     fn search(&self, y: &[f32], mask: &[bool]) -> (f64, f64) {
         let steps = ((self.d_max - self.d_min) / self.scan_step).ceil() as usize + 1;
         let mut scores = Vec::with_capacity(steps);
+        let scan = self.scan_model.as_ref().unwrap_or(self.model);
         for i in 0..steps {
             let d = (self.d_min + i as f64 * self.scan_step).min(self.d_max);
-            scores.push((d, self.model.sse(d, y, mask, self.score_step)));
+            scores.push((d, scan.sse(d, y, mask, self.score_step)));
         }
         let mut minima: Vec<(f64, f64)> = (0..scores.len())
             .filter(|&i| {
@@ -376,7 +387,9 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
     let px = Pixels::new(set);
     let (w, h) = (set.width, set.height);
     let (na, nb) = (set.angles.len(), set.bands());
-    let stride = (((w * h) as f64 / 16384.0).sqrt().floor() as usize).max(1);
+    // About a thousand seeds get the global search; the rest start from interpolated
+    // seeds and need only a few Gauss–Newton steps (global search again where poor).
+    let stride = (((w * h) as f64 / 1024.0).sqrt().floor() as usize).clamp(1, 32);
     let mut d = vec![f32::NAN; w * h];
     let mut sse = vec![0f32; w * h];
     let mut samples = vec![0u32; w * h];

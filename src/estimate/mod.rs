@@ -268,7 +268,7 @@ fn median(v: &mut [f64]) -> Option<f64> {
 
 /// Band step used when scoring candidates (speed; the refinement uses every band).
 fn score_step(bands: usize) -> usize {
-    (bands / 48).max(1)
+    (bands / 40).max(1)
 }
 
 /// Thickness search context for one film index.
@@ -387,9 +387,9 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
     let px = Pixels::new(set);
     let (w, h) = (set.width, set.height);
     let (na, nb) = (set.angles.len(), set.bands());
-    // About a thousand seeds get the global search; the rest start from interpolated
+    // A few hundred seeds get the global search; the rest start from interpolated
     // seeds and need only a few Gauss–Newton steps (global search again where poor).
-    let stride = (((w * h) as f64 / 1024.0).sqrt().floor() as usize).clamp(1, 32);
+    let stride = (((w * h) as f64 / 384.0).sqrt().floor() as usize).clamp(1, 48);
     let mut d = vec![f32::NAN; w * h];
     let mut sse = vec![0f32; w * h];
     let mut samples = vec![0u32; w * h];
@@ -900,7 +900,12 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         let mut sigma = None;
         // Two rounds: thickness orders found with the first index may change once the
         // index is refined.
-        for _ in 0..2 {
+        for round in 0..2 {
+            // The second round only matters when the index moved enough to change which
+            // thickness order fits best (a fringe shifts by d·Δn/n); skip it otherwise.
+            if round == 1 && (n - n0).abs() < 2e-3 {
+                break;
+            }
             let m = geom.model(n);
             let s = DSolver::new(&m, &geom, opts);
             let d0: Vec<f64> = joint

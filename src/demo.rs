@@ -3,7 +3,7 @@
 //! an index (README.md + index.html) that shows them with the numbers.
 
 use crate::capture::{self, simulate::SimulateConfig};
-use crate::estimate::{self, report, Method, Options};
+use crate::estimate::{report, Method, Options};
 use crate::figure::{self, FilmMaterial, RenderSettings, SampleRow};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -118,30 +118,25 @@ pub struct DemoSummary {
 }
 
 fn fit_one(capture_dir: &Path, gt_dir: &Path, method: Method, out: &Path) -> Result<MethodResult> {
-    let set = capture::load_capture_set(capture_dir)?;
     let opts = Options {
         method,
         progress: false,
         ..Options::default()
     };
     let t = Instant::now();
-    let fit = estimate::estimate(&set, &opts)?;
+    let run = report::fit_capture_dir(capture_dir, out, &opts, Some(gt_dir))?;
     let seconds = t.elapsed().as_secs_f64();
-    let de = report::mean_delta_e(&set, &fit, opts.band_integration, 20_000);
-    let gt = capture::load_ground_truth(gt_dir)?;
-    let truth = report::truth_from_ground_truth(&fit, &gt)?;
-    let json = report::fit_json(&set, &fit, &de, Some(&truth), &[]);
-    report::write_outputs(out, &set, &fit, &json)?;
+    let truth = run.truth.expect("ground truth was given");
     Ok(MethodResult {
         method,
-        film_ior: fit.film_ior,
+        film_ior: run.fit.film_ior,
         film_ior_abs_error: truth.film_ior_abs_error,
-        mean_thickness_nm: report::thickness_stats(&fit.thickness_nm)
+        mean_thickness_nm: report::thickness_stats(&run.fit.thickness_nm)
             .map(|s| s.mean)
             .unwrap_or(f64::NAN),
         thickness_mae_nm: truth.thickness_mae_nm,
-        delta_e_ab: de.ok(),
-        rmse: fit.rmse(),
+        delta_e_ab: run.delta_e.ok(),
+        rmse: run.fit.rmse(),
         seconds,
         fit_dir: out.to_path_buf(),
     })

@@ -1,11 +1,10 @@
 //! `thinfilm estimate CAPTURE_DIR --out DIR`: fit the film index and per-pixel thickness
 //! of a capture set and write the fitted material (see `crate::estimate`).
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 use std::time::Instant;
-use thinfilm::capture::{load_capture_set, load_ground_truth};
-use thinfilm::estimate::{estimate, report, Method, Options};
+use thinfilm::estimate::{report, Method, Options};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -52,10 +51,6 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let t = Instant::now();
-    let set = load_capture_set(&args.capture_dir)
-        .with_context(|| format!("loading capture set {}", args.capture_dir.display()))?;
-    let load_s = t.elapsed().as_secs_f64();
     let opts = Options {
         method: args.method,
         film_ior: args.film_ior,
@@ -73,22 +68,17 @@ pub fn run(args: Args) -> Result<()> {
     if !(opts.grid_ior_step > 0.0 && opts.grid_thickness_step_nm > 0.0) {
         anyhow::bail!("--grid-ior-step and --grid-thickness-step-nm must be > 0");
     }
-    let fit = estimate(&set, &opts)?;
     let t = Instant::now();
-    let de = report::mean_delta_e(&set, &fit, opts.band_integration, 20_000);
-    let de_s = t.elapsed().as_secs_f64();
-    let truth = match &args.ground_truth {
-        Some(dir) => {
-            let gt = load_ground_truth(dir)
-                .with_context(|| format!("loading ground truth {}", dir.display()))?;
-            Some(report::truth_from_ground_truth(&fit, &gt)?)
-        }
-        None => None,
-    };
-    let t = Instant::now();
-    let extra = vec![("load".to_string(), load_s), ("delta_e".to_string(), de_s)];
-    let json = report::fit_json(&set, &fit, &de, truth.as_ref(), &extra);
-    report::write_outputs(&args.out, &set, &fit, &json)?;
+    let report::FitRun {
+        fit,
+        delta_e: de,
+        truth,
+    } = report::fit_capture_dir(
+        &args.capture_dir,
+        &args.out,
+        &opts,
+        args.ground_truth.as_deref(),
+    )?;
     let stats = report::thickness_stats(&fit.thickness_nm);
     println!(
         "{}: film index {:.4}{}, thickness mean {} nm, residual RMSE {}, ΔE*ab {} (written in {:.2} s to {})",

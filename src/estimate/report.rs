@@ -506,3 +506,46 @@ pub fn truth_from_ground_truth(fit: &Fit, gt: &GroundTruth) -> Result<TruthError
         &gt.thickness_nm,
     ))
 }
+
+/// What [`fit_capture_dir`] measured and wrote.
+#[derive(Debug, Clone)]
+pub struct FitRun {
+    pub fit: Fit,
+    /// Mean ΔE*ab (D65) between measured and model spectra, or why it is unavailable.
+    pub delta_e: Result<f64, String>,
+    pub truth: Option<TruthErrors>,
+}
+
+/// The whole `thinfilm estimate` job: load the capture set in `capture_dir`, fit it, compare
+/// with a ground truth when given, and write every output into `out` (see [`write_outputs`]).
+pub fn fit_capture_dir(
+    capture_dir: &Path,
+    out: &Path,
+    opts: &super::Options,
+    ground_truth: Option<&Path>,
+) -> Result<FitRun> {
+    let t = std::time::Instant::now();
+    let set = crate::capture::load_capture_set(capture_dir)
+        .with_context(|| format!("loading capture set {}", capture_dir.display()))?;
+    let load_s = t.elapsed().as_secs_f64();
+    let fit = super::estimate(&set, opts)?;
+    let t = std::time::Instant::now();
+    let delta_e = mean_delta_e(&set, &fit, opts.band_integration, 20_000);
+    let de_s = t.elapsed().as_secs_f64();
+    let truth = match ground_truth {
+        Some(dir) => {
+            let gt = crate::capture::load_ground_truth(dir)
+                .with_context(|| format!("loading ground truth {}", dir.display()))?;
+            Some(truth_from_ground_truth(&fit, &gt)?)
+        }
+        None => None,
+    };
+    let extra = vec![("load".to_string(), load_s), ("delta_e".to_string(), de_s)];
+    let json = fit_json(&set, &fit, &delta_e, truth.as_ref(), &extra);
+    write_outputs(out, &set, &fit, &json)?;
+    Ok(FitRun {
+        fit,
+        delta_e,
+        truth,
+    })
+}

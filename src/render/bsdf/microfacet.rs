@@ -61,6 +61,36 @@ impl Ggx {
         self.g1(wi, m) * self.g1(wo, m)
     }
 
+    /// Microfacet reflection without its Fresnel factor (Walter et al. 2007): the half vector
+    /// m and D(m)·G(wi, wo)/(4 cosθi), or `None` when the pair cannot reflect.
+    #[inline]
+    pub fn reflection(&self, wi: Vec3, wo: Vec3) -> Option<(Vec3, f32)> {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return None;
+        }
+        let m = (wi + wo).normalize();
+        let d = self.d(m);
+        if d == 0.0 {
+            return None;
+        }
+        Some((m, d * self.g(wi, wo, m) / (4.0 * wi.z)))
+    }
+
+    /// pdf of `wo` when m is drawn from the visible normals of `wi` and reflected
+    /// (the 1/(4 wo·m) Jacobian of reflection).
+    #[inline]
+    pub fn reflection_pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return 0.0;
+        }
+        let m = (wi + wo).normalize();
+        let dot = wo.dot(m);
+        if dot <= 0.0 {
+            return 0.0;
+        }
+        self.pdf_visible(wi, m) / (4.0 * dot)
+    }
+
     /// Density of visible normals seen from `wi` (wi.z > 0): G1(wi) max(0, wi·m) D(m) / wi.z.
     #[inline]
     pub fn pdf_visible(&self, wi: Vec3, m: Vec3) -> f32 {

@@ -74,32 +74,14 @@ impl ThinFilmBsdf {
     }
 
     pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3, counters: &mut Counters) -> Spec {
-        let Some(ggx) = self.ggx else {
-            return Spec::ZERO;
-        };
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return Spec::ZERO;
+        match self.ggx.and_then(|ggx| ggx.reflection(wi, wo)) {
+            Some((m, weight)) => self.reflectance(ctx, wi.dot(m), counters) * weight,
+            None => Spec::ZERO,
         }
-        let m = (wi + wo).normalize();
-        let d = ggx.d(m);
-        if d == 0.0 {
-            return Spec::ZERO;
-        }
-        let g = ggx.g(wi, wo, m);
-        self.reflectance(ctx, wi.dot(m), counters) * (d * g / (4.0 * wi.z))
     }
 
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
-        let Some(ggx) = self.ggx else { return 0.0 };
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return 0.0;
-        }
-        let m = (wi + wo).normalize();
-        let dot = wo.dot(m);
-        if dot <= 0.0 {
-            return 0.0;
-        }
-        ggx.pdf_visible(wi, m) / (4.0 * dot)
+        self.ggx.map_or(0.0, |ggx| ggx.reflection_pdf(wi, wo))
     }
 
     pub fn sample(

@@ -18,7 +18,9 @@ pub mod effects;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
+pub mod integrator_polarized;
 pub mod lights;
+pub mod polarization;
 pub mod sampler;
 pub mod texture;
 

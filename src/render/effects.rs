@@ -6,7 +6,8 @@
 //! - dispersion handling (terminating secondary wavelengths at refractions) only for dielectric
 //!   interfaces whose index depends on wavelength;
 //! - microfacet (GGX visible-normal) sampling only for BSDFs with α > 0;
-//! - polarisation only if the scene asks for a polariser (not implemented: an error).
+//! - polarisation (Stokes vectors and Mueller matrices, [`super::integrator_polarized`]) only
+//!   if the scene asks for a polariser: a `polarizer` BSDF on a shape or a sensor polariser.
 
 use crate::scene::{BsdfDesc, Scene, TextureDesc};
 
@@ -21,6 +22,8 @@ pub struct Effects {
     pub dispersion: bool,
     /// GGX microfacet sampling is used.
     pub rough: bool,
+    /// Paths carry Stokes vectors (polarised integrator).
+    pub polarization: bool,
     /// One line per decision, for the log.
     pub reasons: Vec<String>,
 }
@@ -43,12 +46,6 @@ fn visit<'a>(desc: &'a BsdfDesc, out: &mut Vec<&'a BsdfDesc>) {
 
 /// Inspects the BSDFs that shapes actually use.
 pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
-    if let Some(p) = scene.polarizer {
-        anyhow::bail!(
-            "the scene asks for a polariser ({p:?}) in front of the sensor; polarised (Stokes/Mueller) \
-             rendering is not implemented, so the render would be wrong: remove the polariser"
-        );
-    }
     let mut used = vec![false; scene.bsdfs.len()];
     for (i, s) in scene.shapes.iter().enumerate() {
         if s.bsdf >= scene.bsdfs.len() {
@@ -71,6 +68,7 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     let mut films = 0;
     let mut rough = Vec::new();
     let mut dispersive = Vec::new();
+    let mut polarizer_bsdfs = 0;
     for d in &all {
         match d {
             BsdfDesc::ThinFilm {
@@ -97,6 +95,7 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
             } if *alpha_u > 0.0 || *alpha_v > 0.0 => {
                 rough.push(format!("roughconductor α=({alpha_u}, {alpha_v})"))
             }
+            BsdfDesc::Polarizer { .. } => polarizer_bsdfs += 1,
             BsdfDesc::Plastic { alpha, .. } if *alpha > 0.0 => {
                 rough.push(format!("roughplastic α={alpha}"))
             }
@@ -132,7 +131,25 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     } else {
         "microfacet sampling: off — all BSDFs smooth or diffuse".into()
     });
-    e.reasons
-        .push("polarisation: off — no polariser in the scene".into());
+    let mut why = Vec::new();
+    if let Some(p) = scene.polarizer {
+        why.push(match p {
+            crate::scene::Polarizer::S => "an S polariser on the sensor".to_string(),
+            crate::scene::Polarizer::P => "a P polariser on the sensor".to_string(),
+            crate::scene::Polarizer::AngleDeg(d) => format!("a polariser at {d}° on the sensor"),
+        });
+    }
+    if polarizer_bsdfs > 0 {
+        why.push(format!("{polarizer_bsdfs} polarizer BSDF(s) in use"));
+    }
+    e.polarization = !why.is_empty();
+    e.reasons.push(if e.polarization {
+        format!(
+            "polarisation: ON — because of {}; paths carry Stokes vectors, BSDFs act as Mueller matrices",
+            why.join(" and ")
+        )
+    } else {
+        "polarisation: off — no polariser in the scene (unpolarised integrator)".into()
+    });
     Ok(e)
 }

@@ -105,6 +105,8 @@ pub struct PreparedScene {
     pub sample_range: (u32, u32),
     pub effects: Effects,
     pub degenerate_triangles: usize,
+    /// Set when effect analysis switched polarisation on.
+    pub polarized: Option<Box<integrator_polarized::PolarizedSetup>>,
 }
 
 /// Validates the scene and options, runs effect analysis, builds the BVH and light tables.
@@ -149,6 +151,13 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     let (accel, degenerate_triangles) = accel::Accel::build(scene)?;
     let lights = lights::LightSet::build(scene, &accel)?;
     let shape_bsdf = scene.shapes.iter().map(|s| s.bsdf as u32).collect();
+    let polarized = if effects.polarization {
+        Some(Box::new(integrator_polarized::PolarizedSetup::build(
+            scene, &bsdfs,
+        )?))
+    } else {
+        None
+    };
     Ok(PreparedScene {
         accel,
         lights,
@@ -163,6 +172,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         sample_range,
         effects,
         degenerate_triangles,
+        polarized,
     })
 }
 
@@ -182,7 +192,10 @@ fn trace_sample(
     let pos = Vec2::new(x as f32 + jitter.x, y as f32 + jitter.y);
     let film_uv = pos / Vec2::new(scene.width as f32, scene.height as f32);
     let ray = scene.camera.generate_ray(film_uv);
-    let l = integrator::li(scene, ray, &mut wl, &mut sampler, counters);
+    let l = match &scene.polarized {
+        None => integrator::li(scene, ray, &mut wl, &mut sampler, counters),
+        Some(setup) => integrator_polarized::li(scene, setup, ray, &mut wl, &mut sampler, counters),
+    };
     (pos, SampledSpectrum(l.to_array()), wl)
 }
 

@@ -11,6 +11,8 @@
 //! `rectangle`, `cube`, `disk` (`to_world`, `flip_normals`, `face_normals`), emitters
 //! `envmap`, `constant`, `area`, `point`, BSDFs `diffuse`, `conductor`, `roughconductor`,
 //! `dielectric`, `roughdielectric`, `plastic`, `roughplastic`, `twosided`, `thinfilm`,
+//! `polarizer` (constant `theta`), the sensor extension `<string name="polarizer"
+//! value="s|p|DEG"/>` (scenes/README.md),
 //! textures `bitmap`, `checkerboard`, values `float`, `integer`, `boolean`, `string`, `rgb`,
 //! `spectrum`, `point`, `vector`.
 //!
@@ -24,7 +26,7 @@
 
 use super::{
     look_at, shapes, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
-    IntegratorSettings, ReconstructionFilter, Scene, Shape, SpectrumDesc, TextureDesc,
+    IntegratorSettings, Polarizer, ReconstructionFilter, Scene, Shape, SpectrumDesc, TextureDesc,
     TextureFilter, WrapMode,
 };
 use crate::optics::{dispersion, Complex64, Ior};
@@ -122,6 +124,7 @@ struct Sensor {
     film: FilmSettings,
     spp: u32,
     seed: u64,
+    polarizer: Option<Polarizer>,
 }
 
 #[derive(Debug, Clone)]
@@ -412,14 +415,20 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
         }
         let integrator = self.integrator.unwrap_or_default();
-        let (camera, film, spp, seed) = match self.sensor.clone() {
-            Some(s) => (s.camera, s.film, s.spp, s.seed),
+        let (camera, film, spp, seed, polarizer) = match self.sensor.clone() {
+            Some(s) => (s.camera, s.film, s.spp, s.seed, s.polarizer),
             None => {
                 // Mitsuba would use a default 45° camera at the origin; framing the scene is
                 // more useful and documented here.
                 let bounds = super::shapes_bounds(&self.shapes)
                     .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-                (super::default_camera(bounds), FilmSettings::default(), 4, 0)
+                (
+                    super::default_camera(bounds),
+                    FilmSettings::default(),
+                    4,
+                    0,
+                    None,
+                )
             }
         };
         Ok(Scene {
@@ -431,7 +440,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             shapes: std::mem::take(&mut self.shapes),
             bsdfs: std::mem::take(&mut self.bsdfs),
             emitters: std::mem::take(&mut self.emitters),
-            polarizer: None,
+            polarizer,
             source: None,
         })
     }
@@ -841,6 +850,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "roughplastic",
             "twosided",
             "thinfilm",
+            "polarizer",
         ];
         let plugin = p.plugin.clone();
         Ok(match plugin.as_str() {
@@ -939,6 +949,27 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     ext_ior: p.ior_number(self, "ext_ior", 1.000277)? as f32,
                     alpha,
                     nonlinear: p.bool(self, "nonlinear", false)?,
+                }
+            }
+            "polarizer" => {
+                // Mitsuba `polarizer`: `theta` in degrees (a constant here), `transmittance`.
+                let theta_deg = match p.take("theta") {
+                    None => 0.0,
+                    Some(q) => match q.val {
+                        Val::Float(v) if v.is_finite() => v as f32,
+                        Val::Spectrum(SpectrumDesc::Constant(v)) if v.is_finite() => v,
+                        _ => {
+                            return Err(self.err(
+                                q.node,
+                                "polarizer theta must be a finite constant angle in degrees",
+                            ))
+                        }
+                    },
+                };
+                p.accept(&["polarizing"], self, |v| matches!(v, Val::Bool(true)))?;
+                BsdfDesc::Polarizer {
+                    theta_deg,
+                    transmittance: p.texture(self, "transmittance", 1.0)?,
                 }
             }
             "twosided" => {
@@ -1422,6 +1453,25 @@ impl<'a, 'i> Ctx<'a, 'i> {
             return Err(self.err(p.node, "need 0 < near_clip < far_clip"));
         }
         let to_world = p.transform(self, "to_world")?;
+        // thinfilm extension: an ideal linear polariser in front of the sensor.
+        let polarizer = match p.string(self, "polarizer")? {
+            None => None,
+            Some(v) => Some(match v.trim().to_ascii_lowercase().as_str() {
+                "s" => Polarizer::S,
+                "p" => Polarizer::P,
+                a => match a.strip_suffix("deg").unwrap_or(a).trim().parse::<f32>() {
+                    Ok(deg) if deg.is_finite() => Polarizer::AngleDeg(deg),
+                    _ => {
+                        return Err(self.err(
+                            p.node,
+                            format!(
+                                "polarizer \"{v}\" must be \"s\", \"p\" or an angle in degrees"
+                            ),
+                        ))
+                    }
+                },
+            }),
+        };
         let mut film = None;
         let mut sampler = None;
         let mut rest = Vec::new();
@@ -1450,6 +1500,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             film,
             spp,
             seed,
+            polarizer,
         })
     }
 

@@ -84,13 +84,20 @@ impl Default for IntegratorSettings {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// An ideal linear polariser in front of the sensor (`<string name="polarizer" …/>` inside
+/// `<sensor>`; a thinfilm extension, see scenes/README.md). It passes half of unpolarised
+/// light, like Mitsuba's `polarizer` BSDF.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Polarizer {
-    /// Passes the s component relative to the plane of incidence at the first hit.
+    /// Per camera ray, transmits the s component (E ⟂ the plane of incidence spanned by the
+    /// ray and the shading normal at the ray's first surface hit) — the seed's S-wave camera.
     S,
+    /// Per camera ray, transmits the p component (E in that plane of incidence).
     P,
-    /// Transmission axis angle in degrees in the sensor's image plane (from +X).
-    AngleDeg(i32),
+    /// A fixed polariser whose transmission axis lies at this angle in degrees from the
+    /// image's +x (rightwards) axis towards its +y (upwards) axis, projected onto the plane
+    /// perpendicular to each camera ray.
+    AngleDeg(f32),
 }
 
 #[derive(Debug, Clone)]
@@ -210,6 +217,14 @@ pub enum BsdfDesc {
         thickness_nm: TextureDesc,
         substrate_ior: Ior,
         alpha: f32,
+    },
+    /// Ideal linear polariser sheet (Mitsuba `polarizer`): light passes straight through.
+    /// At `theta_deg` = 0 the transmission axis is the surface's u (dp/du) direction (the
+    /// absorbing axis is v); `theta_deg` turns it about the beam exactly as Mitsuba's
+    /// `rotated_element` does. Unpolarised renders see a neutral filter of transmittance / 2.
+    Polarizer {
+        theta_deg: f32,
+        transmittance: TextureDesc,
     },
 }
 

@@ -12,6 +12,7 @@ pub mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
 pub mod plastic;
+pub mod polarizer;
 pub mod thinfilm;
 
 use super::texture::{Spec, Texture};
@@ -24,6 +25,7 @@ pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
 pub use plastic::Plastic;
+pub use polarizer::PolarizerBsdf;
 pub use thinfilm::ThinFilmBsdf;
 
 /// What a BSDF needs to know about the shading point besides directions.
@@ -105,6 +107,8 @@ pub enum Bsdf {
     ThinFilm(ThinFilmBsdf),
     /// Mitsuba `twosided`: the back face behaves like the front.
     TwoSided(Box<Bsdf>),
+    /// Mitsuba `polarizer`: null pass-through (see [`polarizer`]).
+    Polarizer(PolarizerBsdf),
 }
 
 impl Bsdf {
@@ -160,6 +164,13 @@ impl Bsdf {
                 ))
             }
             BsdfDesc::TwoSided(inner) => Bsdf::TwoSided(Box::new(Bsdf::from_desc(inner)?)),
+            BsdfDesc::Polarizer {
+                theta_deg,
+                transmittance,
+            } => Bsdf::Polarizer(PolarizerBsdf {
+                theta: theta_deg.to_radians(),
+                transmittance: Texture::new(transmittance),
+            }),
             BsdfDesc::ThinFilm {
                 film_ior,
                 thickness_nm,
@@ -182,7 +193,7 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.eval(ctx, wi, wo),
             Bsdf::Conductor(b) => b.eval(ctx, wi, wo),
-            Bsdf::Dielectric(_) => Spec::ZERO,
+            Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => Spec::ZERO,
             Bsdf::Plastic(b) => b.eval(ctx, wi, wo),
             Bsdf::ThinFilm(b) => b.eval(ctx, wi, wo, c),
             Bsdf::TwoSided(b) => {
@@ -197,7 +208,7 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wi, wo),
             Bsdf::Conductor(b) => b.pdf(wi, wo),
-            Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => 0.0,
             Bsdf::Plastic(b) => b.pdf(wi, wo),
             Bsdf::ThinFilm(b) => b.pdf(wi, wo),
             Bsdf::TwoSided(b) => {
@@ -222,6 +233,7 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.sample(ctx, wi, u1),
             Bsdf::Plastic(b) => b.sample(ctx, wi, u1, u2),
             Bsdf::ThinFilm(b) => b.sample(ctx, wi, u2, c),
+            Bsdf::Polarizer(b) => b.sample(ctx, wi),
             Bsdf::TwoSided(b) => {
                 if wi.z < 0.0 {
                     let mut s = b.sample(ctx, Vec3::new(wi.x, wi.y, -wi.z), u1, u2, c)?;
@@ -241,14 +253,17 @@ impl Bsdf {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
             Bsdf::Conductor(b) => b.ggx.is_some(),
             Bsdf::ThinFilm(b) => b.ggx.is_some(),
-            Bsdf::Dielectric(_) => false,
+            Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => false,
             Bsdf::TwoSided(b) => b.has_smooth_component(),
         }
     }
 
     /// Whether the BSDF scatters only on the front side of its shading normal.
     pub fn is_one_sided(&self) -> bool {
-        !matches!(self, Bsdf::Dielectric(_) | Bsdf::TwoSided(_))
+        !matches!(
+            self,
+            Bsdf::Dielectric(_) | Bsdf::TwoSided(_) | Bsdf::Polarizer(_)
+        )
     }
 }
 

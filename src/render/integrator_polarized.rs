@@ -48,12 +48,12 @@ pub struct PolarizedSetup {
     /// World directions of the image's +x (rightwards) and +y (upwards) axes.
     image_x: Vec3,
     image_y: Vec3,
-    /// Per shape: the world absorbing axis (v direction) of a `polarizer` BSDF at θ = 0.
-    polarizer_v_axis: Vec<Option<Vec3>>,
+    /// Per shape with a `polarizer` BSDF: its world tangents (u, v) = (dp/du ⟂ n, n × u).
+    polarizer_axes: Vec<Option<(Vec3, Vec3)>>,
 }
 
-/// Mitsuba's shading tangent t = n × normalize(dp/du ⟂ n) of a mesh triangle.
-fn triangle_v_axis(p: [Vec3; 3], uv: Option<[Vec2; 3]>, n: Vec3) -> Option<Vec3> {
+/// Mitsuba's shading tangents (s, t) = (normalize(dp/du ⟂ n), n × s) of a mesh triangle.
+fn triangle_axes(p: [Vec3; 3], uv: Option<[Vec2; 3]>, n: Vec3) -> Option<(Vec3, Vec3)> {
     let (dp1, dp2) = (p[1] - p[0], p[2] - p[0]);
     // Without UVs Mitsuba parameterises by the barycentrics: uv = (0,0), (1,0), (0,1).
     let [t0, t1, t2] = uv.unwrap_or([Vec2::ZERO, Vec2::X, Vec2::Y]);
@@ -64,7 +64,7 @@ fn triangle_v_axis(p: [Vec3; 3], uv: Option<[Vec2; 3]>, n: Vec3) -> Option<Vec3>
     }
     let dp_du = (duv2.y * dp1 - duv1.y * dp2) / det;
     let s = dp_du - n * n.dot(dp_du);
-    (s.length_squared() > 1e-20).then(|| n.cross(s.normalize()))
+    (s.length_squared() > 1e-20).then(|| (s.normalize(), n.cross(s.normalize())))
 }
 
 impl PolarizedSetup {
@@ -75,7 +75,7 @@ impl PolarizedSetup {
         let m = scene.camera.to_world;
         let image_x = -m.transform_vector3(Vec3::X).normalize();
         let image_y = m.transform_vector3(Vec3::Y).normalize();
-        let mut polarizer_v_axis = vec![None; scene.shapes.len()];
+        let mut polarizer_axes = vec![None; scene.shapes.len()];
         for (i, shape) in scene.shapes.iter().enumerate() {
             let name = || shape.name.clone().unwrap_or_else(|| format!("shape {i}"));
             match bsdfs.get(shape.bsdf) {
@@ -88,7 +88,7 @@ impl PolarizedSetup {
             let Geometry::Mesh(mesh) = &shape.geometry else {
                 bail!("{}: the polarizer BSDF is supported on planar meshes (rectangle, disk), not on spheres", name());
             };
-            let mut axis: Option<(Vec3, Vec3)> = None;
+            let mut axis: Option<(Vec3, Vec3, Vec3)> = None;
             for tri in &mesh.indices {
                 let p = tri.map(|k| mesh.positions[k as usize]);
                 let ng = (p[1] - p[0]).cross(p[2] - p[0]);
@@ -109,12 +109,12 @@ impl PolarizedSetup {
                     }
                 };
                 let uv = (!mesh.uvs.is_empty()).then(|| tri.map(|k| mesh.uvs[k as usize]));
-                let Some(t) = triangle_v_axis(p, uv, n) else {
+                let Some((u, t)) = triangle_axes(p, uv, n) else {
                     continue;
                 };
                 match axis {
-                    None => axis = Some((t, n)),
-                    Some((t0, n0)) => {
+                    None => axis = Some((u, t, n)),
+                    Some((_, t0, n0)) => {
                         if t.dot(t0) < 0.9999 || n.dot(n0).abs() < 0.9999 {
                             bail!(
                                 "{}: the polarizer BSDF needs a planar shape with one (u, v) \
@@ -125,16 +125,16 @@ impl PolarizedSetup {
                     }
                 }
             }
-            let Some((t, _)) = axis else {
+            let Some((u, t, _)) = axis else {
                 bail!("{}: polarizer shape has no non-degenerate triangle", name());
             };
-            polarizer_v_axis[i] = Some(t);
+            polarizer_axes[i] = Some((u, t));
         }
         Ok(PolarizedSetup {
             sensor: scene.polarizer,
             image_x,
             image_y,
-            polarizer_v_axis,
+            polarizer_axes,
         })
     }
 }
@@ -565,13 +565,12 @@ pub fn li(
         let u2 = sampler.next_2d();
         let (bs, lobe) = if let Bsdf::Polarizer(p) = bsdf {
             // Mitsuba `polarizer`: the beam travels along wi_world through the sheet.
-            let (Some(axis), Some(bs)) = (
-                setup.polarizer_v_axis[si.shape as usize],
-                p.sample(&ctx, wi),
-            ) else {
+            let (Some((u_axis, v_axis)), Some(bs)) =
+                (setup.polarizer_axes[si.shape as usize], p.sample(&ctx, wi))
+            else {
                 break;
             };
-            let (m, b) = p.mueller(wi_world, axis);
+            let (m, b) = p.mueller(wi_world, u_axis, v_axis);
             let t = p.transmittance.eval(si.uv, wl).to_array();
             let lobe = Lobe {
                 depol: Spec::ZERO,

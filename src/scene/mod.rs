@@ -218,10 +218,11 @@ pub enum BsdfDesc {
         substrate_ior: Ior,
         alpha: f32,
     },
-    /// Ideal linear polariser sheet (Mitsuba `polarizer`): light passes straight through.
-    /// At `theta_deg` = 0 the transmission axis is the surface's u (dp/du) direction (the
-    /// absorbing axis is v); `theta_deg` turns it about the beam exactly as Mitsuba's
-    /// `rotated_element` does. Unpolarised renders see a neutral filter of transmittance / 2.
+    /// Ideal linear polariser sheet (Mitsuba 3.9 `polarizer`): light passes straight
+    /// through. The absorbing axis is sin θ·u + cos θ·v in the surface's tangent plane
+    /// (u = dp/du, v = n × u), so at θ = 0 it transmits along u; seen from the side the
+    /// normal points to, a positive θ turns the transmission axis from u away from v
+    /// (clockwise). Unpolarised renders see a neutral filter of transmittance / 2.
     Polarizer {
         theta_deg: f32,
         transmittance: TextureDesc,

@@ -4,10 +4,11 @@
 //! In an unpolarised render it is a neutral filter that passes half the light (times
 //! `transmittance`), which is what Mitsuba's unpolarised variants do. The polarised
 //! integrator ([`crate::render::integrator_polarized`]) instead applies the Mueller matrix
-//! of a linear polariser whose transmission axis is built as Mitsuba does: the absorbing
-//! axis is the surface's v direction (t = n × normalize(dp/du ⟂ n)) projected perpendicular
-//! to the beam (Korger et al. 2013, "The polarization properties of a tilted polarizer"),
-//! the transmission axis is forward × that, and the element is rotated by `theta_deg`.
+//! of a linear polariser whose transmission axis is built as Mitsuba 3.9 does: the absorbing
+//! axis is a = sin θ·u + cos θ·v in the surface's tangent plane (u = dp/du made ⟂ n,
+//! v = n × u; so the v direction at θ = 0), projected perpendicular to the beam (Korger et
+//! al. 2013, "The polarization properties of a tilted polarizer"); the transmission axis is
+//! forward × a.
 
 use super::{BsdfSample, ShadingCtx};
 use crate::render::polarization::{self, Mueller};
@@ -30,17 +31,22 @@ impl PolarizerBsdf {
     }
 
     /// Mueller matrix (same for every wavelength, before the transmittance) and the world
-    /// basis it is expressed in, for light travelling along `forward` (world, unit) through
-    /// a sheet whose absorbing axis at θ = 0 is `v_axis` (world, unit).
-    pub fn mueller(&self, forward: Vec3, v_axis: Vec3) -> (Mueller, Vec3) {
-        let m = polarization::rotated_element(self.theta, &polarization::linear_polarizer(1.0));
-        let a = v_axis - v_axis.dot(forward) * forward;
+    /// basis it is expressed in, for light travelling along `forward` (world, unit) through a
+    /// sheet with world tangents `u_axis` (normalised dp/du ⟂ n) and `v_axis` = n × u.
+    ///
+    /// Mitsuba 3.9 (`polarizer.cpp`): the absorbing axis is a = sin θ·u + cos θ·v (v at θ = 0),
+    /// made perpendicular to the beam (Korger et al. 2013); the polariser transmits along
+    /// forward × a, where the unrotated [`polarization::linear_polarizer`] applies.
+    pub fn mueller(&self, forward: Vec3, u_axis: Vec3, v_axis: Vec3) -> (Mueller, Vec3) {
+        let (s, c) = self.theta.sin_cos();
+        let a = s * u_axis + c * v_axis;
+        let a = a - a.dot(forward) * forward;
         let a = if a.length_squared() > 1e-12 {
             a.normalize()
         } else {
             // Beam along the absorbing axis (grazing): any perpendicular frame.
             polarization::stokes_basis(forward)
         };
-        (m, forward.cross(a))
+        (polarization::linear_polarizer(1.0), forward.cross(a))
     }
 }

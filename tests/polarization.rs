@@ -110,10 +110,7 @@ fn s_polariser_render_reproduces_the_s_reflectance_the_estimator_is_given() {
         let env = li_pol(&scene, up, true);
         let expected_env = if pol.is_empty() { 1.0 } else { 0.5 };
         for k in 0..4 {
-            assert!(
-                (env[k] - expected_env).abs() < 1e-5,
-                "{pol}: env {env:?}"
-            );
+            assert!((env[k] - expected_env).abs() < 1e-5, "{pol}: env {env:?}");
         }
         // (0.01°, not 0°: a ray exactly along −y slips past the zero-thickness bounding box of the
         // flat floor in the BVH — a separate, pre-existing accel edge case.)
@@ -284,10 +281,7 @@ fn polariser_scene_matches_mitsuba_polarised_and_a_rotated_polariser_fails() {
             "polarizer_spheres θ={wrong}° vs the θ=30° reference: mean ΔE00 {:.3}",
             m.delta_e00_mean
         );
-        assert!(
-            m.delta_e00_mean > 1.0,
-            "θ={wrong}° went unnoticed: {m:?}"
-        );
+        assert!(m.delta_e00_mean > 1.0, "θ={wrong}° went unnoticed: {m:?}");
     }
 }
 
@@ -313,6 +307,9 @@ fn polariser_scene_errors_are_clear() {
         <shape type="sphere"><bsdf type="polarizer"><float name="theta" value="10"/></bsdf></shape>
     </scene>"#;
     let scene = load(xml).unwrap();
-    let e = format!("{:#}", prepare(&scene, &RenderOptions::default()).err().unwrap());
+    let e = format!(
+        "{:#}",
+        prepare(&scene, &RenderOptions::default()).err().unwrap()
+    );
     assert!(e.contains("polarizer") && e.contains("planar"), "{e}");
 }

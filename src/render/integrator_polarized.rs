@@ -81,7 +81,10 @@ impl PolarizedSetup {
             match bsdfs.get(shape.bsdf) {
                 Some(Bsdf::Polarizer(_)) => {}
                 Some(Bsdf::TwoSided(inner)) if matches!(**inner, Bsdf::Polarizer(_)) => {
-                    bail!("{}: a polarizer is already two-sided; remove the twosided wrapper", name())
+                    bail!(
+                        "{}: a polarizer is already two-sided; remove the twosided wrapper",
+                        name()
+                    )
                 }
                 _ => continue,
             }
@@ -184,13 +187,7 @@ impl Lobe {
     }
 
     /// The row after this vertex and its new basis (for light travelling along −wo_world).
-    fn propagate(
-        &self,
-        rows: &mut [Stokes; 4],
-        basis: &mut Vec3,
-        wi_world: Vec3,
-        wo_world: Vec3,
-    ) {
+    fn propagate(&self, rows: &mut [Stokes; 4], basis: &mut Vec3, wi_world: Vec3, wo_world: Vec3) {
         let d = self.depol.to_array();
         match &self.pol {
             None => {

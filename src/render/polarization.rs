@@ -66,7 +66,9 @@ impl Mueller {
 
     #[inline]
     pub fn transpose(&self) -> Mueller {
-        Mueller(std::array::from_fn(|i| std::array::from_fn(|j| self.0[j][i])))
+        Mueller(std::array::from_fn(|i| {
+            std::array::from_fn(|j| self.0[j][i])
+        }))
     }
 
     #[inline]
@@ -181,7 +183,12 @@ pub fn rotate_mueller_basis(
 pub fn row_times_rotation(row: Stokes, forward: Vec3, current: Vec3, target: Vec3) -> Stokes {
     let (c, s) = basis_rotation_cs(forward, current, target);
     // R = [[1,0,0,0],[0,c,s,0],[0,−s,c,0],[0,0,0,1]].
-    [row[0], row[1] * c - row[2] * s, row[1] * s + row[2] * c, row[3]]
+    [
+        row[0],
+        row[1] * c - row[2] * s,
+        row[1] * s + row[2] * c,
+        row[3],
+    ]
 }
 
 /// Mueller matrix of a reflection with complex amplitudes `a_s`, `a_p` (Mitsuba convention),
@@ -339,6 +346,7 @@ pub fn degree_of_polarization(s: Stokes) -> f32 {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // 4×4 matrices are compared entry by entry
 mod tests {
     use super::*;
     use crate::optics::{Complex64, ThinFilm};
@@ -395,7 +403,8 @@ mod tests {
         let out = specular_reflection(brewster, 1.5).apply(UNPOL);
         assert!(close(degree_of_polarization(out), 1.0, 1e-4), "{out:?}");
         // Gold at 550 nm, 60°: matches the optics core's R_s and R_p.
-        let au = crate::optics::Ior::Material(crate::optics::dispersion::lookup("Au").unwrap()).at(550.0);
+        let au = crate::optics::Ior::Material(crate::optics::dispersion::lookup("Au").unwrap())
+            .at(550.0);
         let c = 60f64.to_radians().cos();
         let m = specular_reflection_conductor(c as f32, Complex32::new(au.re as f32, au.im as f32));
         let r = ThinFilm {
@@ -477,7 +486,11 @@ mod tests {
         let want = rotator(0.3);
         for i in 0..4 {
             for j in 0..4 {
-                assert!(close(rotate_stokes_basis(f, b0, b1).0[i][j], want.0[i][j], 1e-5));
+                assert!(close(
+                    rotate_stokes_basis(f, b0, b1).0[i][j],
+                    want.0[i][j],
+                    1e-5
+                ));
             }
         }
         // Covector form agrees with the matrix.
@@ -571,7 +584,10 @@ mod tests {
         let want = specular_reflection_conductor(c as f32, Complex32::new(0.2, 3.4));
         for i in 0..4 {
             for j in 0..4 {
-                assert!(close(m.0[i][j], want.0[i][j], 1e-5), "{i}{j}: {m:?} {want:?}");
+                assert!(
+                    close(m.0[i][j], want.0[i][j], 1e-5),
+                    "{i}{j}: {m:?} {want:?}"
+                );
             }
         }
     }

@@ -248,39 +248,49 @@ fn metrics(ours: &RgbImage, reference: &RgbImage) -> ImageMetrics {
     compare_images(&a, &b).unwrap()
 }
 
-#[test]
-fn polariser_scene_matches_mitsuba_polarised_and_a_rotated_polariser_fails() {
+/// Our render of a reference scene (64×64, seed 7) with `theta` overridden, compared with the
+/// committed Mitsuba polarised reference of the scene at its default angle.
+fn against_mitsuba(name: &str, theta: Option<&str>, spp: u32) -> ImageMetrics {
     let refs = load_manifest(&repo()).unwrap();
     let r = refs
         .iter()
-        .find(|r| r.name == "polarizer_spheres")
-        .expect("polarizer_spheres in tests/references/manifest.json");
+        .find(|r| r.name == name)
+        .unwrap_or_else(|| panic!("{name} missing from tests/references/manifest.json"));
     let reference = read_exr_rgb(&r.exr).unwrap();
-    let run = |theta: &str, spp: u32| {
-        let scene =
-            thinfilm::scene::load(&r.scene, &[("theta".to_string(), theta.to_string())]).unwrap();
-        let options = RenderOptions {
-            spp: Some(spp),
-            seed: Some(7),
-            resolution: Some((64, 64)),
-            ..Default::default()
-        };
-        metrics(&render(&scene, &options).unwrap().image, &reference)
+    let defines: Vec<(String, String)> = theta
+        .map(|t| vec![("theta".to_string(), t.to_string())])
+        .unwrap_or_default();
+    let scene = thinfilm::scene::load(&r.scene, &defines).unwrap();
+    let options = RenderOptions {
+        spp: Some(spp),
+        seed: Some(7),
+        resolution: Some((64, 64)),
+        ..Default::default()
     };
-    let m = run("30", 512);
+    let m = metrics(&render(&scene, &options).unwrap().image, &reference);
     eprintln!(
-        "polarizer_spheres θ=30°: mean ΔE00 {:.3} (p95 {:.3}), bias {:?}",
-        m.delta_e00_mean, m.delta_e00_p95, m.mean_bias_rgb
+        "{name} θ={}: mean ΔE00 {:.3} (p95 {:.3}), bias {:?}",
+        theta.unwrap_or("default"),
+        m.delta_e00_mean,
+        m.delta_e00_p95,
+        m.mean_bias_rgb
     );
-    assert!(m.delta_e00_mean <= 1.0, "{m:?}");
-    assert!(m.max_abs_bias() < 0.01, "{m:?}");
-    // The polariser turned by 90° (and, separately, the opposite rotation sense) must fail.
+    m
+}
+
+#[test]
+fn polariser_scenes_match_mitsuba_polarised_and_a_rotated_polariser_fails() {
+    // Delta BSDFs only (conductor, dielectrics) and non-delta ones (rough conductor, diffuse:
+    // emitter sampling, MIS, microfacet frames).
+    for (name, spp) in [("polarizer_spheres", 512), ("polarizer_rough", 256)] {
+        let m = against_mitsuba(name, None, spp);
+        assert!(m.delta_e00_mean <= 1.0, "{name}: {m:?}");
+        assert!(m.max_abs_bias() < 0.01, "{name}: {m:?}");
+    }
+    // The polariser turned by 90° (and, separately, the opposite rotation sense) must fail
+    // against the θ = 30° reference.
     for wrong in ["120", "-30"] {
-        let m = run(wrong, 128);
-        eprintln!(
-            "polarizer_spheres θ={wrong}° vs the θ=30° reference: mean ΔE00 {:.3}",
-            m.delta_e00_mean
-        );
+        let m = against_mitsuba("polarizer_spheres", Some(wrong), 128);
         assert!(m.delta_e00_mean > 1.0, "θ={wrong}° went unnoticed: {m:?}");
     }
 }

@@ -364,8 +364,14 @@ fn effect_analysis_switches_interference() {
 
     let mut polarised = film_scene(4, 1);
     polarised.polarizer = Some(Polarizer::S);
-    let err = render(&polarised, &RenderOptions::default()).unwrap_err();
-    assert!(format!("{err:#}").contains("polariser"));
+    // Polarised rendering (issue 9): the polariser switches the polarised integrator on.
+    let out = render(&polarised, &RenderOptions::default()).unwrap();
+    assert!(out.effects.polarization);
+    assert!(out
+        .effects
+        .reasons
+        .iter()
+        .any(|r| r.starts_with("polarisation: ON")));
 }
 
 /// No NaN/inf: grazing views of a film-coated floor, zero-thickness films, smooth and rough,

@@ -240,6 +240,15 @@ fn scenes_without_a_polariser_keep_the_unpolarised_integrator() {
         }
     }
     assert!(seen >= 5);
+    // The seed's S-camera example (thinfilm's sensor extension, outside scenes/*.xml).
+    let path = dir.join("extensions/seed_s_camera.xml");
+    let scene = thinfilm::scene::load(&path, &[]).unwrap();
+    assert_eq!(scene.polarizer, Some(Polarizer::S));
+    let prepared = prepare(&scene, &RenderOptions::default()).unwrap();
+    assert!(prepared
+        .effects
+        .to_string()
+        .contains("polarisation: ON — because of an S polariser on the sensor"));
 }
 
 fn metrics(ours: &RgbImage, reference: &RgbImage) -> ImageMetrics {

@@ -211,6 +211,22 @@ pub enum BsdfDesc {
         substrate_ior: Ior,
         alpha: f32,
     },
+    /// Multilayer coating on an opaque substrate (`thinfilm` with a `layers` string): the
+    /// Fresnel term is the transfer-matrix reflectance of the stack (top layer first).
+    ThinFilmStack {
+        /// (index, physical thickness in nm), from the ambient side down to the substrate.
+        layers: Vec<(Ior, f64)>,
+        substrate_ior: Ior,
+        alpha: f32,
+    },
+    /// Free-standing film between two identical ambient media (`thinfilm_bubble`: a soap
+    /// bubble): coherent Airy reflection and transmission, two-sided, transmission straight
+    /// through.
+    Bubble {
+        film_ior: Ior,
+        thickness_nm: TextureDesc,
+        ext_ior: Ior,
+    },
 }
 
 impl BsdfDesc {

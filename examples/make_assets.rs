@@ -3,6 +3,9 @@
 //! - `scenes/textures/studio.exr` — the procedural studio sky (src/scene/sky.rs);
 //! - `scenes/textures/thickness_example.exr` — a smooth synthetic film-thickness map in nm
 //!   (one channel named `Y`, so Mitsuba's bitmap plugin reads it as a monochrome texture).
+//! - `scenes/textures/bubble_thickness.exr` — soap-film thickness in nm on a sphere's (u, v)
+//!   (v = 0 at the top pole): gravity drainage, thin (~30 nm, "black film") at the top and
+//!   ~900 nm at the bottom, with swirls; periodic in u so the sphere has no seam.
 //!
 //! Run from the repository root: `cargo run --release --example make_assets [OUT_DIR]`
 //! (OUT_DIR defaults to `scenes`).
@@ -44,5 +47,38 @@ fn main() -> Result<()> {
             (a.min(v), b.max(v))
         });
     println!("{}: {tw}×{th}, {mn:.1}–{mx:.1} nm", path.display());
+
+    let (bw, bh) = (256, 128);
+    let bubble = bubble_thickness(bw, bh);
+    let path = out.join("textures/bubble_thickness.exr");
+    write_exr_channels(&path, bw, bh, &[("Y", &bubble)])?;
+    let (mn, mx) = bubble
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    println!("{}: {bw}×{bh}, {mn:.1}–{mx:.1} nm", path.display());
     Ok(())
+}
+
+/// Soap-bubble thickness (nm) over a sphere's Mitsuba UVs (u = φ/2π, v = θ/π, θ from the top
+/// pole +z). A draining film thins from the top: its thickness grows roughly as a power of
+/// the depth below the top (the marginal-regeneration profile of draining vertical soap films,
+/// h ∝ depth^½…^1; here ^1.4 for a visible band sequence), plus convective swirls whose
+/// amplitude vanishes at the poles. Periodic in u (integer angular frequencies).
+fn bubble_thickness(width: usize, height: usize) -> Vec<f32> {
+    use std::f32::consts::PI;
+    let mut out = Vec::with_capacity(width * height);
+    for i in 0..height {
+        for j in 0..width {
+            let u = (j as f32 + 0.5) / width as f32;
+            let v = (i as f32 + 0.5) / height as f32;
+            let base = 30.0 + 870.0 * v.powf(1.4);
+            let phase = 2.0 * PI * (3.0 * u) + 9.0 * v + 1.5 * (2.0 * PI * u).sin();
+            let swirl = 90.0 * (PI * v).sin() * phase.sin()
+                + 40.0 * (PI * v).sin().powi(2) * (2.0 * PI * 5.0 * u - 14.0 * v).sin();
+            out.push((base + swirl).max(10.0));
+        }
+    }
+    out
 }

@@ -12,6 +12,11 @@ Regenerate the committed references (from the repository root):
     export DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
     python3 tools/mitsuba/render_references.py --spp 4096 --size 128
 
+Only some scenes (the others stay in the manifest):
+    python3 tools/mitsuba/render_references.py --spp 4096 --size 128 --only bubble --only coatings
+
+Scenes in NO_MITSUBA_REFERENCE (prism.xml: dispersion) are skipped with the reason.
+
 Other modes:
     --material path/to/material.xml   also render a material written by `thinfilm estimate`
     --bench SCENE --spp 16,64,256 --out-dir DIR --json
@@ -147,12 +152,22 @@ def compose_material_scene(material_path, template_path, out_path):
     raise ValueError(f"{template_path}: no <bsdf id=\"fitted_material\"> placeholder")
 
 
+# Scenes Mitsuba cannot render faithfully, with the reason (printed when skipped).
+NO_MITSUBA_REFERENCE = {
+    "prism": "dispersive dielectric (Mitsuba's dielectric takes a constant index only)",
+}
+
+
 def scene_list(args):
     """(name, scene file, material file or None); material scenes are composed on the fly."""
     scenes = []
     sdir = os.path.join(REPO, args.scenes_dir)
     if os.path.isdir(sdir):
         for name in sorted(os.listdir(sdir)):
+            stem = os.path.splitext(name)[0]
+            if name.endswith(".xml") and stem in NO_MITSUBA_REFERENCE:
+                print(f"skipping {name}: {NO_MITSUBA_REFERENCE[stem]}", file=sys.stderr)
+                continue
             if name.endswith(".xml"):
                 scenes.append((os.path.splitext(name)[0], os.path.join(sdir, name), None))
     if args.dev_scenes:
@@ -255,6 +270,9 @@ def main():
             "rfilter": "box",
             "seconds": round(secs, 2),
         }
+    if args.only and "command" in manifest:
+        # A partial re-render (--only) keeps the command that regenerates everything.
+        command = manifest["command"]
     manifest.update(
         {
             "mitsuba_version": mi.__version__,

@@ -149,8 +149,8 @@ fn effect_analysis_reports_films_and_stacks() {
     assert!(l.contains("MgF2:99.6") && l.contains("13 layers"), "{l}");
     let e = effects::analyze(&load_file("teapot_mgf2_400.xml", &[])).unwrap();
     assert!(!e.bubble && !e.stack);
-    assert!(line(&e, "free-standing film: off").len() > 0);
-    assert!(line(&e, "multilayer stack: off").len() > 0);
+    assert!(!line(&e, "free-standing film: off").is_empty());
+    assert!(!line(&e, "multilayer stack: off").is_empty());
     let e = effects::analyze(&load_file("prism.xml", &[])).unwrap();
     assert!(e.dispersion && !e.interference);
 }
@@ -180,7 +180,9 @@ fn scene_syntax_for_films_stacks_and_dispersion() {
         other => panic!("{other:?}"),
     }
     match bsdf(r#"<bsdf type="thinfilm_bubble"/>"#).unwrap() {
-        BsdfDesc::Bubble { film_ior, ext_ior, .. } => {
+        BsdfDesc::Bubble {
+            film_ior, ext_ior, ..
+        } => {
             assert_eq!(film_ior.at(500.0).re, 1.33);
             assert_eq!(ext_ior.at(500.0).re, 1.0);
         }
@@ -196,31 +198,79 @@ fn scene_syntax_for_films_stacks_and_dispersion() {
     // Mitsuba's IOR table wins for bare names: the scene renders as in Mitsuba.
     let bk7 = dielectric("bk7").unwrap();
     assert!(!bk7.is_dispersive() && bk7.at(500.0).re == 1.5046);
-    for v in ["material:BK7", "SiO2", "cauchy:1.5046,4200", "sellmeier:1.03961212,0.00600069867"] {
+    for v in [
+        "material:BK7",
+        "SiO2",
+        "cauchy:1.5046,4200",
+        "sellmeier:1.03961212,0.00600069867",
+    ] {
         assert!(dielectric(v).unwrap().is_dispersive(), "{v}");
     }
     // Tabulated spectrum → dispersive too.
-    match bsdf(r#"<bsdf type="dielectric"><spectrum name="int_ior" value="400:1.53, 700:1.51"/></bsdf>"#).unwrap() {
+    match bsdf(
+        r#"<bsdf type="dielectric"><spectrum name="int_ior" value="400:1.53, 700:1.51"/></bsdf>"#,
+    )
+    .unwrap()
+    {
         BsdfDesc::Dielectric { int_ior, .. } => assert!(int_ior.is_dispersive()),
         other => panic!("{other:?}"),
     }
     // Errors name the problem and the line.
     for (xml, want) in [
-        (r#"<bsdf type="thinfilm"><string name="layers" value="MgF2"/></bsdf>"#, "MgF2:100"),
-        (r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:-3"/></bsdf>"#, "≥ 0"),
-        (r#"<bsdf type="thinfilm"><string name="layers" value="Unobtainium:30"/></bsdf>"#, "Unobtainium"),
-        (r#"<bsdf type="thinfilm"><string name="layers" value="(MgF2:3"/></bsdf>"#, "unbalanced"),
-        (r#"<bsdf type="thinfilm"><string name="layers" value="(MgF2:3)x0"/></bsdf>"#, "xN"),
-        (r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:3,"/></bsdf>"#, "empty layer"),
-        (r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:3"/><float name="thickness" value="3"/></bsdf>"#, "cannot be combined"),
-        (r#"<bsdf type="thinfilm_bubble"><float name="thickness" value="-1"/></bsdf>"#, "≥ 0"),
-        (r#"<bsdf type="thinfilm_bubble"><string name="ext_ior" value="water"/></bsdf>"#, "constant real"),
-        (r#"<bsdf type="dielectric"><string name="int_ior" value="Au"/></bsdf>"#, "absorbs"),
-        (r#"<bsdf type="dielectric"><string name="int_ior" value="cauchy:1.5"/></bsdf>"#, "cauchy"),
-        (r#"<bsdf type="dielectric"><string name="int_ior" value="glass?"/></bsdf>"#, "Mitsuba IOR names"),
+        (
+            r#"<bsdf type="thinfilm"><string name="layers" value="MgF2"/></bsdf>"#,
+            "MgF2:100",
+        ),
+        (
+            r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:-3"/></bsdf>"#,
+            "≥ 0",
+        ),
+        (
+            r#"<bsdf type="thinfilm"><string name="layers" value="Unobtainium:30"/></bsdf>"#,
+            "Unobtainium",
+        ),
+        (
+            r#"<bsdf type="thinfilm"><string name="layers" value="(MgF2:3"/></bsdf>"#,
+            "unbalanced",
+        ),
+        (
+            r#"<bsdf type="thinfilm"><string name="layers" value="(MgF2:3)x0"/></bsdf>"#,
+            "xN",
+        ),
+        (
+            r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:3,"/></bsdf>"#,
+            "empty layer",
+        ),
+        (
+            r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:3"/><float name="thickness" value="3"/></bsdf>"#,
+            "cannot be combined",
+        ),
+        (
+            r#"<bsdf type="thinfilm_bubble"><float name="thickness" value="-1"/></bsdf>"#,
+            "≥ 0",
+        ),
+        (
+            r#"<bsdf type="thinfilm_bubble"><string name="ext_ior" value="water"/></bsdf>"#,
+            "constant real",
+        ),
+        (
+            r#"<bsdf type="dielectric"><string name="int_ior" value="Au"/></bsdf>"#,
+            "absorbs",
+        ),
+        (
+            r#"<bsdf type="dielectric"><string name="int_ior" value="cauchy:1.5"/></bsdf>"#,
+            "cauchy",
+        ),
+        (
+            r#"<bsdf type="dielectric"><string name="int_ior" value="glass?"/></bsdf>"#,
+            "Mitsuba IOR names",
+        ),
     ] {
         let err = format!("{:#}", bsdf(xml).unwrap_err());
-        assert!(err.contains(want) && err.contains("test.xml:"), "{xml}: {err}");
+        assert!(
+            err.contains(want) && err.contains("test.xml:"),
+            "{xml}: {err}"
+        );
     }
 }
 

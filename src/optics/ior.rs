@@ -194,9 +194,10 @@ mod tests {
         assert!(c.is_dispersive());
         // n(500 nm) = 1.5046 + 4200/500².
         assert!((c.at(500.0).re - (1.5046 + 4200.0 / 250_000.0)).abs() < 1e-12);
-        let s: Ior = "sellmeier:1.03961212,0.00600069867,0.231792344,0.0200179144,1.01046945,103.560653"
-            .parse()
-            .unwrap();
+        let s: Ior =
+            "sellmeier:1.03961212,0.00600069867,0.231792344,0.0200179144,1.01046945,103.560653"
+                .parse()
+                .unwrap();
         // Same formula as the library's N-BK7: n_d = 1.5168.
         assert!((s.at(587.6).re - 1.5168).abs() < 1e-4, "{}", s.at(587.6));
         let bk7: Ior = "material:BK7".parse().unwrap();
@@ -207,7 +208,7 @@ mod tests {
             "cauchy:a,b",
             "cauchy:-3,0",
             "sellmeier:1.0",
-            "sellmeier:1.0,0.3",   // pole at λ = 548 nm inside the visible range
+            "sellmeier:1.0,0.3", // pole at λ = 548 nm inside the visible range
             "material:unobtainium",
             "cauchy:1.5,inf",
         ] {

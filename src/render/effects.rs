@@ -182,6 +182,9 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     } else {
         "multilayer stack: off — no thinfilm with layers in use".into()
     });
+    // Several shapes may share one glass: name each interface once.
+    dispersive.sort();
+    dispersive.dedup();
     e.dispersion = !dispersive.is_empty();
     e.reasons.push(if e.dispersion {
         format!("dispersion: ON — wavelength-dependent refraction at {}; secondary wavelengths terminate there", dispersive.join(", "))

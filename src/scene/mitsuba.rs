@@ -1084,7 +1084,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
         }
         let q = p.take("layers").expect("checked by the caller");
         let Val::Str(text) = &q.val else {
-            return Err(self.err(q.node, "layers must be a <string>, e.g. \"MgF2:100, TiO2:50\""));
+            return Err(self.err(
+                q.node,
+                "layers must be a <string>, e.g. \"MgF2:100, TiO2:50\"",
+            ));
         };
         let layers = parse_layers(text).map_err(|e| self.err(q.node, format!("layers: {e}")))?;
         let substrate_ior = match p.take("substrate_ior") {
@@ -1764,7 +1767,11 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
         out.push(text[start..].trim());
         Ok(out)
     }
-    fn parse(text: &str, out: &mut Vec<(Ior, f64)>, level: usize) -> std::result::Result<(), String> {
+    fn parse(
+        text: &str,
+        out: &mut Vec<(Ior, f64)>,
+        level: usize,
+    ) -> std::result::Result<(), String> {
         for item in items(text)? {
             if item.is_empty() {
                 return Err(format!("empty layer in \"{text}\""));
@@ -1794,14 +1801,21 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
             let (material, thickness) = item.rsplit_once(':').ok_or_else(|| {
                 format!("layer '{item}' must be index:thickness_nm, e.g. MgF2:100")
             })?;
-            let d: f64 = thickness
+            let d: f64 = thickness.trim().parse().map_err(|_| {
+                format!(
+                    "layer '{item}': thickness '{}' is not a number (nm)",
+                    thickness.trim()
+                )
+            })?;
+            if !(d.is_finite() && d >= 0.0) {
+                return Err(format!(
+                    "layer '{item}': thickness must be finite and ≥ 0 nm"
+                ));
+            }
+            let ior: Ior = material
                 .trim()
                 .parse()
-                .map_err(|_| format!("layer '{item}': thickness '{}' is not a number (nm)", thickness.trim()))?;
-            if !(d.is_finite() && d >= 0.0) {
-                return Err(format!("layer '{item}': thickness must be finite and ≥ 0 nm"));
-            }
-            let ior: Ior = material.trim().parse().map_err(|e| format!("layer '{item}': {e}"))?;
+                .map_err(|e| format!("layer '{item}': {e}"))?;
             out.push((ior, d));
             if out.len() > 10_000 {
                 return Err("more than 10000 layers".into());

@@ -53,7 +53,13 @@ impl BubbleBsdf {
             substrate_ior: [ambient; 4],
         };
         let resp = film.response(ctx.wl.lambda, cos_theta.abs().min(1.0));
-        let clean = |v: f32| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
+        let clean = |v: f32| {
+            if v.is_finite() {
+                v.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        };
         let r = resp.r().map(clean);
         let t = resp.t().map(clean);
         (Spec::from_array(r), Spec::from_array(t))

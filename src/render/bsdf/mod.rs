@@ -210,12 +210,17 @@ impl Bsdf {
                 ext_ior,
             } => {
                 let ext = ext_ior.at(550.0);
-                if ext_ior.is_dispersive() || ext.im != 0.0 || !(ext.re > 0.0 && ext.re.is_finite()) {
-                    anyhow::bail!("thinfilm_bubble: ext_ior must be a constant real index > 0, got {ext_ior}");
+                if ext_ior.is_dispersive() || ext.im != 0.0 || !(ext.re > 0.0 && ext.re.is_finite())
+                {
+                    anyhow::bail!(
+                        "thinfilm_bubble: ext_ior must be a constant real index > 0, got {ext_ior}"
+                    );
                 }
                 let n = film_ior.at(550.0);
                 if !(n.re > 0.0 && n.re.is_finite() && n.im >= 0.0) {
-                    anyhow::bail!("thinfilm_bubble: film_ior must have n > 0 and k ≥ 0, got {film_ior}");
+                    anyhow::bail!(
+                        "thinfilm_bubble: film_ior must have n > 0 and k ≥ 0, got {film_ior}"
+                    );
                 }
                 Bsdf::Bubble(BubbleBsdf {
                     film_ior: film_ior.clone(),

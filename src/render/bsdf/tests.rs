@@ -596,8 +596,18 @@ fn bubble_matches_airy_and_absorbs_when_lossy() {
                 substrate_ior: crate::optics::Complex64::new(1.0, 0.0),
             }
             .response(wl.lambda[k] as f64, cos as f64);
-            assert!((r[k] as f64 - f.r()).abs() < 1e-5, "R {} vs {}", r[k], f.r());
-            assert!((t[k] as f64 - f.t()).abs() < 1e-5, "T {} vs {}", t[k], f.t());
+            assert!(
+                (r[k] as f64 - f.r()).abs() < 1e-5,
+                "R {} vs {}",
+                r[k],
+                f.r()
+            );
+            assert!(
+                (t[k] as f64 - f.t()).abs() < 1e-5,
+                "T {} vs {}",
+                t[k],
+                f.t()
+            );
         }
     }
     // Colour: a 350 nm water film reflects very differently across the visible.
@@ -633,7 +643,9 @@ fn bubble_sampling_frequencies_and_weights() {
         let (mut n_r, mut mean) = (0usize, Spec::ZERO);
         let mut s = Sampler::from_seed(17);
         for _ in 0..n {
-            let smp = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), &mut c).unwrap();
+            let smp = b
+                .sample(&ctx, wi, s.next_1d(), s.next_2d(), &mut c)
+                .unwrap();
             assert!(smp.delta && smp.eta == 1.0);
             if smp.wo.z * wi.z > 0.0 {
                 n_r += 1;
@@ -641,7 +653,10 @@ fn bubble_sampling_frequencies_and_weights() {
                 assert!(((smp.weight - r / p_r).abs()).max_element() < 1e-5);
                 assert!((smp.pdf - p_r).abs() < 1e-6);
             } else {
-                assert!((smp.wo + wi).length() < 1e-6, "transmission must go straight through");
+                assert!(
+                    (smp.wo + wi).length() < 1e-6,
+                    "transmission must go straight through"
+                );
                 assert!(((smp.weight - t / (1.0 - p_r)).abs()).max_element() < 1e-5);
             }
             mean += smp.weight;
@@ -651,7 +666,10 @@ fn bubble_sampling_frequencies_and_weights() {
         let chi2 = (n_r as f64 - expected_r).powi(2) / expected_r
             + ((n - n_r) as f64 - expected_t).powi(2) / expected_t;
         // χ²(1 dof) > 10.83 has probability 0.001.
-        assert!(chi2 < 10.83, "θ={theta}: χ² {chi2}, P_R {p_r}, observed {n_r}/{n}");
+        assert!(
+            chi2 < 10.83,
+            "θ={theta}: χ² {chi2}, P_R {p_r}, observed {n_r}/{n}"
+        );
         mean /= n as f32;
         for k in 0..4 {
             assert!((mean[k] - 1.0).abs() < 0.02, "θ={theta}: E[w] {mean}");
@@ -669,7 +687,7 @@ fn bubble_sampling_frequencies_and_weights() {
 /// (indices from the dispersion library at each path wavelength) and angle.
 #[test]
 fn stack_reflectance_equals_tmm() {
-    use crate::optics::{dispersion, Complex64, Layer, Stack};
+    use crate::optics::{dispersion, Layer, Stack};
     let Bsdf::Stack(b) = stack("MgF2:100, TiO2:50", "BK7", 0.0) else {
         unreachable!()
     };
@@ -707,7 +725,6 @@ fn stack_reflectance_equals_tmm() {
         let (b, _) = airy.reflect_transmit(&ctx_of(&wl), cos, &mut c);
         assert!((a - b).abs().max_element() < 2e-5, "{a} vs {b}");
     }
-    let _ = Complex64::new(0.0, 0.0);
 }
 
 /// Coatings behave as designed: a quarter-wave MgF2 layer on BK7 cuts the 550 nm reflectance
@@ -725,7 +742,11 @@ fn ar_coating_and_dielectric_mirror() {
     };
     let bare = stack("MgF2:0", "BK7", 0.0);
     let ar = stack("MgF2:99.6", "BK7", 0.0);
-    assert!((at(&bare, 550.0) - 0.0420).abs() < 0.002, "{}", at(&bare, 550.0));
+    assert!(
+        (at(&bare, 550.0) - 0.0420).abs() < 0.002,
+        "{}",
+        at(&bare, 550.0)
+    );
     assert!(at(&ar, 550.0) < 0.014, "{}", at(&ar, 550.0));
     // Blue and red reflect more than green: the purple look of coated optics.
     assert!(at(&ar, 420.0) > at(&ar, 550.0) && at(&ar, 700.0) > at(&ar, 550.0));
@@ -761,7 +782,9 @@ fn dispersion_terminates_only_when_declared() {
     for spec in ["cauchy:1.5046,4200", "material:BK7"] {
         let mut c = Counters::default();
         let g = glass(spec);
-        let smp = g.sample(&ctx, dir(40.0, 0.0), 0.99, Vec2::ZERO, &mut c).unwrap();
+        let smp = g
+            .sample(&ctx, dir(40.0, 0.0), 0.99, Vec2::ZERO, &mut c)
+            .unwrap();
         assert!(smp.terminate_secondary && smp.wo.z < 0.0, "{spec}");
         assert_eq!(c.secondary_terminations, 1);
         // Refraction uses the hero wavelength's index (420 nm): Snell with n(420).

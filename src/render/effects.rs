@@ -138,6 +138,20 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
                 };
                 stacks.push(format!("[{shown}] on {substrate_ior}"));
             }
+            BsdfDesc::CoatedDielectric {
+                layers,
+                int_ior,
+                ext_ior,
+            } => {
+                films += 1;
+                e.interference = true;
+                e.stack = true;
+                let names: Vec<String> = layers.iter().map(|(n, d)| format!("{n}:{d}")).collect();
+                stacks.push(format!("coating [{}] on dielectric {int_ior}/{ext_ior}", names.join(", ")));
+                if int_ior.is_dispersive() || ext_ior.is_dispersive() {
+                    dispersive.push(format!("coated dielectric {int_ior}/{ext_ior}"));
+                }
+            }
             BsdfDesc::Conductor {
                 alpha_u, alpha_v, ..
             } if *alpha_u > 0.0 || *alpha_v > 0.0 => {

@@ -842,6 +842,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "twosided",
             "thinfilm",
             "thinfilm_bubble",
+            "coateddielectric",
         ];
         let plugin = p.plugin.clone();
         Ok(match plugin.as_str() {
@@ -965,6 +966,26 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 BsdfDesc::TwoSided(Box::new(b))
             }
             "thinfilm" if p.list.iter().any(|q| q.name == "layers") => self.thinfilm_stack(p)?,
+            "coateddielectric" => {
+                let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
+                let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
+                let Some(q) = p.take("coating") else {
+                    return Err(self.err(
+                        p.node,
+                        "coateddielectric needs a <string name=\"coating\"> of layers, e.g. \"MgF2:99.6\"",
+                    ));
+                };
+                let Val::Str(text) = &q.val else {
+                    return Err(self.err(q.node, "coating must be a <string> of layers, e.g. \"MgF2:99.6\""));
+                };
+                let layers =
+                    parse_layers(text).map_err(|e| self.err(q.node, format!("coating: {e}")))?;
+                BsdfDesc::CoatedDielectric {
+                    layers,
+                    int_ior,
+                    ext_ior,
+                }
+            }
             "thinfilm_bubble" => {
                 let film_ior = match p.take("film_ior") {
                     None => Ior::real(1.33),

@@ -219,6 +219,15 @@ pub enum BsdfDesc {
         substrate_ior: Ior,
         alpha: f32,
     },
+    /// Smooth dielectric interface with a multilayer coating on its outside
+    /// (`coateddielectric` with a `coating` string, e.g. an anti-reflection coated lens): the stack's R and T replace the
+    /// Fresnel terms; refraction follows Snell between `ext_ior` and `int_ior`.
+    CoatedDielectric {
+        /// (index, thickness nm) from the outside (ext_ior side) inwards.
+        layers: Vec<(Ior, f64)>,
+        int_ior: Ior,
+        ext_ior: Ior,
+    },
     /// Free-standing film between two identical ambient media (`thinfilm_bubble`: a soap
     /// bubble): coherent Airy reflection and transmission, two-sided, transmission straight
     /// through.

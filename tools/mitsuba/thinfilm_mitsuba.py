@@ -36,8 +36,12 @@ on both sides; coherent Airy R and T (s and p averaged), two-sided; reflection i
 direction, transmission goes straight through (weight T, eta 1); the lobe is chosen with
 probability mean(R) / (mean(R) + mean(T)) over the four wavelengths.
 
+Coated glass (`coateddielectric`: float `int_ior`, `ext_ior` (default 1.000277), string
+`coating` of lossless layers on the outside): R from the stack seen from the side the light
+arrives on, T = 1 - R, Snell refraction between the bulk media, Mitsuba dielectric weights.
+
 Use: `import thinfilm_mitsuba; thinfilm_mitsuba.setup(variant)` after which scene files with
-`<bsdf type="thinfilm">` and `<bsdf type="thinfilm_bubble">` load.
+`<bsdf type="thinfilm">`, `"thinfilm_bubble"` and `"coateddielectric"` load.
 """
 
 import math
@@ -219,19 +223,19 @@ def parse_layers(text):
     return out
 
 
-def stack_reflectance(dr, lambda_nm, cos_i, layers, substrate):
+def stack_reflectance(dr, lambda_nm, cos_i, layers, substrate, ambient=1.0):
     """Unpolarised reflectance of air | layers (real indices: names or numbers) | substrate
     by the Rouard recursion r_j = (r_{j-1,j} + r_{j+1} e^{2i beta_j}) / (1 + r_{j-1,j} r_{j+1} e^{2i beta_j}),
     float64. Works on drjit Float64 arrays or Python floats (then dr may be the math-like shim)."""
     cos_i = dr.clip(cos_i, 0.0, 1.0)
-    kx2 = 1.0 - cos_i * cos_i
+    kx2 = ambient * ambient * (1.0 - cos_i * cos_i)
     zero = 0.0 * cos_i
-    media = [(1.0 + zero, zero)]
+    media = [(ambient + zero, zero)]
     for name, _d in layers:
         media.append((material_index(name, lambda_nm, dr) + zero, zero))
     media.append((material_index(substrate, lambda_nm, dr) + zero, zero))
     nsq = [_cmul(n, n) for n in media]
-    nc = [(cos_i, zero)] + [_csqrt_upper((q[0] - kx2, q[1]), dr) for q in nsq[1:]]
+    nc = [(ambient * cos_i, zero)] + [_csqrt_upper((q[0] - kx2, q[1]), dr) for q in nsq[1:]]
 
     def r_if(i, f, pol):
         if pol == "s":
@@ -516,6 +520,72 @@ def _register(mi):
 
     mi.register_bsdf("thinfilm_bubble", lambda props: BubbleBSDF(props))
 
+    class CoatedDielectricBSDF(mi.BSDF):
+        """Smooth dielectric under a lossless multilayer coating on its outside
+        (`coateddielectric`): R from the stack seen from the arriving side, T = 1 - R,
+        refraction by Snell between ext_ior and int_ior, weights as Mitsuba's dielectric."""
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.int_ior = float(props.get("int_ior", 1.5046))
+            self.ext_ior = float(props.get("ext_ior", 1.000277))
+            self.layers = parse_layers(props.get("coating"))
+            for name, _d in self.layers:
+                material_index(name, 550.0)
+            self.eta = self.int_ior / self.ext_ior
+            sides = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
+            self.m_components = [
+                mi.BSDFFlags.DeltaReflection | sides,
+                mi.BSDFFlags.DeltaTransmission | sides | mi.BSDFFlags.NonSymmetric,
+            ]
+            self.m_flags = self.m_components[0] | self.m_components[1]
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            cos_i = mi.Frame3f.cos_theta(si.wi)
+            inside = cos_i < 0
+            c = mi.Float64(dr.abs(cos_i))
+            rs = []
+            for i in range(4):
+                lam = mi.Float64(si.wavelengths[i])
+                r_out = stack_reflectance(dr, lam, c, self.layers, self.int_ior, self.ext_ior)
+                r_in = stack_reflectance(dr, lam, c, self.layers[::-1], self.ext_ior, self.int_ior)
+                rs.append(mi.Float(dr.select(mi.Bool(inside), r_in, r_out)))
+            r = mi.Spectrum(*rs)
+            t = 1.0 - r
+            p_r = dr.clip((rs[0] + rs[1] + rs[2] + rs[3]) * 0.25, 0.0, 1.0)
+            if not ctx.is_enabled(mi.BSDFFlags.DeltaTransmission, 1):
+                p_r = mi.Float(1.0)
+            if not ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0):
+                p_r = mi.Float(0.0)
+            _f, cos_t, eta_it, eta_ti = mi.fresnel(cos_i, mi.Float(self.eta))
+            reflect = sample1 < p_r
+            bs = mi.BSDFSample3f()
+            bs.wo = dr.select(reflect, mi.reflect(si.wi), mi.refract(si.wi, cos_t, eta_ti))
+            bs.pdf = dr.select(reflect, p_r, 1.0 - p_r)
+            bs.eta = dr.select(reflect, mi.Float(1.0), eta_it)
+            bs.sampled_type = dr.select(
+                reflect, mi.UInt32(+mi.BSDFFlags.DeltaReflection), mi.UInt32(+mi.BSDFFlags.DeltaTransmission)
+            )
+            bs.sampled_component = dr.select(reflect, mi.UInt32(0), mi.UInt32(1))
+            # Radiance is compressed by eta^2 entering the denser medium (Mitsuba dielectric).
+            weight = dr.select(reflect, r / p_r, t / (1.0 - p_r) * dr.square(eta_ti))
+            active = mi.Bool(active) & (bs.pdf > 0) & (cos_i != 0)
+            return (bs, dr.select(active, weight, 0.0))
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return (mi.Spectrum(0.0), mi.Float(0.0))
+
+        def to_string(self):
+            return f"CoatedDielectricBSDF[int_ior={self.int_ior}, ext_ior={self.ext_ior}, coating={self.layers}]"
+
+    mi.register_bsdf("coateddielectric", lambda props: CoatedDielectricBSDF(props))
+
 
 def check_against_tmm(mi, tolerance=1e-9, log=print):
     """Checks airy_reflectance (as used by the plugin, on drjit Float64 arrays of the active
@@ -619,6 +689,18 @@ def check_against_tmm(mi, tolerance=1e-9, log=print):
                 err_stack = max(err_stack, abs(_scalar(r) - r_ref))
         worst = max(worst, err_stack)
         log(f"  tmm check stack [{layers}] on {sub}: max |R - R_tmm| = {err_stack:.2e}")
+    # Seen from inside the glass (coated dielectric), including total internal reflection.
+    ls = parse_layers("MgF2:99.6")
+    err_in = 0.0
+    for t in np.radians([0.0, 20.0, 40.0, 41.0, 60.0]):
+        for l in lams:
+            n_glass = 1.5168
+            ns = [n_glass, material_index("MgF2", l), 1.000277]
+            r_ref = 0.5 * sum(tmm.coh_tmm(pol, ns, [np.inf, 99.6, np.inf], t, l)["R"] for pol in "sp")
+            r = stack_reflectance(dr, mi.Float64(l), mi.Float64(math.cos(t)), ls[::-1], 1.000277, n_glass)
+            err_in = max(err_in, abs(_scalar(r) - r_ref))
+    worst = max(worst, err_in)
+    log(f"  tmm check coating seen from inside BK7-like glass (incl. TIR): max |R - R_tmm| = {err_in:.2e}")
     if worst > tolerance:
         raise AssertionError(f"Airy reflectance differs from tmm by {worst} > {tolerance}")
     return worst

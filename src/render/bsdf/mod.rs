@@ -27,7 +27,7 @@ pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
 pub use plastic::Plastic;
-pub use stack::StackBsdf;
+pub use stack::{CoatedDielectric, StackBsdf};
 pub use thinfilm::ThinFilmBsdf;
 
 /// What a BSDF needs to know about the shading point besides directions.
@@ -115,6 +115,8 @@ pub enum Bsdf {
     Stack(StackBsdf),
     /// Free-standing film (`thinfilm_bubble`), two-sided.
     Bubble(BubbleBsdf),
+    /// Dielectric interface under a multilayer coating (`coateddielectric`).
+    CoatedDielectric(CoatedDielectric),
     /// Mitsuba `twosided`: the back face behaves like the front.
     TwoSided(Box<Bsdf>),
 }
@@ -204,6 +206,29 @@ impl Bsdf {
                     .map_err(|e| anyhow::anyhow!("thinfilm layers: {e}"))?;
                 Bsdf::Stack(b)
             }
+            BsdfDesc::CoatedDielectric {
+                layers,
+                int_ior,
+                ext_ior,
+            } => {
+                let b = CoatedDielectric {
+                    layers: layers.clone(),
+                    int_ior: int_ior.clone(),
+                    ext_ior: ext_ior.clone(),
+                    dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
+                };
+                for inside in [false, true] {
+                    b.stack_at(550.0, inside)
+                        .validate()
+                        .map_err(|e| anyhow::anyhow!("dielectric coating: {e}"))?;
+                }
+                for (what, n) in [("int_ior", int_ior), ("ext_ior", ext_ior)] {
+                    if n.at(550.0).im != 0.0 {
+                        anyhow::bail!("coated dielectric: {what} must be real, got {n}");
+                    }
+                }
+                Bsdf::CoatedDielectric(b)
+            }
             BsdfDesc::Bubble {
                 film_ior,
                 thickness_nm,
@@ -240,7 +265,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.eval(ctx, wi, wo),
             Bsdf::ThinFilm(b) => b.eval(ctx, wi, wo, c),
             Bsdf::Stack(b) => b.eval(ctx, wi, wo, c),
-            Bsdf::Bubble(_) => Spec::ZERO,
+            Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_) => Spec::ZERO,
             Bsdf::TwoSided(b) => {
                 let (wi, wo) = two_sided_flip(wi, wo);
                 b.eval(ctx, wi, wo, c)
@@ -257,7 +282,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.pdf(wi, wo),
             Bsdf::ThinFilm(b) => b.pdf(wi, wo),
             Bsdf::Stack(b) => b.pdf(wi, wo),
-            Bsdf::Bubble(_) => 0.0,
+            Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_) => 0.0,
             Bsdf::TwoSided(b) => {
                 let (wi, wo) = two_sided_flip(wi, wo);
                 b.pdf(wi, wo)
@@ -288,6 +313,13 @@ impl Bsdf {
             Bsdf::ThinFilm(b) => b.sample(ctx, wi, u2, c),
             Bsdf::Stack(b) => b.sample(ctx, wi, u2, c),
             Bsdf::Bubble(b) => b.sample(ctx, wi, u1, c),
+            Bsdf::CoatedDielectric(b) => {
+                let s = b.sample(ctx, wi, u1, c);
+                if matches!(s, Some(s) if s.terminate_secondary) && !ctx.wl.secondary_terminated() {
+                    c.secondary_terminations += 1;
+                }
+                s
+            }
             Bsdf::TwoSided(b) => {
                 if wi.z < 0.0 {
                     let mut s = b.sample(ctx, Vec3::new(wi.x, wi.y, -wi.z), u1, u2, c)?;
@@ -308,7 +340,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.ggx.is_some(),
             Bsdf::ThinFilm(b) => b.ggx.is_some(),
             Bsdf::Stack(b) => b.ggx.is_some(),
-            Bsdf::Dielectric(_) | Bsdf::Bubble(_) => false,
+            Bsdf::Dielectric(_) | Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_) => false,
             Bsdf::TwoSided(b) => b.has_smooth_component(),
         }
     }
@@ -317,7 +349,10 @@ impl Bsdf {
     pub fn is_one_sided(&self) -> bool {
         !matches!(
             self,
-            Bsdf::Dielectric(_) | Bsdf::TwoSided(_) | Bsdf::Bubble(_)
+            Bsdf::Dielectric(_)
+                | Bsdf::TwoSided(_)
+                | Bsdf::Bubble(_)
+                | Bsdf::CoatedDielectric(_)
         )
     }
 }

@@ -108,7 +108,8 @@ fn lens_mesh(
         }
         let ring = |i: u32, j: u32| base + 1 + (i - 1) * segments + (j % segments);
         let mut tri = |a: u32, b: u32, c: u32| {
-            m.indices.push(if side > 0.0 { [a, b, c] } else { [a, c, b] });
+            m.indices
+                .push(if side > 0.0 { [a, b, c] } else { [a, c, b] });
         };
         for j in 0..segments {
             tri(base, ring(1, j), ring(1, j + 1));
@@ -132,7 +133,12 @@ fn lens_mesh(
     }
     for j in 0..segments {
         let k = (j + 1) % segments;
-        let (b0, t0, b1, t1) = (base + 2 * j, base + 2 * j + 1, base + 2 * k, base + 2 * k + 1);
+        let (b0, t0, b1, t1) = (
+            base + 2 * j,
+            base + 2 * j + 1,
+            base + 2 * k,
+            base + 2 * k + 1,
+        );
         m.indices.push([b0, b1, t1]);
         m.indices.push([b0, t1, t0]);
     }

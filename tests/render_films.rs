@@ -132,7 +132,12 @@ fn dispersion_only_when_declared() {
     assert!(on && n > 20, "prism: {n} terminations, dispersion {on}");
     let (n, on) = count(&load_file("prism.xml", &[("glass", "1.7847")]));
     assert_eq!((n, on), (0, false), "constant-index prism");
-    for s in ["bubble.xml", "coatings.xml", "lens.xml", "teapot_mgf2_400.xml"] {
+    for s in [
+        "bubble.xml",
+        "coatings.xml",
+        "lens.xml",
+        "teapot_mgf2_400.xml",
+    ] {
         assert_eq!(count(&load_file(s, &[])), (0, false), "{s}");
     }
 }
@@ -160,7 +165,10 @@ fn effect_analysis_reports_films_and_stacks() {
     assert!(!line(&e, "multilayer stack: off").is_empty());
     let e = effects::analyze(&load_file("lens.xml", &[])).unwrap();
     assert!(e.stack && !e.dispersion, "{e}");
-    assert!(line(&e, "multilayer stack: ON").contains("coating [MgF2:99.6]"), "{e}");
+    assert!(
+        line(&e, "multilayer stack: ON").contains("coating [MgF2:99.6]"),
+        "{e}"
+    );
     let e = effects::analyze(&load_file("prism.xml", &[])).unwrap();
     assert!(e.dispersion && !e.interference);
 }

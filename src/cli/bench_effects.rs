@@ -3,7 +3,7 @@
 //! Renders the same scene (the teapot of `scenes/teapot_mgf2_400.xml` in the studio
 //! environment) with only its material swapped — diffuse, smooth conductor, one Airy film
 //! (constant and textured thickness), multilayer stacks (2 and 13 layers, transfer-matrix
-//! method), a free-standing film (bubble: reflection and transmission), and glass with a
+//! method), a free-standing film (bubble: reflection and transmission), AR-coated glass, and glass with a
 //! constant or a dispersive index — plus the prism scene with its Sellmeier glass against the
 //! same glass at constant index. Every variant uses the same resolution, spp, seed and thread
 //! count; the time excludes BVH/light setup. Prints a markdown table of microseconds per
@@ -138,6 +138,11 @@ fn variants() -> Vec<(String, &'static str, &'static str, String, String)> {
             "glass n=1.5168",
             "none (refraction)",
             r#"<bsdf type="dielectric"><float name="int_ior" value="1.5168"/></bsdf>"#.into(),
+        ),
+        teapot(
+            "AR-coated glass n=1.5168",
+            "TMM stack on a refracting interface",
+            r#"<bsdf type="coateddielectric"><float name="int_ior" value="1.5168"/><string name="coating" value="MgF2:99.6"/></bsdf>"#.into(),
         ),
         teapot(
             "glass material:BK7",

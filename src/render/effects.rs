@@ -147,7 +147,10 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
                 e.interference = true;
                 e.stack = true;
                 let names: Vec<String> = layers.iter().map(|(n, d)| format!("{n}:{d}")).collect();
-                stacks.push(format!("coating [{}] on dielectric {int_ior}/{ext_ior}", names.join(", ")));
+                stacks.push(format!(
+                    "coating [{}] on dielectric {int_ior}/{ext_ior}",
+                    names.join(", ")
+                ));
                 if int_ior.is_dispersive() || ext_ior.is_dispersive() {
                     dispersive.push(format!("coated dielectric {int_ior}/{ext_ior}"));
                 }

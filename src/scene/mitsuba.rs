@@ -976,7 +976,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     ));
                 };
                 let Val::Str(text) = &q.val else {
-                    return Err(self.err(q.node, "coating must be a <string> of layers, e.g. \"MgF2:99.6\""));
+                    return Err(self.err(
+                        q.node,
+                        "coating must be a <string> of layers, e.g. \"MgF2:99.6\"",
+                    ));
                 };
                 let layers =
                     parse_layers(text).map_err(|e| self.err(q.node, format!("coating: {e}")))?;

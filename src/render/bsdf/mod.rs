@@ -349,10 +349,7 @@ impl Bsdf {
     pub fn is_one_sided(&self) -> bool {
         !matches!(
             self,
-            Bsdf::Dielectric(_)
-                | Bsdf::TwoSided(_)
-                | Bsdf::Bubble(_)
-                | Bsdf::CoatedDielectric(_)
+            Bsdf::Dielectric(_) | Bsdf::TwoSided(_) | Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_)
         )
     }
 }

@@ -819,15 +819,25 @@ fn coated_dielectric_limits_and_energy() {
     for cos in [1.0f32, 0.7, 0.2, 0.01, -1.0, -0.8, -0.5, -0.2] {
         let (r, t) = bare.reflect_transmit(&ctx_of(&wl), cos, &mut c);
         let fresnel = fresnel::fresnel_dielectric(cos, 1.5).0;
-        assert!((r.x - fresnel).abs() < 1e-5, "cos {cos}: R {} vs Fresnel {fresnel}", r.x);
-        assert!((r + t - Spec::ONE).abs().max_element() < 1e-5, "cos {cos}: {r} {t}");
+        assert!(
+            (r.x - fresnel).abs() < 1e-5,
+            "cos {cos}: R {} vs Fresnel {fresnel}",
+            r.x
+        );
+        assert!(
+            (r + t - Spec::ONE).abs().max_element() < 1e-5,
+            "cos {cos}: {r} {t}"
+        );
     }
     let Bsdf::CoatedDielectric(ar) = coated("MgF2:99.6", "material:BK7") else {
         unreachable!()
     };
     for cos in [1.0f32, 0.5, 0.05, -1.0, -0.9, -0.75, -0.3] {
         let (r, t) = ar.reflect_transmit(&ctx_of(&wl), cos, &mut c);
-        assert!((r + t - Spec::ONE).abs().max_element() < 1e-5, "cos {cos}: {r} {t}");
+        assert!(
+            (r + t - Spec::ONE).abs().max_element() < 1e-5,
+            "cos {cos}: {r} {t}"
+        );
     }
     let green = SampledWavelengths::new([550.0; 4], [1.0; 4]);
     let (r_ar, _) = ar.reflect_transmit(&ctx_of(&green), 1.0, &mut c);
@@ -847,7 +857,11 @@ fn coated_dielectric_limits_and_energy() {
     assert!(refr.wo.z < 0.0 && (sin_t - 0.5 / n420).abs() < 1e-5);
     assert!(refr.terminate_secondary && (refr.pdf - (1.0 - p_r)).abs() < 1e-6);
     let w = t / (1.0 - p_r) / (n420 * n420);
-    assert!((refr.weight - w).abs().max_element() < 1e-4, "{} vs {w}", refr.weight);
+    assert!(
+        (refr.weight - w).abs().max_element() < 1e-4,
+        "{} vs {w}",
+        refr.weight
+    );
     let refl = disp.sample(&ctx_of(&wl), wi, 0.0, &mut c).unwrap();
     assert!(refl.wo.z > 0.0 && !refl.terminate_secondary);
     assert!((refl.weight - r / p_r).abs().max_element() < 1e-5);

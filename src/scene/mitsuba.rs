@@ -1154,7 +1154,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         self.err(
                             q.node,
                             format!(
-                                "{name}: {e}; Mitsuba IOR names: {}; dispersive: material:NAME, cauchy:A,B[,C], sellmeier:B1,C1,…",
+                                "{name}: unknown IOR name \"{s}\" ({e}); Mitsuba IOR names: {}; dispersive: material:NAME, cauchy:A,B[,C], sellmeier:B1,C1,…",
                                 names.join(", ")
                             ),
                         )

@@ -38,9 +38,25 @@ fn load(path: &Path) -> Scene {
     thinfilm::scene::load(path, &[]).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()))
 }
 
+/// Samples per pixel for our side. The soap bubble (`bubble`) chooses between two delta lobes
+/// at each of two film crossings and sees the environment's sharp softboxes through and in
+/// the film, so its per-pixel variance is several times the others': at 128 spp noise alone
+/// gives mean ΔE00 ≈ 1.05 (two seeds; mean bias < 0.7 %), at 512 spp 0.58, at 2048 spp 0.32
+/// (measured 2026-11-22). 512 spp keeps the ΔE00 ≤ 1 check meaningful for it.
+fn our_spp(name: &str) -> u32 {
+    match name {
+        "bubble" => 512,
+        _ => OUR_SPP,
+    }
+}
+
 fn render_ours(scene: &Scene) -> RgbImage {
+    render_ours_spp(scene, OUR_SPP)
+}
+
+fn render_ours_spp(scene: &Scene, spp: u32) -> RgbImage {
     let options = RenderOptions {
-        spp: Some(OUR_SPP),
+        spp: Some(spp),
         seed: Some(7),
         resolution: Some((OUR_SIZE, OUR_SIZE)),
         ..Default::default()
@@ -84,7 +100,7 @@ fn every_reference_scene_matches_mitsuba() {
             "{}: references are 128×128",
             r.name
         );
-        let ours = render_ours(&load(&r.scene));
+        let ours = render_ours_spp(&load(&r.scene), our_spp(&r.name));
         let m = metrics_against(&ours, &reference);
         eprintln!("{:24} {}", r.name, describe(&m));
         if !passes(&m) {

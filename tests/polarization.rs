@@ -332,3 +332,38 @@ fn polariser_scene_errors_are_clear() {
     );
     assert!(e.contains("polarizer") && e.contains("planar"), "{e}");
 }
+
+/// Layered and free-standing films have no Mueller matrices in the polarised integrator:
+/// asking for a polariser with them must be a clear error, not a silently depolarised image.
+#[test]
+fn polariser_with_unpolarisable_films_is_refused() {
+    for bsdf in [
+        r#"<bsdf type="thinfilm_bubble"><float name="thickness" value="300"/></bsdf>"#,
+        r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:100, TiO2:50"/></bsdf>"#,
+        r#"<bsdf type="coateddielectric"><string name="coating" value="MgF2:99.6"/></bsdf>"#,
+    ] {
+        let xml = |pol: &str| {
+            format!(
+                r#"<scene version="3.0.0">
+                <sensor type="perspective">{pol}</sensor>
+                <emitter type="constant"/>
+                <shape type="sphere">{bsdf}</shape>
+            </scene>"#
+            )
+        };
+        let plain = load_str(&xml(""), Path::new("."), &[], "t.xml").unwrap();
+        assert!(thinfilm::render::effects::analyze(&plain).is_ok(), "{bsdf}");
+        let polarised = load_str(
+            &xml(r#"<string name="polarizer" value="s"/>"#),
+            Path::new("."),
+            &[],
+            "t.xml",
+        )
+        .unwrap();
+        let e = format!(
+            "{:#}",
+            thinfilm::render::effects::analyze(&polarised).unwrap_err()
+        );
+        assert!(e.contains("Mueller") && e.contains("polariser"), "{e}");
+    }
+}

@@ -2,6 +2,8 @@
 
 use clap::Subcommand;
 
+#[path = "bench_effects.rs"]
+mod bench_effects;
 #[path = "bench_estimate.rs"]
 mod bench_estimate;
 #[path = "bench_optics.rs"]

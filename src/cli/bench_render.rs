@@ -50,6 +50,8 @@ pub struct Args {
     /// Worker threads for our renderer (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    #[command(flatten)]
+    pub effects: super::bench_effects::Args,
 }
 
 #[derive(Debug, Clone)]
@@ -127,6 +129,10 @@ fn run_mitsuba(
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if args.effects.effects {
+        let table = args.table.as_deref();
+        return args.effects.run(&args.root, args.seed, args.threads, table);
+    }
     if args.spp.is_empty() || args.spp.contains(&0) {
         bail!("--spp needs positive sample counts");
     }

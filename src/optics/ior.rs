@@ -1,6 +1,6 @@
 //! Refractive index specifications: a number, a complex `n+ki`, or a material name.
 
-use super::dispersion::{self, Material};
+use super::dispersion::{self, Material, Model};
 use num_complex::Complex64;
 use std::fmt;
 use std::str::FromStr;
@@ -55,6 +55,9 @@ impl FromStr for Ior {
         if let Some(m) = dispersion::lookup(t) {
             return Ok(Ior::Material(m));
         }
+        if let Some(formula) = parse_formula(t)? {
+            return Ok(formula);
+        }
         let value = parse_complex(t).ok_or_else(|| {
             format!(
                 "'{t}' is not a refractive index: expected a number (1.37), a complex n+ki (0.18+3.4i) \
@@ -67,6 +70,86 @@ impl FromStr for Ior {
         }
         Ok(Ior::Constant(value))
     }
+}
+
+/// Explicitly dispersive specifications (scene syntax, documented in scenes/README.md):
+/// - `material:NAME` — a material of the dispersion library (e.g. `material:BK7`, to get the
+///   Sellmeier N-BK7 where a bare `bk7` means Mitsuba's constant 1.5046);
+/// - `cauchy:A,B[,C]` — n(λ) = A + B/λ² + C/λ⁴ with λ in nm, B in nm², C in nm⁴ (the form used
+///   in graphics, e.g. BK7 ≈ `cauchy:1.5046,4200`);
+/// - `sellmeier:B1,C1[,B2,C2,…]` — n² = 1 + Σ B_i λ²/(λ² − C_i) with λ in µm and C_i in µm²
+///   (the Schott catalogue form; N-BK7 = `sellmeier:1.03961212,0.00600069867,0.231792344,0.0200179144,1.01046945,103.560653`).
+///
+/// Returns `Ok(None)` when `t` has none of these prefixes. A formula becomes a [`Material`]
+/// leaked to obtain the `&'static` that [`Ior::Material`] holds (a few dozen bytes per formula
+/// in a loaded scene, as for tabulated spectra in scene files).
+fn parse_formula(t: &str) -> Result<Option<Ior>, String> {
+    let Some((kind, rest)) = t.split_once(':') else {
+        return Ok(None);
+    };
+    let kind_l = kind.trim().to_ascii_lowercase();
+    if kind_l == "material" {
+        return dispersion::lookup(rest)
+            .map(|m| Some(Ior::Material(m)))
+            .ok_or_else(|| {
+                format!(
+                    "unknown material '{}' in '{t}' (known: {})",
+                    rest.trim(),
+                    dispersion::names().join(", ")
+                )
+            });
+    }
+    if kind_l != "cauchy" && kind_l != "sellmeier" {
+        return Ok(None);
+    }
+    let c: Vec<f64> = rest
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("'{t}': coefficients must be numbers ({e})"))?;
+    if c.iter().any(|v| !v.is_finite()) {
+        return Err(format!("'{t}': coefficients must be finite"));
+    }
+    let model = if kind_l == "cauchy" {
+        if !(2..=3).contains(&c.len()) {
+            return Err(format!("'{t}': cauchy needs A,B or A,B,C (λ in nm)"));
+        }
+        // nm² → µm² and nm⁴ → µm⁴ (the library's Cauchy is in µm).
+        Model::Cauchy {
+            a: c[0],
+            b: c[1] * 1e-6,
+            c: c.get(2).copied().unwrap_or(0.0) * 1e-12,
+        }
+    } else {
+        if c.is_empty() || c.len() % 2 != 0 {
+            return Err(format!(
+                "'{t}': sellmeier needs pairs B1,C1[,B2,C2,…] (C in µm²)"
+            ));
+        }
+        Model::Sellmeier {
+            a: 1.0,
+            terms: c.chunks_exact(2).map(|p| (p[0], p[1])).collect(),
+        }
+    };
+    let material = Material {
+        name: Box::leak(t.to_string().into_boxed_str()),
+        aliases: Vec::new(),
+        source: "formula in the scene file",
+        valid_range_nm: (360.0, 830.0),
+        model,
+    };
+    // Physical over the visible range (a pole inside it, or n ≤ 0, is a user error; the
+    // Sellmeier model clamps n² < 0 to n = 0, caught here).
+    for l in (360..=830).step_by(5) {
+        let n = material.nk(l as f64);
+        if !(n.re.is_finite() && n.re > 0.0) {
+            return Err(format!(
+                "'{t}' gives n = {} at {l} nm: not a refractive index over the visible range",
+                n.re
+            ));
+        }
+    }
+    Ok(Some(Ior::Material(Box::leak(Box::new(material)))))
 }
 
 fn parse_complex(t: &str) -> Option<Complex64> {
@@ -103,5 +186,33 @@ mod tests {
         assert!("1.5-0.1i".parse::<Ior>().is_err());
         assert!("nonsense".parse::<Ior>().is_err());
         assert!("NaN".parse::<Ior>().is_err());
+    }
+
+    #[test]
+    fn parses_dispersion_formulas() {
+        let c: Ior = "cauchy:1.5046,4200".parse().unwrap();
+        assert!(c.is_dispersive());
+        // n(500 nm) = 1.5046 + 4200/500².
+        assert!((c.at(500.0).re - (1.5046 + 4200.0 / 250_000.0)).abs() < 1e-12);
+        let s: Ior =
+            "sellmeier:1.03961212,0.00600069867,0.231792344,0.0200179144,1.01046945,103.560653"
+                .parse()
+                .unwrap();
+        // Same formula as the library's N-BK7: n_d = 1.5168.
+        assert!((s.at(587.6).re - 1.5168).abs() < 1e-4, "{}", s.at(587.6));
+        let bk7: Ior = "material:BK7".parse().unwrap();
+        assert!((bk7.at(587.6).re - s.at(587.6).re).abs() < 1e-9);
+        // Errors name the problem, never panic.
+        for bad in [
+            "cauchy:1.5",
+            "cauchy:a,b",
+            "cauchy:-3,0",
+            "sellmeier:1.0",
+            "sellmeier:1.0,0.3", // pole at λ = 548 nm inside the visible range
+            "material:unobtainium",
+            "cauchy:1.5,inf",
+        ] {
+            assert!(bad.parse::<Ior>().is_err(), "{bad} accepted");
+        }
     }
 }

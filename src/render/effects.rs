@@ -3,6 +3,9 @@
 //! on. Each decision records why, for the render log.
 //!
 //! - interference (the Airy film code) only for `thinfilm` materials that some shape uses;
+//!   free-standing films (`thinfilm_bubble`: coherent reflection *and* transmission) and
+//!   multilayer stacks (`thinfilm` with `layers`: the transfer-matrix method) are reported
+//!   separately, since each has its own cost;
 //! - dispersion handling (terminating secondary wavelengths at refractions) only for dielectric
 //!   interfaces whose index depends on wavelength;
 //! - microfacet (GGX visible-normal) sampling only for BSDFs with α > 0;
@@ -24,6 +27,10 @@ pub struct Effects {
     pub rough: bool,
     /// Paths carry Stokes vectors (polarised integrator).
     pub polarization: bool,
+    /// Free-standing films (bubbles): coherent R and T, transmission straight through.
+    pub bubble: bool,
+    /// Multilayer coatings: transfer-matrix reflectance per wavelength.
+    pub stack: bool,
     /// One line per decision, for the log.
     pub reasons: Vec<String>,
 }
@@ -69,6 +76,8 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     let mut rough = Vec::new();
     let mut dispersive = Vec::new();
     let mut polarizer_bsdfs = 0;
+    let mut bubbles = Vec::new();
+    let mut stacks = Vec::new();
     for d in &all {
         match d {
             BsdfDesc::ThinFilm {
@@ -89,6 +98,60 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
                     rough.push(format!("thinfilm α={alpha}"));
                 }
                 let _ = (film_ior, substrate_ior);
+            }
+            BsdfDesc::Bubble {
+                film_ior,
+                thickness_nm,
+                ext_ior,
+            } => {
+                films += 1;
+                e.interference = true;
+                e.bubble = true;
+                let textured = matches!(
+                    thickness_nm,
+                    TextureDesc::Bitmap(_) | TextureDesc::Checkerboard { .. }
+                );
+                e.thickness_texture |= textured;
+                bubbles.push(format!(
+                    "film n={film_ior} in n={ext_ior}{}",
+                    if textured { ", textured thickness" } else { "" }
+                ));
+            }
+            BsdfDesc::ThinFilmStack {
+                layers,
+                substrate_ior,
+                alpha,
+            } => {
+                films += 1;
+                e.interference = true;
+                e.stack = true;
+                if *alpha > 0.0 {
+                    rough.push(format!("layered thinfilm α={alpha}"));
+                }
+                let names: Vec<String> = layers.iter().map(|(n, d)| format!("{n}:{d}")).collect();
+                let shown = if names.len() > 6 {
+                    format!("{} … ({} layers)", names[..6].join(", "), names.len())
+                } else {
+                    names.join(", ")
+                };
+                stacks.push(format!("[{shown}] on {substrate_ior}"));
+            }
+            BsdfDesc::CoatedDielectric {
+                layers,
+                int_ior,
+                ext_ior,
+            } => {
+                films += 1;
+                e.interference = true;
+                e.stack = true;
+                let names: Vec<String> = layers.iter().map(|(n, d)| format!("{n}:{d}")).collect();
+                stacks.push(format!(
+                    "coating [{}] on dielectric {int_ior}/{ext_ior}",
+                    names.join(", ")
+                ));
+                if int_ior.is_dispersive() || ext_ior.is_dispersive() {
+                    dispersive.push(format!("coated dielectric {int_ior}/{ext_ior}"));
+                }
             }
             BsdfDesc::Conductor {
                 alpha_u, alpha_v, ..
@@ -119,6 +182,25 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     } else {
         "interference: off — no thin-film material in use".into()
     });
+    e.reasons.push(if e.bubble {
+        format!(
+            "free-standing film: ON — coherent Airy reflection and transmission (R + T = 1 when lossless) for {}",
+            bubbles.join("; ")
+        )
+    } else {
+        "free-standing film: off — no thinfilm_bubble in use".into()
+    });
+    e.reasons.push(if e.stack {
+        format!(
+            "multilayer stack: ON — transfer-matrix reflectance per wavelength for {}",
+            stacks.join("; ")
+        )
+    } else {
+        "multilayer stack: off — no thinfilm with layers in use".into()
+    });
+    // Several shapes may share one glass: name each interface once.
+    dispersive.sort();
+    dispersive.dedup();
     e.dispersion = !dispersive.is_empty();
     e.reasons.push(if e.dispersion {
         format!("dispersion: ON — wavelength-dependent refraction at {}; secondary wavelengths terminate there", dispersive.join(", "))
@@ -143,6 +225,23 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
         why.push(format!("{polarizer_bsdfs} polarizer BSDF(s) in use"));
     }
     e.polarization = !why.is_empty();
+    // The polarised integrator has Mueller matrices for the single film, conductors,
+    // dielectrics, plastic and diffuse; the layered and free-standing films would silently
+    // act as depolarisers there, so refuse rather than render something wrong.
+    let unpolarisable: Vec<&String> = bubbles.iter().chain(stacks.iter()).collect();
+    if e.polarization && !unpolarisable.is_empty() {
+        anyhow::bail!(
+            "the scene asks for polarisation ({}) but uses {}, whose Mueller matrices are not \
+             implemented (only thinfilm, conductor, dielectric, plastic and diffuse are): remove \
+             the polariser or these materials",
+            why.join(" and "),
+            unpolarisable
+                .iter()
+                .map(|s| s.as_str())
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+    }
     e.reasons.push(if e.polarization {
         format!(
             "polarisation: ON — because of {}; paths carry Stokes vectors, BSDFs act as Mueller matrices",

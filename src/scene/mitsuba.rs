@@ -851,6 +851,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "twosided",
             "thinfilm",
             "polarizer",
+            "thinfilm_bubble",
+            "coateddielectric",
         ];
         let plugin = p.plugin.clone();
         Ok(match plugin.as_str() {
@@ -925,11 +927,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 } else {
                     0.0
                 };
-                let int_ior = p.ior_number(self, "int_ior", 1.5046)?;
-                let ext_ior = p.ior_number(self, "ext_ior", 1.000277)?;
+                let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
+                let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
                 BsdfDesc::Dielectric {
-                    int_ior: Ior::real(int_ior),
-                    ext_ior: Ior::real(ext_ior),
+                    int_ior,
+                    ext_ior,
                     alpha,
                 }
             }
@@ -994,35 +996,61 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 };
                 BsdfDesc::TwoSided(Box::new(b))
             }
+            "thinfilm" if p.list.iter().any(|q| q.name == "layers") => self.thinfilm_stack(p)?,
+            "coateddielectric" => {
+                let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
+                let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
+                let Some(q) = p.take("coating") else {
+                    return Err(self.err(
+                        p.node,
+                        "coateddielectric needs a <string name=\"coating\"> of layers, e.g. \"MgF2:99.6\"",
+                    ));
+                };
+                let Val::Str(text) = &q.val else {
+                    return Err(self.err(
+                        q.node,
+                        "coating must be a <string> of layers, e.g. \"MgF2:99.6\"",
+                    ));
+                };
+                let layers =
+                    parse_layers(text).map_err(|e| self.err(q.node, format!("coating: {e}")))?;
+                BsdfDesc::CoatedDielectric {
+                    layers,
+                    int_ior,
+                    ext_ior,
+                }
+            }
+            "thinfilm_bubble" => {
+                let film_ior = match p.take("film_ior") {
+                    None => Ior::real(1.33),
+                    Some(q) => self.named_or_real_ior(&q, "film_ior")?,
+                };
+                let thickness_nm = self.thickness(p, 400.0)?;
+                let ext_ior = match p.take("ext_ior") {
+                    None => Ior::real(1.0),
+                    Some(q) => {
+                        let ior = self.named_or_real_ior(&q, "ext_ior")?;
+                        if ior.is_dispersive() || ior.at(550.0).im != 0.0 {
+                            return Err(self.err(
+                                q.node,
+                                "ext_ior of thinfilm_bubble must be a constant real index",
+                            ));
+                        }
+                        ior
+                    }
+                };
+                BsdfDesc::Bubble {
+                    film_ior,
+                    thickness_nm,
+                    ext_ior,
+                }
+            }
             "thinfilm" => {
                 let film_ior = match p.take("film_ior") {
                     None => Ior::real(1.37),
                     Some(q) => self.named_or_real_ior(&q, "film_ior")?,
                 };
-                let thickness_nm = match p.take("thickness") {
-                    None => TextureDesc::Value(SpectrumDesc::Constant(400.0)),
-                    Some(q) => match q.val {
-                        Val::Float(v) if v.is_finite() && v >= 0.0 => {
-                            TextureDesc::Value(SpectrumDesc::Constant(v as f32))
-                        }
-                        Val::Float(v) => {
-                            return Err(self.err(q.node, format!("thickness {v} nm must be ≥ 0")))
-                        }
-                        Val::Texture(TextureDesc::Bitmap(b)) => {
-                            TextureDesc::Bitmap(Arc::new(single_channel(&b)))
-                        }
-                        Val::Texture(t @ TextureDesc::Checkerboard { .. }) => t,
-                        ref v => {
-                            return Err(self.err(
-                                q.node,
-                                format!(
-                                    "thickness must be a float or a bitmap texture, not {}",
-                                    v.kind()
-                                ),
-                            ))
-                        }
-                    },
-                };
+                let thickness_nm = self.thickness(p, 400.0)?;
                 let substrate = p.take("substrate_ior");
                 let substrate_k = match p.take("substrate_k") {
                     None => None,
@@ -1069,6 +1097,124 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
             _ => return Err(self.unknown_plugin(p, KNOWN)),
         })
+    }
+
+    /// Film thickness in nm: a float ≥ 0 or a (single-channel) bitmap / checkerboard texture.
+    fn thickness(&mut self, p: &mut Props<'a, 'i>, default: f32) -> Result<TextureDesc> {
+        Ok(match p.take("thickness") {
+            None => TextureDesc::Value(SpectrumDesc::Constant(default)),
+            Some(q) => match q.val {
+                Val::Float(v) if v.is_finite() && v >= 0.0 => {
+                    TextureDesc::Value(SpectrumDesc::Constant(v as f32))
+                }
+                Val::Float(v) => {
+                    return Err(self.err(q.node, format!("thickness {v} nm must be ≥ 0")))
+                }
+                Val::Texture(TextureDesc::Bitmap(b)) => {
+                    TextureDesc::Bitmap(Arc::new(single_channel(&b)))
+                }
+                Val::Texture(t @ TextureDesc::Checkerboard { .. }) => t,
+                ref v => {
+                    return Err(self.err(
+                        q.node,
+                        format!(
+                            "thickness must be a float or a bitmap texture, not {}",
+                            v.kind()
+                        ),
+                    ))
+                }
+            },
+        })
+    }
+
+    /// `thinfilm` with a `layers` string: a multilayer coating on an opaque substrate.
+    fn thinfilm_stack(&mut self, p: &mut Props<'a, 'i>) -> Result<BsdfDesc> {
+        for conflicting in ["film_ior", "thickness"] {
+            if let Some(q) = p.take(conflicting) {
+                return Err(self.err(
+                    q.node,
+                    format!("'{conflicting}' cannot be combined with 'layers' (give each layer as material:thickness_nm)"),
+                ));
+            }
+        }
+        let q = p.take("layers").expect("checked by the caller");
+        let Val::Str(text) = &q.val else {
+            return Err(self.err(
+                q.node,
+                "layers must be a <string>, e.g. \"MgF2:100, TiO2:50\"",
+            ));
+        };
+        let layers = parse_layers(text).map_err(|e| self.err(q.node, format!("layers: {e}")))?;
+        let substrate_ior = match p.take("substrate_ior") {
+            None => Ior::real(1.64),
+            Some(q) => self.named_or_real_ior(&q, "substrate_ior")?,
+        };
+        if let Some(q) = p.take("substrate_k") {
+            return Err(self.err(
+                q.node,
+                "with 'layers', give an absorbing substrate as substrate_ior=\"n+ki\" or a material name",
+            ));
+        }
+        let alpha = p.float(self, "alpha", 0.0)? as f32;
+        if !(alpha >= 0.0) {
+            return Err(self.err(p.node, "alpha must be ≥ 0"));
+        }
+        Ok(BsdfDesc::ThinFilmStack {
+            layers,
+            substrate_ior,
+            alpha,
+        })
+    }
+
+    /// A dielectric's `int_ior`/`ext_ior`: a float or a Mitsuba IOR name (constant, as in
+    /// Mitsuba — so `bk7` is 1.5046 everywhere Mitsuba renders the scene too); a dispersive
+    /// index from `material:NAME`, `cauchy:…`, `sellmeier:…` (see [`Ior`]'s parser), a name of
+    /// the dispersion library that is not in Mitsuba's table (e.g. `SiO2`), or a tabulated
+    /// `<spectrum>` of λ:n pairs.
+    fn dielectric_ior(&mut self, p: &mut Props<'a, 'i>, name: &str, default: f64) -> Result<Ior> {
+        let Some(q) = p.take(name) else {
+            return Ok(Ior::real(default));
+        };
+        let ior = match &q.val {
+            Val::Str(s) => {
+                if let Some(v) = mitsuba_ior(s) {
+                    Ior::real(v)
+                } else {
+                    s.parse::<Ior>().map_err(|e| {
+                        let names: Vec<_> = MITSUBA_IOR_TABLE.iter().map(|(n, _)| *n).collect();
+                        self.err(
+                            q.node,
+                            format!(
+                                "{name}: unknown IOR name \"{s}\" ({e}); Mitsuba IOR names: {}; dispersive: material:NAME, cauchy:A,B[,C], sellmeier:B1,C1,…",
+                                names.join(", ")
+                            ),
+                        )
+                    })?
+                }
+            }
+            _ => {
+                let n = self.spectral(&q, name)?;
+                if !(n.min() > 0.0) {
+                    return Err(self.err(q.node, format!("{name} must be > 0")));
+                }
+                combine_ior(
+                    &format!("{} {name}", self.loc(q.node)),
+                    &n,
+                    &Spectral::Const(0.0),
+                )
+            }
+        };
+        let c = ior.at(550.0);
+        if !(c.re > 0.0 && c.re.is_finite()) {
+            return Err(self.err(q.node, format!("{name} must be > 0")));
+        }
+        if c.im != 0.0 {
+            return Err(self.err(
+                q.node,
+                format!("{name} = {ior} absorbs (k > 0): a dielectric needs a real index (use conductor)"),
+            ));
+        }
+        Ok(ior)
     }
 
     fn bsdf_value(&self, v: &Val) -> BsdfDesc {
@@ -1664,6 +1810,97 @@ fn combine_ior(label: &str, n: &Spectral, k: &Spectral) -> Ior {
         model: dispersion::Model::Table(rows),
     };
     Ior::Material(Box::leak(Box::new(material)))
+}
+
+/// Parses a `layers` string: comma- or semicolon-separated `index:thickness_nm` items, top
+/// (ambient side) first. The index is a number (`1.38`), `n+ki` (`2.0+0.1i`) or a material
+/// of the dispersion library (`MgF2`, `TiO2`, `SiO2`, …). A group in parentheses followed by
+/// `xN` repeats N times: `(TiO2:52, SiO2:94)x6, TiO2:52` is a 13-layer quarter-wave mirror.
+pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> {
+    fn items(text: &str) -> std::result::Result<Vec<&str>, String> {
+        let mut out = Vec::new();
+        let (mut depth, mut start) = (0i32, 0);
+        for (i, ch) in text.char_indices() {
+            match ch {
+                '(' => depth += 1,
+                ')' => {
+                    depth -= 1;
+                    if depth < 0 {
+                        return Err(format!("unbalanced ')' in \"{text}\""));
+                    }
+                }
+                ',' | ';' if depth == 0 => {
+                    out.push(text[start..i].trim());
+                    start = i + 1;
+                }
+                _ => {}
+            }
+        }
+        if depth != 0 {
+            return Err(format!("unbalanced '(' in \"{text}\""));
+        }
+        out.push(text[start..].trim());
+        Ok(out)
+    }
+    fn parse(
+        text: &str,
+        out: &mut Vec<(Ior, f64)>,
+        level: usize,
+    ) -> std::result::Result<(), String> {
+        for item in items(text)? {
+            if item.is_empty() {
+                return Err(format!("empty layer in \"{text}\""));
+            }
+            if let Some(body) = item.strip_prefix('(') {
+                let close = body
+                    .rfind(')')
+                    .ok_or_else(|| format!("'{item}': missing ')'"))?;
+                let count = body[close + 1..].trim();
+                let count = count
+                    .strip_prefix(['x', 'X', '*'])
+                    .and_then(|c| c.trim().parse::<usize>().ok())
+                    .filter(|&n| (1..=1000).contains(&n))
+                    .ok_or_else(|| {
+                        format!("'{item}': a group must end in xN with 1 ≤ N ≤ 1000, e.g. (TiO2:52, SiO2:94)x6")
+                    })?;
+                if level > 4 {
+                    return Err("groups nested too deeply".into());
+                }
+                let mut group = Vec::new();
+                parse(&body[..close], &mut group, level + 1)?;
+                for _ in 0..count {
+                    out.extend(group.iter().cloned());
+                }
+                continue;
+            }
+            let (material, thickness) = item.rsplit_once(':').ok_or_else(|| {
+                format!("layer '{item}' must be index:thickness_nm, e.g. MgF2:100")
+            })?;
+            let d: f64 = thickness.trim().parse().map_err(|_| {
+                format!(
+                    "layer '{item}': thickness '{}' is not a number (nm)",
+                    thickness.trim()
+                )
+            })?;
+            if !(d.is_finite() && d >= 0.0) {
+                return Err(format!(
+                    "layer '{item}': thickness must be finite and ≥ 0 nm"
+                ));
+            }
+            let ior: Ior = material
+                .trim()
+                .parse()
+                .map_err(|e| format!("layer '{item}': {e}"))?;
+            out.push((ior, d));
+            if out.len() > 10_000 {
+                return Err("more than 10000 layers".into());
+            }
+        }
+        Ok(())
+    }
+    let mut out = Vec::new();
+    parse(text, &mut out, 0)?;
+    Ok(out)
 }
 
 /// True when `$name` occurs as a whole parameter reference somewhere in the text.

@@ -227,6 +227,31 @@ pub enum BsdfDesc {
         theta_deg: f32,
         transmittance: TextureDesc,
     },
+    /// Multilayer coating on an opaque substrate (`thinfilm` with a `layers` string): the
+    /// Fresnel term is the transfer-matrix reflectance of the stack (top layer first).
+    ThinFilmStack {
+        /// (index, physical thickness in nm), from the ambient side down to the substrate.
+        layers: Vec<(Ior, f64)>,
+        substrate_ior: Ior,
+        alpha: f32,
+    },
+    /// Smooth dielectric interface with a multilayer coating on its outside
+    /// (`coateddielectric` with a `coating` string, e.g. an anti-reflection coated lens): the stack's R and T replace the
+    /// Fresnel terms; refraction follows Snell between `ext_ior` and `int_ior`.
+    CoatedDielectric {
+        /// (index, thickness nm) from the outside (ext_ior side) inwards.
+        layers: Vec<(Ior, f64)>,
+        int_ior: Ior,
+        ext_ior: Ior,
+    },
+    /// Free-standing film between two identical ambient media (`thinfilm_bubble`: a soap
+    /// bubble): coherent Airy reflection and transmission, two-sided, transmission straight
+    /// through.
+    Bubble {
+        film_ior: Ior,
+        thickness_nm: TextureDesc,
+        ext_ior: Ior,
+    },
 }
 
 impl BsdfDesc {

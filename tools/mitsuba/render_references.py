@@ -12,6 +12,11 @@ Regenerate the committed references (from the repository root):
     export DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
     python3 tools/mitsuba/render_references.py --spp 4096 --size 128
 
+Only some scenes (the others stay in the manifest):
+    python3 tools/mitsuba/render_references.py --spp 4096 --size 128 --only bubble --only coatings
+
+Scenes in NO_MITSUBA_REFERENCE (prism.xml: dispersion) are skipped with the reason.
+
 Other modes:
     --material path/to/material.xml   also render a material written by `thinfilm estimate`
     --bench SCENE --spp 16,64,256 --out-dir DIR --json
@@ -147,12 +152,30 @@ def compose_material_scene(material_path, template_path, out_path):
     raise ValueError(f"{template_path}: no <bsdf id=\"fitted_material\"> placeholder")
 
 
+# Scenes Mitsuba cannot render faithfully, with the reason (printed when skipped).
+NO_MITSUBA_REFERENCE = {
+    "prism": "dispersive dielectric (Mitsuba's dielectric takes a constant index only)",
+}
+# Scenes rendered by another script (a polarised variant); their manifest entries are kept.
+OTHER_SCRIPT = {
+    "polarizer_": "needs a *_polarized variant: tools/mitsuba/render_polarized.py",
+}
+
+
 def scene_list(args):
     """(name, scene file, material file or None); material scenes are composed on the fly."""
     scenes = []
     sdir = os.path.join(REPO, args.scenes_dir)
     if os.path.isdir(sdir):
         for name in sorted(os.listdir(sdir)):
+            stem = os.path.splitext(name)[0]
+            other = [why for prefix, why in OTHER_SCRIPT.items() if stem.startswith(prefix)]
+            if name.endswith(".xml") and other:
+                print(f"skipping {name}: {other[0]}", file=sys.stderr)
+                continue
+            if name.endswith(".xml") and stem in NO_MITSUBA_REFERENCE:
+                print(f"skipping {name}: {NO_MITSUBA_REFERENCE[stem]}", file=sys.stderr)
+                continue
             if name.endswith(".xml"):
                 scenes.append((os.path.splitext(name)[0], os.path.join(sdir, name), None))
     if args.dev_scenes:
@@ -229,9 +252,17 @@ def main():
     os.makedirs(out_dir, exist_ok=True)
     manifest_path = os.path.join(out_dir, "manifest.json")
     manifest = {"references": {}}
-    if os.path.exists(manifest_path) and args.only:
+    if os.path.exists(manifest_path):
         with open(manifest_path) as f:
             manifest = json.load(f)
+        if not args.only:
+            # A full run replaces this script's entries but keeps those another script
+            # (render_polarized.py) made.
+            manifest["references"] = {
+                k: v
+                for k, v in manifest["references"].items()
+                if any(k.startswith(p) for p in OTHER_SCRIPT)
+            }
     command = "python3 " + " ".join(shlex.quote(a) for a in [rel(os.path.abspath(sys.argv[0]))] + sys.argv[1:])
     scenes = scene_list(args)
     if not scenes:
@@ -255,6 +286,9 @@ def main():
             "rfilter": "box",
             "seconds": round(secs, 2),
         }
+    if args.only and "command" in manifest:
+        # A partial re-render (--only) keeps the command that regenerates everything.
+        command = manifest["command"]
     manifest.update(
         {
             "mitsuba_version": mi.__version__,

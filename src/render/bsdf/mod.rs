@@ -6,6 +6,7 @@
 //! queried direction; `eval` returns f(wi, wo)·|cos θo| and `sample` returns the weight
 //! eval / pdf (for delta lobes: the lobe's value divided by its selection probability).
 
+pub mod bubble;
 pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
@@ -13,6 +14,7 @@ pub mod fresnel;
 pub mod microfacet;
 pub mod plastic;
 pub mod polarizer;
+pub mod stack;
 pub mod thinfilm;
 
 use super::texture::{Spec, Texture};
@@ -21,11 +23,13 @@ use crate::spectrum::SampledWavelengths;
 use glam::{Vec2, Vec3};
 use microfacet::Ggx;
 
+pub use bubble::BubbleBsdf;
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
 pub use plastic::Plastic;
 pub use polarizer::PolarizerBsdf;
+pub use stack::{CoatedDielectric, StackBsdf};
 pub use thinfilm::ThinFilmBsdf;
 
 /// What a BSDF needs to know about the shading point besides directions.
@@ -45,6 +49,9 @@ pub struct Counters {
     pub shadow_rays: u64,
     /// Samples whose estimate was NaN/inf and was discarded.
     pub invalid_samples: u64,
+    /// Paths whose secondary wavelengths were terminated at a dispersive interface (0 in a
+    /// scene without dispersion: the proof that the 4-wavelength fast path is kept).
+    pub secondary_terminations: u64,
 }
 
 impl Counters {
@@ -53,6 +60,7 @@ impl Counters {
         self.rays += o.rays;
         self.shadow_rays += o.shadow_rays;
         self.invalid_samples += o.invalid_samples;
+        self.secondary_terminations += o.secondary_terminations;
     }
 }
 
@@ -105,6 +113,12 @@ pub enum Bsdf {
     Dielectric(Dielectric),
     Plastic(Plastic),
     ThinFilm(ThinFilmBsdf),
+    /// Multilayer coating (`thinfilm` with `layers`).
+    Stack(StackBsdf),
+    /// Free-standing film (`thinfilm_bubble`), two-sided.
+    Bubble(BubbleBsdf),
+    /// Dielectric interface under a multilayer coating (`coateddielectric`).
+    CoatedDielectric(CoatedDielectric),
     /// Mitsuba `twosided`: the back face behaves like the front.
     TwoSided(Box<Bsdf>),
     /// Mitsuba `polarizer`: null pass-through (see [`polarizer`]).
@@ -185,6 +199,71 @@ impl Bsdf {
                     ggx: (*alpha > 0.0).then(|| Ggx::new(*alpha, *alpha)),
                 })
             }
+            BsdfDesc::ThinFilmStack {
+                layers,
+                substrate_ior,
+                alpha,
+            } => {
+                check_alpha(*alpha, "thinfilm alpha")?;
+                let b = StackBsdf {
+                    layers: layers.clone(),
+                    substrate_ior: substrate_ior.clone(),
+                    ggx: (*alpha > 0.0).then(|| Ggx::new(*alpha, *alpha)),
+                };
+                // Indices and thicknesses once, at a mid-visible wavelength: the hot path
+                // does not validate.
+                b.stack_at(550.0)
+                    .validate()
+                    .map_err(|e| anyhow::anyhow!("thinfilm layers: {e}"))?;
+                Bsdf::Stack(b)
+            }
+            BsdfDesc::CoatedDielectric {
+                layers,
+                int_ior,
+                ext_ior,
+            } => {
+                let b = CoatedDielectric {
+                    layers: layers.clone(),
+                    int_ior: int_ior.clone(),
+                    ext_ior: ext_ior.clone(),
+                    dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
+                };
+                for inside in [false, true] {
+                    b.stack_at(550.0, inside)
+                        .validate()
+                        .map_err(|e| anyhow::anyhow!("dielectric coating: {e}"))?;
+                }
+                for (what, n) in [("int_ior", int_ior), ("ext_ior", ext_ior)] {
+                    if n.at(550.0).im != 0.0 {
+                        anyhow::bail!("coated dielectric: {what} must be real, got {n}");
+                    }
+                }
+                Bsdf::CoatedDielectric(b)
+            }
+            BsdfDesc::Bubble {
+                film_ior,
+                thickness_nm,
+                ext_ior,
+            } => {
+                let ext = ext_ior.at(550.0);
+                if ext_ior.is_dispersive() || ext.im != 0.0 || !(ext.re > 0.0 && ext.re.is_finite())
+                {
+                    anyhow::bail!(
+                        "thinfilm_bubble: ext_ior must be a constant real index > 0, got {ext_ior}"
+                    );
+                }
+                let n = film_ior.at(550.0);
+                if !(n.re > 0.0 && n.re.is_finite() && n.im >= 0.0) {
+                    anyhow::bail!(
+                        "thinfilm_bubble: film_ior must have n > 0 and k ≥ 0, got {film_ior}"
+                    );
+                }
+                Bsdf::Bubble(BubbleBsdf {
+                    film_ior: film_ior.clone(),
+                    thickness_nm: Texture::new(thickness_nm),
+                    ext_ior: ext.re as f32,
+                })
+            }
         })
     }
 
@@ -196,6 +275,8 @@ impl Bsdf {
             Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => Spec::ZERO,
             Bsdf::Plastic(b) => b.eval(ctx, wi, wo),
             Bsdf::ThinFilm(b) => b.eval(ctx, wi, wo, c),
+            Bsdf::Stack(b) => b.eval(ctx, wi, wo, c),
+            Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_) => Spec::ZERO,
             Bsdf::TwoSided(b) => {
                 let (wi, wo) = two_sided_flip(wi, wo);
                 b.eval(ctx, wi, wo, c)
@@ -211,6 +292,8 @@ impl Bsdf {
             Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => 0.0,
             Bsdf::Plastic(b) => b.pdf(wi, wo),
             Bsdf::ThinFilm(b) => b.pdf(wi, wo),
+            Bsdf::Stack(b) => b.pdf(wi, wo),
+            Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_) => 0.0,
             Bsdf::TwoSided(b) => {
                 let (wi, wo) = two_sided_flip(wi, wo);
                 b.pdf(wi, wo)
@@ -230,10 +313,25 @@ impl Bsdf {
         let s = match self {
             Bsdf::Diffuse(b) => b.sample(ctx, wi, u2),
             Bsdf::Conductor(b) => b.sample(ctx, wi, u2),
-            Bsdf::Dielectric(b) => b.sample(ctx, wi, u1),
+            Bsdf::Dielectric(b) => {
+                let s = b.sample(ctx, wi, u1);
+                if matches!(s, Some(s) if s.terminate_secondary) && !ctx.wl.secondary_terminated() {
+                    c.secondary_terminations += 1;
+                }
+                s
+            }
             Bsdf::Plastic(b) => b.sample(ctx, wi, u1, u2),
             Bsdf::ThinFilm(b) => b.sample(ctx, wi, u2, c),
             Bsdf::Polarizer(b) => b.sample(ctx, wi),
+            Bsdf::Stack(b) => b.sample(ctx, wi, u2, c),
+            Bsdf::Bubble(b) => b.sample(ctx, wi, u1, c),
+            Bsdf::CoatedDielectric(b) => {
+                let s = b.sample(ctx, wi, u1, c);
+                if matches!(s, Some(s) if s.terminate_secondary) && !ctx.wl.secondary_terminated() {
+                    c.secondary_terminations += 1;
+                }
+                s
+            }
             Bsdf::TwoSided(b) => {
                 if wi.z < 0.0 {
                     let mut s = b.sample(ctx, Vec3::new(wi.x, wi.y, -wi.z), u1, u2, c)?;
@@ -253,7 +351,11 @@ impl Bsdf {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
             Bsdf::Conductor(b) => b.ggx.is_some(),
             Bsdf::ThinFilm(b) => b.ggx.is_some(),
-            Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => false,
+            Bsdf::Stack(b) => b.ggx.is_some(),
+            Bsdf::Dielectric(_)
+            | Bsdf::Bubble(_)
+            | Bsdf::CoatedDielectric(_)
+            | Bsdf::Polarizer(_) => false,
             Bsdf::TwoSided(b) => b.has_smooth_component(),
         }
     }
@@ -262,7 +364,11 @@ impl Bsdf {
     pub fn is_one_sided(&self) -> bool {
         !matches!(
             self,
-            Bsdf::Dielectric(_) | Bsdf::TwoSided(_) | Bsdf::Polarizer(_)
+            Bsdf::Dielectric(_)
+                | Bsdf::TwoSided(_)
+                | Bsdf::Bubble(_)
+                | Bsdf::CoatedDielectric(_)
+                | Bsdf::Polarizer(_)
         )
     }
 }

@@ -36,6 +36,36 @@ fn thin_film(alpha: f32, thickness: f32) -> Bsdf {
     .unwrap()
 }
 
+/// A multilayer coating from the scene syntax (`layers`, substrate).
+fn stack(layers: &str, substrate: &str, alpha: f32) -> Bsdf {
+    Bsdf::from_desc(&BsdfDesc::ThinFilmStack {
+        layers: crate::scene::mitsuba::parse_layers(layers).unwrap(),
+        substrate_ior: substrate.parse().unwrap(),
+        alpha,
+    })
+    .unwrap()
+}
+
+/// A dielectric interface under a coating (`coateddielectric`), air outside.
+fn coated(layers: &str, int_ior: &str) -> Bsdf {
+    Bsdf::from_desc(&BsdfDesc::CoatedDielectric {
+        layers: crate::scene::mitsuba::parse_layers(layers).unwrap(),
+        int_ior: int_ior.parse().unwrap(),
+        ext_ior: Ior::real(1.0),
+    })
+    .unwrap()
+}
+
+/// A free-standing film (soap bubble) of constant thickness.
+fn bubble(film_ior: &str, thickness: f32) -> Bsdf {
+    Bsdf::from_desc(&BsdfDesc::Bubble {
+        film_ior: film_ior.parse().unwrap(),
+        thickness_nm: constant(thickness),
+        ext_ior: Ior::real(1.0),
+    })
+    .unwrap()
+}
+
 fn test_bsdfs() -> Vec<(&'static str, Bsdf)> {
     vec![
         (
@@ -86,6 +116,7 @@ fn test_bsdfs() -> Vec<(&'static str, Bsdf)> {
             .unwrap(),
         ),
         ("roughthinfilm", thin_film(0.25, 400.0)),
+        ("roughstack", stack("MgF2:100, TiO2:50", "BK7", 0.2)),
         (
             "twosided-diffuse",
             Bsdf::from_desc(&BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse {
@@ -412,6 +443,15 @@ fn finite_at_grazing_and_degenerate_inputs() {
     all.push(("film-d0", thin_film(0.0, 0.0)));
     all.push(("film-negative", thin_film(0.1, -5.0)));
     all.push(("film-nan", thin_film(0.0, f32::NAN)));
+    all.push(("bubble", bubble("water", 300.0)));
+    all.push(("bubble-d0", bubble("1.33", 0.0)));
+    all.push(("bubble-nan", bubble("1.33", f32::NAN)));
+    all.push(("bubble-absorbing", bubble("1.5+0.2i", 250.0)));
+    all.push(("stack", stack("(TiO2:52, SiO2:94)x6, TiO2:52", "BK7", 0.0)));
+    all.push(("stack-d0", stack("MgF2:0, TiO2:0", "1.5", 0.0)));
+    all.push(("stack-empty-metal", stack("SiO2:0", "Au", 0.3)));
+    all.push(("coated-glass", coated("MgF2:99.6", "1.5168")));
+    all.push(("coated-glass-d0", coated("MgF2:0", "material:BK7")));
     all.push((
         "conductor",
         Bsdf::from_desc(&BsdfDesc::Conductor {
@@ -509,4 +549,320 @@ fn diffuse_white_furnace_weights() {
             .unwrap();
         assert_eq!(smp.weight, Spec::ONE);
     }
+}
+
+// ---- Free-standing films (thinfilm_bubble) and multilayer stacks (thinfilm + layers) ----
+
+fn ctx_of(wl: &SampledWavelengths) -> ShadingCtx<'_> {
+    ShadingCtx { wl, uv: Vec2::ZERO }
+}
+
+/// Lossless bubble: R + T = 1 at every wavelength, angle (to grazing) and thickness, from
+/// both sides; zero thickness is no film at all (R = 0, T = 1).
+#[test]
+fn bubble_conserves_energy_when_lossless() {
+    let mut c = Counters::default();
+    for d in [0.0f32, 1.0, 80.0, 300.0, 612.5, 1500.0, 5000.0] {
+        let Bsdf::Bubble(b) = bubble("water", d) else {
+            unreachable!()
+        };
+        for lambda in [380.0f32, 455.0, 550.0, 700.0, 820.0] {
+            let wl = SampledWavelengths {
+                lambda: [lambda; 4],
+                pdf: [1.0; 4],
+            };
+            for cos in [1.0f32, 0.8, 0.5, 0.2, 0.05, 1e-3, -0.3, -1.0] {
+                let (r, t) = b.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+                for k in 0..4 {
+                    assert!(
+                        (r[k] + t[k] - 1.0).abs() < 2e-5,
+                        "d={d} λ={lambda} cos={cos}: R={} T={}",
+                        r[k],
+                        t[k]
+                    );
+                    if d == 0.0 {
+                        assert!(r[k].abs() < 1e-6, "d=0: R={}", r[k]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The bubble's R and T are the f64 Airy film n1 = 1 | n2 | n3 = 1 of the optics module, and an
+/// absorbing film loses energy (R + T < 1).
+#[test]
+fn bubble_matches_airy_and_absorbs_when_lossy() {
+    let wl = wl();
+    let mut c = Counters::default();
+    let Bsdf::Bubble(b) = bubble("1.33", 350.0) else {
+        unreachable!()
+    };
+    for cos in [1.0f32, 0.7, 0.3, 0.02] {
+        let (r, t) = b.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        for k in 0..4 {
+            let f = crate::optics::ThinFilm {
+                ambient_ior: 1.0,
+                film_ior: crate::optics::Complex64::new(1.33, 0.0),
+                thickness_nm: 350.0,
+                substrate_ior: crate::optics::Complex64::new(1.0, 0.0),
+            }
+            .response(wl.lambda[k] as f64, cos as f64);
+            assert!(
+                (r[k] as f64 - f.r()).abs() < 1e-5,
+                "R {} vs {}",
+                r[k],
+                f.r()
+            );
+            assert!(
+                (t[k] as f64 - f.t()).abs() < 1e-5,
+                "T {} vs {}",
+                t[k],
+                f.t()
+            );
+        }
+    }
+    // Colour: a 350 nm water film reflects very differently across the visible.
+    let (r, _) = b.reflect_transmit(&ctx_of(&wl), 1.0, &mut c);
+    assert!(r.max_element() - r.min_element() > 0.05, "{r}");
+    let Bsdf::Bubble(lossy) = bubble("1.5+0.2i", 250.0) else {
+        unreachable!()
+    };
+    let (r, t) = lossy.reflect_transmit(&ctx_of(&wl), 0.8, &mut c);
+    assert!((r + t).max_element() < 0.99, "{r} {t}");
+}
+
+/// Bubble sampling: mirror or straight-through directions, lobe frequencies follow
+/// P_R = R̄/(R̄+T̄) (χ² with one degree of freedom), weights R/P_R and T/(1−P_R), and the
+/// expected weight E[w] = R + T = 1 per wavelength (a white furnace inside the BSDF).
+#[test]
+fn bubble_sampling_frequencies_and_weights() {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let mut c = Counters::default();
+    let Bsdf::Bubble(inner) = bubble("water", 420.0) else {
+        unreachable!()
+    };
+    let b = bubble("water", 420.0);
+    for (theta, back) in [(20.0f32, false), (70.0, false), (50.0, true), (85.0, true)] {
+        let mut wi = dir(theta, 30.0);
+        if back {
+            wi.z = -wi.z;
+        }
+        let (r, t) = inner.reflect_transmit(&ctx, wi.z, &mut c);
+        let p_r = r.element_sum() / (r.element_sum() + t.element_sum());
+        let n = 100_000;
+        let (mut n_r, mut mean) = (0usize, Spec::ZERO);
+        let mut s = Sampler::from_seed(17);
+        for _ in 0..n {
+            let smp = b
+                .sample(&ctx, wi, s.next_1d(), s.next_2d(), &mut c)
+                .unwrap();
+            assert!(smp.delta && smp.eta == 1.0);
+            if smp.wo.z * wi.z > 0.0 {
+                n_r += 1;
+                assert!((smp.wo - Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
+                assert!(((smp.weight - r / p_r).abs()).max_element() < 1e-5);
+                assert!((smp.pdf - p_r).abs() < 1e-6);
+            } else {
+                assert!(
+                    (smp.wo + wi).length() < 1e-6,
+                    "transmission must go straight through"
+                );
+                assert!(((smp.weight - t / (1.0 - p_r)).abs()).max_element() < 1e-5);
+            }
+            mean += smp.weight;
+        }
+        let expected_r = p_r as f64 * n as f64;
+        let expected_t = n as f64 - expected_r;
+        let chi2 = (n_r as f64 - expected_r).powi(2) / expected_r
+            + ((n - n_r) as f64 - expected_t).powi(2) / expected_t;
+        // χ²(1 dof) > 10.83 has probability 0.001.
+        assert!(
+            chi2 < 10.83,
+            "θ={theta}: χ² {chi2}, P_R {p_r}, observed {n_r}/{n}"
+        );
+        mean /= n as f32;
+        for k in 0..4 {
+            assert!((mean[k] - 1.0).abs() < 0.02, "θ={theta}: E[w] {mean}");
+        }
+    }
+    // Once secondaries are terminated only the hero decides the lobe.
+    let mut hero = wl;
+    hero.terminate_secondary();
+    let (r, t) = inner.reflect_transmit(&ctx_of(&hero), 0.9, &mut c);
+    let p = BubbleBsdf::reflect_probability(&ctx_of(&hero), r, t);
+    assert!((p - r.x / (r.x + t.x)).abs() < 1e-6);
+}
+
+/// The stack BSDF's R is the transfer-matrix result of `optics::Stack` for the same layers
+/// (indices from the dispersion library at each path wavelength) and angle.
+#[test]
+fn stack_reflectance_equals_tmm() {
+    use crate::optics::{dispersion, Layer, Stack};
+    let Bsdf::Stack(b) = stack("MgF2:100, TiO2:50", "BK7", 0.0) else {
+        unreachable!()
+    };
+    let wl = wl();
+    let mut c = Counters::default();
+    let n = |name: &str, l: f32| dispersion::lookup(name).unwrap().nk(l as f64);
+    for cos in [1.0f32, 0.75, 0.4, 0.1, 0.0] {
+        let r = b.reflectance(&ctx_of(&wl), cos, &mut c);
+        for k in 0..4 {
+            let l = wl.lambda[k];
+            let reference = Stack {
+                ambient_ior: 1.0,
+                layers: vec![
+                    Layer::coherent(n("MgF2", l), 100.0),
+                    Layer::coherent(n("TiO2", l), 50.0),
+                ],
+                substrate_ior: n("BK7", l),
+            }
+            .response(l as f64, cos as f64)
+            .r();
+            assert!(
+                (r[k] as f64 - reference).abs() < 1e-6,
+                "cos {cos} λ {l}: {} vs {reference}",
+                r[k]
+            );
+        }
+    }
+    // One layer: the stack path equals the Airy thinfilm path (two independent codes).
+    let one = stack("1.37:400", "1.64", 0.0);
+    let (Bsdf::Stack(one), Bsdf::ThinFilm(airy)) = (one, thin_film(0.0, 400.0)) else {
+        unreachable!()
+    };
+    for cos in [1.0f32, 0.5, 0.05] {
+        let a = one.reflectance(&ctx_of(&wl), cos, &mut c);
+        let (b, _) = airy.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        assert!((a - b).abs().max_element() < 2e-5, "{a} vs {b}");
+    }
+}
+
+/// Coatings behave as designed: a quarter-wave MgF2 layer on BK7 cuts the 550 nm reflectance
+/// from ≈4.2 % to ≈1.3 %; a (TiO2/SiO2)^6 TiO2 quarter-wave mirror at 550 nm reflects > 95 %
+/// there and little far outside its stop band.
+#[test]
+fn ar_coating_and_dielectric_mirror() {
+    let at = |b: &Bsdf, l: f32| {
+        let Bsdf::Stack(b) = b else { unreachable!() };
+        let wl = SampledWavelengths {
+            lambda: [l; 4],
+            pdf: [1.0; 4],
+        };
+        b.reflectance(&ctx_of(&wl), 1.0, &mut Counters::default()).x
+    };
+    let bare = stack("MgF2:0", "BK7", 0.0);
+    let ar = stack("MgF2:99.6", "BK7", 0.0);
+    assert!(
+        (at(&bare, 550.0) - 0.0420).abs() < 0.002,
+        "{}",
+        at(&bare, 550.0)
+    );
+    assert!(at(&ar, 550.0) < 0.014, "{}", at(&ar, 550.0));
+    // Blue and red reflect more than green: the purple look of coated optics.
+    assert!(at(&ar, 420.0) > at(&ar, 550.0) && at(&ar, 700.0) > at(&ar, 550.0));
+    let mirror = stack("(TiO2:51.9, SiO2:94.2)x6, TiO2:51.9", "BK7", 0.0);
+    assert!(at(&mirror, 550.0) > 0.95, "{}", at(&mirror, 550.0));
+    assert!(at(&mirror, 780.0) < 0.5, "{}", at(&mirror, 780.0));
+}
+
+/// A dispersive dielectric asks for secondary termination (and the dispatcher counts it); a
+/// constant-index one never does.
+#[test]
+fn dispersion_terminates_only_when_declared() {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let glass = |ior: &str| {
+        Bsdf::from_desc(&BsdfDesc::Dielectric {
+            int_ior: ior.parse().unwrap(),
+            ext_ior: Ior::real(1.0),
+            alpha: 0.0,
+        })
+        .unwrap()
+    };
+    let mut c = Counters::default();
+    let constant = glass("1.5046");
+    let mut s = Sampler::from_seed(3);
+    for _ in 0..1000 {
+        let smp = constant
+            .sample(&ctx, dir(40.0, 0.0), s.next_1d(), s.next_2d(), &mut c)
+            .unwrap();
+        assert!(!smp.terminate_secondary);
+    }
+    assert_eq!(c.secondary_terminations, 0);
+    for spec in ["cauchy:1.5046,4200", "material:BK7"] {
+        let mut c = Counters::default();
+        let g = glass(spec);
+        let smp = g
+            .sample(&ctx, dir(40.0, 0.0), 0.99, Vec2::ZERO, &mut c)
+            .unwrap();
+        assert!(smp.terminate_secondary && smp.wo.z < 0.0, "{spec}");
+        assert_eq!(c.secondary_terminations, 1);
+        // Refraction uses the hero wavelength's index (420 nm): Snell with n(420).
+        let n420 = spec.parse::<Ior>().unwrap().at(420.0).re as f32;
+        let sin_t = (smp.wo.x * smp.wo.x + smp.wo.y * smp.wo.y).sqrt();
+        assert!((sin_t - dir(40.0, 0.0).x / n420).abs() < 1e-5, "{spec}");
+    }
+}
+
+/// Coated dielectric: a zero-thickness coating is the bare Fresnel interface from both sides
+/// (including total internal reflection); a lossless coating keeps R + T = 1 from both sides;
+/// the AR coating transmits more than bare glass at 550 nm.
+#[test]
+fn coated_dielectric_limits_and_energy() {
+    let wl = wl();
+    let mut c = Counters::default();
+    let Bsdf::CoatedDielectric(bare) = coated("MgF2:0", "1.5") else {
+        unreachable!()
+    };
+    for cos in [1.0f32, 0.7, 0.2, 0.01, -1.0, -0.8, -0.5, -0.2] {
+        let (r, t) = bare.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        let fresnel = fresnel::fresnel_dielectric(cos, 1.5).0;
+        assert!(
+            (r.x - fresnel).abs() < 1e-5,
+            "cos {cos}: R {} vs Fresnel {fresnel}",
+            r.x
+        );
+        assert!(
+            (r + t - Spec::ONE).abs().max_element() < 1e-5,
+            "cos {cos}: {r} {t}"
+        );
+    }
+    let Bsdf::CoatedDielectric(ar) = coated("MgF2:99.6", "material:BK7") else {
+        unreachable!()
+    };
+    for cos in [1.0f32, 0.5, 0.05, -1.0, -0.9, -0.75, -0.3] {
+        let (r, t) = ar.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        assert!(
+            (r + t - Spec::ONE).abs().max_element() < 1e-5,
+            "cos {cos}: {r} {t}"
+        );
+    }
+    let green = SampledWavelengths::new([550.0; 4], [1.0; 4]);
+    let (r_ar, _) = ar.reflect_transmit(&ctx_of(&green), 1.0, &mut c);
+    let (r_bare, _) = bare.reflect_transmit(&ctx_of(&green), 1.0, &mut c);
+    assert!(r_ar.x < 0.014 && r_bare.x > 0.035, "{r_ar} {r_bare}");
+    // Sampling: refraction obeys Snell with the η² radiance factor; dispersive glass
+    // terminates secondaries on refraction only.
+    let Bsdf::CoatedDielectric(disp) = coated("MgF2:99.6", "cauchy:1.5046,4200") else {
+        unreachable!()
+    };
+    let wi = dir(30.0, 0.0);
+    let (r, t) = disp.reflect_transmit(&ctx_of(&wl), wi.z, &mut c);
+    let p_r = r.element_sum() / (r + t).element_sum();
+    let refr = disp.sample(&ctx_of(&wl), wi, 0.999, &mut c).unwrap();
+    let n420 = 1.5046 + 4200.0 / (420.0f32 * 420.0);
+    let sin_t = (refr.wo.x * refr.wo.x + refr.wo.y * refr.wo.y).sqrt();
+    assert!(refr.wo.z < 0.0 && (sin_t - 0.5 / n420).abs() < 1e-5);
+    assert!(refr.terminate_secondary && (refr.pdf - (1.0 - p_r)).abs() < 1e-6);
+    let w = t / (1.0 - p_r) / (n420 * n420);
+    assert!(
+        (refr.weight - w).abs().max_element() < 1e-4,
+        "{} vs {w}",
+        refr.weight
+    );
+    let refl = disp.sample(&ctx_of(&wl), wi, 0.0, &mut c).unwrap();
+    assert!(refl.wo.z > 0.0 && !refl.terminate_secondary);
+    assert!((refl.weight - r / p_r).abs().max_element() < 1e-5);
 }

@@ -7,6 +7,7 @@ use super::geometry::{Frame, SurfaceInteraction};
 use crate::scene::{Geometry, Scene, TriangleMesh};
 use glam::{Vec2, Vec3};
 use obvhs::cwbvh::CwBvh;
+use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 
 /// An analytic sphere.
@@ -38,6 +39,10 @@ pub struct Accel {
     bvh: Option<CwBvh>,
     /// Triangles in BVH order (index = BVH primitive id).
     tris: Vec<Triangle>,
+    /// The same triangles with edges and normal precomputed for the hot intersection loop
+    /// (obvhs `RtTriangle`: the same Möller–Trumbore arithmetic as `Triangle::intersect`, so
+    /// hits are bit-identical, minus two subtractions and a cross product per test).
+    rt_tris: Vec<RtTriangle>,
     /// (shape, triangle index within the shape's mesh), BVH order.
     tri_ref: Vec<(u32, u32)>,
     spheres: Vec<SphereGeom>,
@@ -143,10 +148,12 @@ impl Accel {
                 .collect();
             Some(bvh)
         };
+        let rt_tris = tris.iter().map(RtTriangle::from).collect();
         Ok((
             Accel {
                 bvh,
                 tris,
+                rt_tris,
                 tri_ref,
                 spheres,
                 meshes,
@@ -166,12 +173,11 @@ impl Accel {
         let mut tmax = ray.tmax;
         if let Some(bvh) = &self.bvh {
             let r = obvhs::ray::Ray::new(ray.origin.into(), ray.dir.into(), ray.tmin, tmax);
-            let mut hit = obvhs::ray::RayHit::none();
-            if bvh.ray_traverse(r, &mut hit, |r, id| self.tris[id].intersect(r)) {
-                tmax = hit.t;
+            if let Some((t, id)) = closest_hit(bvh, &self.rt_tris, r) {
+                tmax = t;
                 best = Some(Hit {
-                    t: hit.t,
-                    prim: Prim::Triangle(hit.primitive_id),
+                    t,
+                    prim: Prim::Triangle(id),
                 });
             }
         }
@@ -198,7 +204,7 @@ impl Accel {
         }
         if let Some(bvh) = &self.bvh {
             let r = obvhs::ray::Ray::new(ray.origin.into(), ray.dir.into(), ray.tmin, ray.tmax);
-            return !bvh.ray_traverse_miss(r, |r, id| self.tris[id].intersect(r));
+            return any_hit(bvh, &self.rt_tris, r);
         }
         false
     }
@@ -299,6 +305,50 @@ impl Accel {
     pub fn mesh(&self, shape: u32) -> Option<&TriangleMesh> {
         self.meshes.get(shape as usize).and_then(|m| m.as_ref())
     }
+}
+
+/// Closest triangle hit: obvhs' CWBVH traversal (its `traverse!` macro, as in
+/// `CwBvh::ray_traverse`) with the triangle test inlined into the loop (through
+/// `ray_traverse`'s closure it was an out-of-line call per candidate triangle).
+#[inline]
+fn closest_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> Option<(f32, u32)> {
+    use glam::UVec2;
+    let mut traverse_ray = ray;
+    let mut best_id = u32::MAX;
+    let mut state = bvh.new_traversal(ray.direction);
+    let mut node;
+    obvhs::traverse!(
+        bvh,
+        node,
+        state,
+        node.intersect_ray(&traverse_ray, state.oct_inv4),
+        {
+            let t = tris[state.primitive_id as usize].intersect(&traverse_ray);
+            if t < traverse_ray.tmax {
+                best_id = state.primitive_id;
+                traverse_ray.tmax = t;
+            }
+        }
+    );
+    (best_id != u32::MAX).then_some((traverse_ray.tmax, best_id))
+}
+
+/// True if any triangle is hit (shadow rays: stops at the first hit).
+#[inline]
+fn any_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> bool {
+    use glam::UVec2;
+    let mut hit = false;
+    let mut state = bvh.new_traversal(ray.direction);
+    let mut node;
+    'outer: {
+        obvhs::traverse!(bvh, node, state, node.intersect_ray(&ray, state.oct_inv4), {
+            if tris[state.primitive_id as usize].intersect(&ray) < ray.tmax {
+                hit = true;
+                break 'outer;
+            }
+        });
+    }
+    hit
 }
 
 /// Ray–sphere distance in (tmin, tmax), or +inf. Uses the numerically stable form of the

@@ -10,7 +10,44 @@ use std::ops::{
     Add, AddAssign, Div, DivAssign, Index, IndexMut, Mul, MulAssign, Neg, Sub, SubAssign,
 };
 
-use super::{cie_xyz_cmf, CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+use super::{CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+use std::sync::LazyLock;
+
+/// The 1 nm CIE tables in f32 for the renderer's per-sample lookups, one row per nm
+/// (index = λ − 360): (x̄, ȳ, z̄, D65(λ) / [`super::RGB_ILLUMINANT_D65_NORM`]). One 16-byte
+/// row holds everything a path needs at one wavelength, and f32 interpolation avoids the
+/// f64 round trips of [`super::cie_xyz_cmf`] / [`super::d65`] (values agree to ~1e-7
+/// relative; see `tests::f32_cie_table_matches_f64`).
+static CMF_D65_F32: LazyLock<Vec<[f32; 4]>> = LazyLock::new(|| {
+    let (cmf, d65) = super::cie_tables_1nm();
+    cmf.iter()
+        .zip(d65.iter())
+        .map(|(c, d)| {
+            [
+                c[0] as f32,
+                c[1] as f32,
+                c[2] as f32,
+                (d / super::RGB_ILLUMINANT_D65_NORM) as f32,
+            ]
+        })
+        .collect()
+});
+
+/// (x̄, ȳ, z̄, D65/[`super::RGB_ILLUMINANT_D65_NORM`]) at `lambda_nm`, linearly interpolated
+/// in f32 from the 1 nm tables; zero outside 360–830 nm (and for NaN).
+#[inline]
+pub fn cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
+    let x = lambda_nm - LAMBDA_MIN_NM as f32;
+    let n = super::N_TABLE_NM;
+    if !(x >= 0.0 && x <= (n - 1) as f32) {
+        return [0.0; 4];
+    }
+    let table = &*CMF_D65_F32;
+    let i = (x as usize).min(n - 2);
+    let t = x - i as f32;
+    let (a, b) = (glam::Vec4::from(table[i]), glam::Vec4::from(table[i + 1]));
+    (a + (b - a) * t).to_array()
+}
 
 /// Wavelengths carried by one path.
 pub const N_SPECTRUM_SAMPLES: usize = 4;
@@ -188,10 +225,10 @@ impl SampledSpectrum {
             if pdf == 0.0 {
                 continue;
             }
-            let cmf = cie_xyz_cmf(wavelengths.lambda[k] as f64);
+            let cmf = cmf_d65_f32(wavelengths.lambda[k]);
             let w = self.0[k] / pdf;
             for c in 0..3 {
-                xyz[c] += cmf[c] as f32 * w;
+                xyz[c] += cmf[c] * w;
             }
         }
         let norm = 1.0 / (N_SPECTRUM_SAMPLES as f64 * CIE_Y_INTEGRAL) as f32;
@@ -287,6 +324,27 @@ impl std::iter::Sum for SampledSpectrum {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn f32_cie_table_matches_f64() {
+        for i in 0..=47_000 {
+            let l = 360.0 + i as f32 * 0.01;
+            let fast = cmf_d65_f32(l);
+            let cmf = super::super::cie_xyz_cmf(l as f64);
+            let d = super::super::d65(l as f64) / super::super::RGB_ILLUMINANT_D65_NORM;
+            for (c, want) in [cmf[0], cmf[1], cmf[2], d].into_iter().enumerate() {
+                assert!(
+                    (fast[c] as f64 - want).abs() <= 2e-6 * want.abs().max(1e-3),
+                    "λ {l} channel {c}: {} vs {want}",
+                    fast[c]
+                );
+            }
+        }
+        for l in [359.99, 830.01, f32::NAN, f32::INFINITY, -1.0] {
+            assert_eq!(cmf_d65_f32(l), [0.0; 4], "λ {l}");
+        }
+        assert!(cmf_d65_f32(830.0)[3] > 0.0 && cmf_d65_f32(360.0)[3] > 0.0);
+    }
 
     #[test]
     fn sample_visible_ends_and_rotation() {

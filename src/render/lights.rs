@@ -632,7 +632,8 @@ mod tests {
                 worst = worst.max(err);
             }
         }
-        assert!(worst < 4e-7, "max error {worst}");
+        // 2.5 ulp of π: the final π − r rounding dominates near ±π.
+        assert!(worst < 6e-7, "max error {worst}");
         for (y, x) in [(0.0f32, 0.0f32), (-0.0, 0.0), (0.0, -0.0), (-0.0, -0.0), (0.0, -1.0)]
         {
             assert_eq!(atan2_fast(y, x), y.atan2(x), "atan2({y}, {x})");

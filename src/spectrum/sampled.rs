@@ -382,7 +382,7 @@ mod tests {
         // The 4-sample average of L/pdf equals L0/p0 alone.
         let l = SampledSpectrum([2.0, 5.0, 7.0, 9.0]);
         let xyz = l.to_xyz(&w);
-        let cmf = cie_xyz_cmf(w.lambda[0] as f64);
+        let cmf = super::super::cie_xyz_cmf(w.lambda[0] as f64);
         let expect = cmf[1] as f32 * 2.0 / p0 / CIE_Y_INTEGRAL as f32;
         assert!((xyz[1] - expect).abs() <= 1e-5 * expect.abs().max(1e-6));
     }

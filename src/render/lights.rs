@@ -158,6 +158,9 @@ pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
         0.021_863_066,
         -0.004_054_597,
     ];
+    if x.is_nan() || y.is_nan() {
+        return f32::NAN;
+    }
     let (ax, ay) = (x.abs(), y.abs());
     let (mx, mn) = (ax.max(ay), ax.min(ay));
     if mx == 0.0 {

@@ -11,42 +11,68 @@ use std::ops::{
 };
 
 use super::{CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
-use std::sync::LazyLock;
 
 /// The 1 nm CIE tables in f32 for the renderer's per-sample lookups, one row per nm
 /// (index = λ − 360): (x̄, ȳ, z̄, D65(λ) / [`super::RGB_ILLUMINANT_D65_NORM`]). One 16-byte
 /// row holds everything a path needs at one wavelength, and f32 interpolation avoids the
 /// f64 round trips of [`super::cie_xyz_cmf`] / [`super::d65`] (values agree to ~1e-7
-/// relative; see `tests::f32_cie_table_matches_f64`).
-static CMF_D65_F32: LazyLock<Vec<[f32; 4]>> = LazyLock::new(|| {
-    let (cmf, d65) = super::cie_tables_1nm();
-    cmf.iter()
-        .zip(d65.iter())
-        .map(|(c, d)| {
-            [
-                c[0] as f32,
-                c[1] as f32,
-                c[2] as f32,
-                (d / super::RGB_ILLUMINANT_D65_NORM) as f32,
-            ]
-        })
-        .collect()
-});
+/// relative; see `tests::f32_cie_table_matches_f64`). Built at compile time.
+static CMF_D65_F32: [[f32; 4]; super::N_TABLE_NM] = {
+    let (cmf, d65) = (&super::tables::CIE_CMF_1NM, &super::tables::CIE_D65_1NM);
+    let mut out = [[0.0f32; 4]; super::N_TABLE_NM];
+    let mut i = 0;
+    while i < super::N_TABLE_NM {
+        out[i] = [
+            cmf[i][0] as f32,
+            cmf[i][1] as f32,
+            cmf[i][2] as f32,
+            (d65[i] / super::RGB_ILLUMINANT_D65_NORM) as f32,
+        ];
+        i += 1;
+    }
+    out
+};
+
+/// Linear-sRGB matching functions per nm, (r̄, ḡ, b̄, 0) = XYZ→sRGB · (x̄, ȳ, z̄) divided by
+/// the Monte-Carlo normalisation N·∫ȳ: a sample's RGB is Σ_k rgb̄(λ_k)·L_k/p(λ_k) directly,
+/// without the XYZ step and its f64 matrix product.
+static RGB_CMF_F32: [[f32; 4]; super::N_TABLE_NM] = {
+    let cmf = &super::tables::CIE_CMF_1NM;
+    let m = &super::XYZ_TO_SRGB;
+    let norm = 1.0 / (N_SPECTRUM_SAMPLES as f64 * CIE_Y_INTEGRAL);
+    let mut out = [[0.0f32; 4]; super::N_TABLE_NM];
+    let mut i = 0;
+    while i < super::N_TABLE_NM {
+        let c = cmf[i];
+        let mut r = 0;
+        while r < 3 {
+            out[i][r] = ((m[r][0] * c[0] + m[r][1] * c[1] + m[r][2] * c[2]) * norm) as f32;
+            r += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// Linear interpolation in a 1 nm f32 table; zero outside 360–830 nm (and for NaN).
+#[inline]
+fn lerp_table(table: &[[f32; 4]; super::N_TABLE_NM], lambda_nm: f32) -> glam::Vec4 {
+    let x = lambda_nm - LAMBDA_MIN_NM as f32;
+    let n = super::N_TABLE_NM;
+    if !(x >= 0.0 && x <= (n - 1) as f32) {
+        return glam::Vec4::ZERO;
+    }
+    let i = (x as usize).min(n - 2);
+    let t = x - i as f32;
+    let (a, b) = (glam::Vec4::from(table[i]), glam::Vec4::from(table[i + 1]));
+    a + (b - a) * t
+}
 
 /// (x̄, ȳ, z̄, D65/[`super::RGB_ILLUMINANT_D65_NORM`]) at `lambda_nm`, linearly interpolated
 /// in f32 from the 1 nm tables; zero outside 360–830 nm (and for NaN).
 #[inline]
 pub fn cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
-    let x = lambda_nm - LAMBDA_MIN_NM as f32;
-    let n = super::N_TABLE_NM;
-    if !(x >= 0.0 && x <= (n - 1) as f32) {
-        return [0.0; 4];
-    }
-    let table = &*CMF_D65_F32;
-    let i = (x as usize).min(n - 2);
-    let t = x - i as f32;
-    let (a, b) = (glam::Vec4::from(table[i]), glam::Vec4::from(table[i + 1]));
-    (a + (b - a) * t).to_array()
+    lerp_table(&CMF_D65_F32, lambda_nm).to_array()
 }
 
 /// Wavelengths carried by one path.
@@ -236,9 +262,18 @@ impl SampledSpectrum {
     }
 
     /// Monte-Carlo estimate of linear sRGB (XYZ → Rec.709, D65), as the film records it.
+    /// Uses the per-nm sRGB matching functions (the XYZ→sRGB matrix folded into the table),
+    /// equal to `xyz_to_linear_srgb(to_xyz)` up to f32 rounding.
     pub fn to_linear_srgb(&self, wavelengths: &SampledWavelengths) -> [f32; 3] {
-        let xyz = self.to_xyz(wavelengths);
-        super::xyz_to_linear_srgb(xyz.map(f64::from)).map(|v| v as f32)
+        let mut rgb = glam::Vec4::ZERO;
+        for k in 0..N_SPECTRUM_SAMPLES {
+            let pdf = wavelengths.pdf[k];
+            if pdf == 0.0 {
+                continue;
+            }
+            rgb += lerp_table(&RGB_CMF_F32, wavelengths.lambda[k]) * (self.0[k] / pdf);
+        }
+        [rgb.x, rgb.y, rgb.z]
     }
 }
 
@@ -324,6 +359,28 @@ impl std::iter::Sum for SampledSpectrum {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rgb_table_matches_xyz_then_matrix() {
+        for i in 0..2000 {
+            let w = SampledWavelengths::sample_visible(i as f32 / 2000.0);
+            let l = SampledSpectrum([0.3, 1.7, 0.02, 5.0]);
+            let want = super::super::xyz_to_linear_srgb(l.to_xyz(&w).map(f64::from));
+            let got = l.to_linear_srgb(&w);
+            // f32 accumulation: error relative to the sample's overall magnitude (channels
+            // can cancel to near zero).
+            let scale: f64 = want.iter().map(|v| v.abs()).sum();
+            for c in 0..3 {
+                let tol = 2e-6 * scale;
+                assert!((got[c] as f64 - want[c]).abs() <= tol, "{i} {c}: {got:?} {want:?}");
+            }
+        }
+        // Terminated secondaries (pdf 0) contribute nothing in both forms.
+        let mut w = SampledWavelengths::sample_visible(0.3);
+        w.pdf[1] = 0.0;
+        let l = SampledSpectrum([0.0, 1e30, 0.0, 0.0]);
+        assert_eq!(l.to_linear_srgb(&w), [0.0; 3]);
+    }
 
     #[test]
     fn f32_cie_table_matches_f64() {

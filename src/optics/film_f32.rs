@@ -150,7 +150,8 @@ impl ThinFilmX4 {
         for i in 0..4 {
             let n2_64 = n2[i] as f64;
             let n2c_sq = n2_64 * n2_64 - kx2_64;
-            if !(n2c_sq > 0.0) {
+            // Evanescent in the film (or NaN): the general path handles it.
+            if n2c_sq.is_nan() || n2c_sq <= 0.0 {
                 return None;
             }
             let n2c_64 = n2c_sq.sqrt();
@@ -198,7 +199,8 @@ impl ThinFilmX4 {
             let den_im = q * em1_im;
             let den2 = den_re * den_re + den_im * den_im;
             let inv2 = Vec4::ONE / den2;
-            let big2 = Vec4::splat(2.0) * (den0 * den0 + q * q * (em1_re * em1_re + em1_im * em1_im));
+            let big2 =
+                Vec4::splat(2.0) * (den0 * den0 + q * q * (em1_re * em1_re + em1_im * em1_im));
             let t_amp = Vec4::splat(4.0) * a * b;
             (
                 (num_re * num_re + num_im * num_im) * inv2,
@@ -337,7 +339,11 @@ mod tests {
     fn lossless_simd_path_matches_f64() {
         let mut taken = 0usize;
         let mut max_err = 0.0f64;
-        for (n1, n2, n3) in [(1.0f32, 1.37f32, 1.64f32), (1.0, 2.37, 1.64), (1.33, 1.9, 1.5)] {
+        for (n1, n2, n3) in [
+            (1.0f32, 1.37f32, 1.64f32),
+            (1.0, 2.37, 1.64),
+            (1.33, 1.9, 1.5),
+        ] {
             for di in 0..=100 {
                 let d = di as f32 * 49.7;
                 for ai in 0..=45 {
@@ -362,7 +368,10 @@ mod tests {
                             (got.t_p[i], want.t_p),
                         ] {
                             let e = (g as f64 - w).abs();
-                            assert!(e < 1e-5, "n {n1}/{n2}/{n3} d {d} cos {cos1} λ {l}: {g} vs {w}");
+                            assert!(
+                                e < 1e-5,
+                                "n {n1}/{n2}/{n3} d {d} cos {cos1} λ {l}: {g} vs {w}"
+                            );
                             max_err = max_err.max(e);
                         }
                     }

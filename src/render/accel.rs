@@ -358,12 +358,18 @@ fn any_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> bool {
     let mut state = bvh.new_traversal(ray.direction);
     let mut node;
     'outer: {
-        obvhs::traverse!(bvh, node, state, node.intersect_ray(&ray, state.oct_inv4), {
-            if tris[state.primitive_id as usize].intersect(&ray) < ray.tmax {
-                hit = true;
-                break 'outer;
+        obvhs::traverse!(
+            bvh,
+            node,
+            state,
+            node.intersect_ray(&ray, state.oct_inv4),
+            {
+                if tris[state.primitive_id as usize].intersect(&ray) < ray.tmax {
+                    hit = true;
+                    break 'outer;
+                }
             }
-        });
+        );
     }
     hit
 }
@@ -578,7 +584,11 @@ mod tests {
             )
             .normalize();
             // Some axis-aligned directions (zero components → infinite inverse).
-            let d = if i % 7 == 0 { Vec3::new(0.0, d.y.signum(), 0.0) } else { d };
+            let d = if i % 7 == 0 {
+                Vec3::new(0.0, d.y.signum(), 0.0)
+            } else {
+                d
+            };
             let tmax = if i % 3 == 0 { 1.5 } else { f32::INFINITY };
             let r = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, tmax);
             let base = closest_hit(&bvh, &rt, r);
@@ -595,7 +605,10 @@ mod tests {
             hits += base.is_some() as u32;
             occluded += occ as u32;
         }
-        assert!(hits > 2_000 && occluded > 2_000, "{hits} hits, {occluded} occluded");
+        assert!(
+            hits > 2_000 && occluded > 2_000,
+            "{hits} hits, {occluded} occluded"
+        );
     }
 
     #[test]

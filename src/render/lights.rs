@@ -126,7 +126,6 @@ impl Distribution2D {
     }
 }
 
-
 /// [`crate::spectrum::RgbSigmoidPolynomial::eval`] at four wavelengths at once (SIMD lanes).
 /// Same operations in the same order (IEEE `sqrt`/`/` are exact in both forms), so the
 /// result is bit-identical to four scalar calls; the envmap lookup is a hot spot (4 texels
@@ -165,7 +164,11 @@ pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
     let (mx, mn) = (ax.max(ay), ax.min(ay));
     if mx == 0.0 {
         // atan2(±0, +0) = ±0, atan2(±0, −0) = ±π.
-        return if x.is_sign_negative() { PI.copysign(y) } else { y };
+        return if x.is_sign_negative() {
+            PI.copysign(y)
+        } else {
+            y
+        };
     }
     let z = mn / mx;
     let z2 = z * z;
@@ -290,7 +293,10 @@ impl EnvMap {
         let r0 = (y as usize).min(h - 2);
         let fy = y - r0 as f32;
         // The four texels share the D65 factor: evaluate it once per wavelength.
-        let d65 = Spec::from_array(wl.lambda.map(|l| crate::spectrum::sampled::cmf_d65_f32(l)[3]));
+        let d65 = Spec::from_array(
+            wl.lambda
+                .map(|l| crate::spectrum::sampled::cmf_d65_f32(l)[3]),
+        );
         let lambda = Spec::from_array(wl.lambda);
         let mut out = Spec::ZERO;
         for (r, c, wgt) in [
@@ -637,8 +643,13 @@ mod tests {
         }
         // 2.5 ulp of π: the final π − r rounding dominates near ±π.
         assert!(worst < 6e-7, "max error {worst}");
-        for (y, x) in [(0.0f32, 0.0f32), (-0.0, 0.0), (0.0, -0.0), (-0.0, -0.0), (0.0, -1.0)]
-        {
+        for (y, x) in [
+            (0.0f32, 0.0f32),
+            (-0.0, 0.0),
+            (0.0, -0.0),
+            (-0.0, -0.0),
+            (0.0, -1.0),
+        ] {
             assert_eq!(atan2_fast(y, x), y.atan2(x), "atan2({y}, {x})");
         }
         assert_eq!(atan2_fast(-0.0, -1.0), -PI);

@@ -409,7 +409,10 @@ mod tests {
         let mut x = 0.01f32;
         while x < 20.0 {
             let (a, b) = (ln_fast(x), x.ln());
-            assert!((a - b).abs() <= 2e-7 * b.abs().max(1.0), "ln {x}: {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 2e-7 * b.abs().max(1.0),
+                "ln {x}: {a} vs {b}"
+            );
             x *= 1.000_37;
         }
         assert_eq!(ln_fast(1.0), 0.0);

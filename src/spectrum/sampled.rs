@@ -372,7 +372,10 @@ mod tests {
             let scale: f64 = want.iter().map(|v| v.abs()).sum();
             for c in 0..3 {
                 let tol = 2e-6 * scale;
-                assert!((got[c] as f64 - want[c]).abs() <= tol, "{i} {c}: {got:?} {want:?}");
+                assert!(
+                    (got[c] as f64 - want[c]).abs() <= tol,
+                    "{i} {c}: {got:?} {want:?}"
+                );
             }
         }
         // Terminated secondaries (pdf 0) contribute nothing in both forms.

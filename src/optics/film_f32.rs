@@ -108,8 +108,132 @@ impl ThinFilmX4 {
     /// Evaluate at four wavelengths (nm) for `cos θ1` in the ambient. No validation: inputs
     /// must satisfy [`ThinFilm::validate`] (the renderer checks materials at load time).
     #[inline]
-    #[allow(clippy::needless_range_loop)] // lane i indexes four parallel arrays
     pub fn response(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> FilmResponseX4 {
+        if let Some(out) = self.response_lossless(lambda_nm, cos_theta1) {
+            return out;
+        }
+        self.response_general(lambda_nm, cos_theta1)
+    }
+
+    /// The common dielectric case — real film and substrate indices, light propagating in
+    /// both (n² > n1² sin²θ1) — with the four wavelengths in SIMD lanes: the admittances
+    /// are real and only E = e^{2iβ} is complex, so the Airy sums below are
+    /// [`Self::response_general`]'s formulas with the zero imaginary parts dropped. The film
+    /// phase is formed and reduced in f64 exactly as there. Returns None (caller falls back
+    /// to the general path) for absorbing or evanescent layers and for ill-conditioned lanes.
+    #[inline]
+    fn response_lossless(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> Option<FilmResponseX4> {
+        use glam::Vec4;
+        if self.film_ior.iter().any(|z| z.im != 0.0)
+            || self.substrate_ior.iter().any(|z| z.im != 0.0)
+        {
+            return None;
+        }
+        let cos1 = cos_theta1.clamp(0.0, 1.0);
+        let n1 = self.ambient_ior;
+        let cos1_64 = cos1 as f64;
+        let n1_64 = n1 as f64;
+        let kx2_64 = n1_64 * n1_64 * ((1.0 - cos1_64) * (1.0 + cos1_64));
+        let d_64 = self.thickness_nm as f64;
+        let n1c = n1 * cos1;
+        let n2 = Vec4::from_array(self.film_ior.map(|z| z.re));
+        let n3 = Vec4::from_array(self.substrate_ior.map(|z| z.re));
+        // n3 cosθ3 from (n3 − n1)(n3 + n1) + (n1 cosθ1)² (no cancellation at grazing).
+        let n3c_sq = (n3 - Vec4::splat(n1)) * (n3 + Vec4::splat(n1)) + Vec4::splat(n1c * n1c);
+        if !(n3c_sq.cmpgt(Vec4::ZERO).all() && n2.cmpgt(Vec4::ZERO).all()) {
+            return None;
+        }
+        let n3c = n3c_sq.sqrt();
+        let mut n2c_a = [0.0f32; 4];
+        let mut y_a = [0.0f32; 4];
+        let mut odd_a = [0.0f32; 4];
+        for i in 0..4 {
+            let n2_64 = n2[i] as f64;
+            let n2c_sq = n2_64 * n2_64 - kx2_64;
+            // Evanescent in the film (or NaN): the general path handles it.
+            if n2c_sq.is_nan() || n2c_sq <= 0.0 {
+                return None;
+            }
+            let n2c_64 = n2c_sq.sqrt();
+            let two_beta = 2.0 * (n2c_64 * (2.0 * PI * d_64 / lambda_nm[i] as f64));
+            // Nearest multiple of π without libm `round` (no SSE4.1 at the baseline
+            // target); |2β/π| is far below 2⁶³. Ties may go either way: y stays in ±π/2.
+            let q = two_beta / PI;
+            let k = (q.abs() + 0.5) as i64;
+            let k = if q < 0.0 { -k } else { k };
+            y_a[i] = (two_beta - k as f64 * PI) as f32;
+            odd_a[i] = if k % 2 == 0 { 0.0 } else { 1.0 };
+            n2c_a[i] = n2c_64 as f32;
+        }
+        let n2c = Vec4::from_array(n2c_a);
+        // sin, cos of y/2 with |y/2| ≤ π/4 + ε: Taylor to degree 9/10, error < 2e-9.
+        let h = Vec4::from_array(y_a) * 0.5;
+        let h2 = h * h;
+        let sh = h
+            * (Vec4::ONE
+                + h2 * (Vec4::splat(-1.0 / 6.0)
+                    + h2 * (Vec4::splat(1.0 / 120.0)
+                        + h2 * (Vec4::splat(-1.0 / 5040.0) + h2 * (1.0 / 362_880.0)))));
+        let ch = Vec4::ONE
+            + h2 * (Vec4::splat(-0.5)
+                + h2 * (Vec4::splat(1.0 / 24.0)
+                    + h2 * (Vec4::splat(-1.0 / 720.0)
+                        + h2 * (Vec4::splat(1.0 / 40_320.0) + h2 * (-1.0 / 3_628_800.0)))));
+        // e^{iy} − 1 = −2 sin²(y/2) + i sin y; odd k flips the sign of E: E − 1 = −(e^{iy} − 1) − 2.
+        let m_re = Vec4::splat(-2.0) * sh * sh;
+        let m_im = Vec4::splat(2.0) * sh * ch;
+        let odd = Vec4::from_array(odd_a).cmpgt(Vec4::ZERO);
+        let em1_re = Vec4::select(odd, -m_re - Vec4::splat(2.0), m_re);
+        let em1_im = Vec4::select(odd, -m_im, m_im);
+        let e_re = em1_re + Vec4::ONE;
+        let e_im = em1_im;
+        // Airy sum with real admittances a, b, c (see response_general).
+        let airy = |a: Vec4, b: Vec4, c: Vec4| {
+            let (amb, apb, bpc, bmc) = (a - b, a + b, b + c, b - c);
+            let p = apb * bmc;
+            let num_re = amb * bpc + p * e_re;
+            let num_im = p * e_im;
+            let q = amb * bmc;
+            let den0 = Vec4::splat(2.0) * b * (a + c);
+            let den_re = den0 + q * em1_re;
+            let den_im = q * em1_im;
+            let den2 = den_re * den_re + den_im * den_im;
+            let inv2 = Vec4::ONE / den2;
+            let big2 =
+                Vec4::splat(2.0) * (den0 * den0 + q * q * (em1_re * em1_re + em1_im * em1_im));
+            let t_amp = Vec4::splat(4.0) * a * b;
+            (
+                (num_re * num_re + num_im * num_im) * inv2,
+                t_amp * t_amp * inv2,
+                big2 * inv2,
+            )
+        };
+        let a_s = Vec4::splat(n1c);
+        let (r_s, ts2, cond_s) = airy(a_s, n2c, n3c);
+        let (r_p, tp02, cond_p) = airy(a_s / (n1 * n1), n2c / (n2 * n2), n3c / (n3 * n3));
+        let max2 = Vec4::splat(F32_MAX_CONDITION * F32_MAX_CONDITION);
+        if !(cond_s.cmple(max2).all() && cond_p.cmple(max2).all()) {
+            return None;
+        }
+        let mut out = FilmResponseX4 {
+            r_s: r_s.to_array(),
+            r_p: r_p.to_array(),
+            ..Default::default()
+        };
+        if n1c > 0.0 {
+            // tmm.T_from_t with real n3 cosθ3: |t_p|² carries (n1/n3)².
+            let tp2 = tp02 * (Vec4::splat(n1) / n3) * (Vec4::splat(n1) / n3);
+            let inv_n1c = 1.0 / n1c;
+            out.t_s = (ts2 * n3c * inv_n1c).max(Vec4::ZERO).to_array();
+            out.t_p = (tp2 * n3c * inv_n1c).max(Vec4::ZERO).to_array();
+        }
+        Some(out)
+    }
+
+    /// Any indices, lane by lane (complex arithmetic; f64 fallback for ill-conditioned lanes).
+    #[inline]
+    #[allow(clippy::needless_range_loop)] // lane i indexes four parallel arrays
+    pub fn response_general(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> FilmResponseX4 {
         let cos1 = cos_theta1.clamp(0.0, 1.0);
         let n1 = self.ambient_ior;
         let cos1_64 = cos1 as f64;
@@ -202,5 +326,80 @@ impl ThinFilmX4 {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The SIMD lossless path itself (not just `response`, which may fall back) against the
+    /// f64 film: it must take the common dielectric cases and agree to 1e-5.
+    #[test]
+    fn lossless_simd_path_matches_f64() {
+        let mut taken = 0usize;
+        let mut max_err = 0.0f64;
+        for (n1, n2, n3) in [
+            (1.0f32, 1.37f32, 1.64f32),
+            (1.0, 2.37, 1.64),
+            (1.33, 1.9, 1.5),
+        ] {
+            for di in 0..=100 {
+                let d = di as f32 * 49.7;
+                for ai in 0..=45 {
+                    let cos1 = (ai as f32 * 2.0).to_radians().cos();
+                    let x4 = ThinFilmX4 {
+                        ambient_ior: n1,
+                        film_ior: [Complex32::new(n2, 0.0); 4],
+                        thickness_nm: d,
+                        substrate_ior: [Complex32::new(n3, 0.0); 4],
+                    };
+                    let lambdas = [360.0, 455.5 + di as f32, 600.25, 830.0];
+                    let Some(got) = x4.response_lossless(lambdas, cos1) else {
+                        continue;
+                    };
+                    taken += 1;
+                    for (i, &l) in lambdas.iter().enumerate() {
+                        let want = x4.lane_f64(i, l, cos1);
+                        for (g, w) in [
+                            (got.r_s[i], want.r_s),
+                            (got.r_p[i], want.r_p),
+                            (got.t_s[i], want.t_s),
+                            (got.t_p[i], want.t_p),
+                        ] {
+                            let e = (g as f64 - w).abs();
+                            assert!(
+                                e < 1e-5,
+                                "n {n1}/{n2}/{n3} d {d} cos {cos1} λ {l}: {g} vs {w}"
+                            );
+                            max_err = max_err.max(e);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(taken > 3 * 101 * 40, "fast path taken only {taken} times");
+        println!("lossless SIMD path: {taken} evaluations, max |Δ| {max_err:.2e}");
+    }
+
+    #[test]
+    fn lossless_path_declines_absorbing_and_evanescent_layers() {
+        let base = ThinFilmX4 {
+            ambient_ior: 1.0,
+            film_ior: [Complex32::new(1.37, 0.0); 4],
+            thickness_nm: 400.0,
+            substrate_ior: [Complex32::new(1.64, 0.0); 4],
+        };
+        let l = [400.0, 500.0, 600.0, 700.0];
+        assert!(base.response_lossless(l, 0.5).is_some());
+        let mut metal = base;
+        metal.substrate_ior[2] = Complex32::new(0.18, 3.4);
+        assert!(metal.response_lossless(l, 0.5).is_none());
+        // Film index below the ambient one: evanescent in the film at grazing incidence.
+        let mut tir = base;
+        tir.ambient_ior = 1.5;
+        tir.film_ior = [Complex32::new(1.2, 0.0); 4];
+        assert!(tir.response_lossless(l, 0.1).is_none());
+        assert_eq!(tir.response(l, 0.1), tir.response_general(l, 0.1));
     }
 }

@@ -12,14 +12,12 @@
 //! their radius with normalised weights (Mitsuba `hdrfilm` with `tent`/`gaussian`).
 
 use crate::scene::ReconstructionFilter;
-use crate::spectrum::{xyz_to_linear_srgb, SampledSpectrum, SampledWavelengths};
+use crate::spectrum::{SampledSpectrum, SampledWavelengths};
 
 /// Linear sRGB of one spectral sample.
 #[inline]
 pub fn sample_to_rgb(l: SampledSpectrum, wl: &SampledWavelengths) -> [f32; 3] {
-    let xyz = l.to_xyz(wl);
-    let rgb = xyz_to_linear_srgb([xyz[0] as f64, xyz[1] as f64, xyz[2] as f64]);
-    [rgb[0] as f32, rgb[1] as f32, rgb[2] as f32]
+    l.to_linear_srgb(wl)
 }
 
 /// Sum of `values` in the canonical binary tree over sample indices: the range is split at its

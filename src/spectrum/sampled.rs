@@ -10,7 +10,70 @@ use std::ops::{
     Add, AddAssign, Div, DivAssign, Index, IndexMut, Mul, MulAssign, Neg, Sub, SubAssign,
 };
 
-use super::{cie_xyz_cmf, CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+use super::{CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+
+/// The 1 nm CIE tables in f32 for the renderer's per-sample lookups, one row per nm
+/// (index = λ − 360): (x̄, ȳ, z̄, D65(λ) / [`super::RGB_ILLUMINANT_D65_NORM`]). One 16-byte
+/// row holds everything a path needs at one wavelength, and f32 interpolation avoids the
+/// f64 round trips of [`super::cie_xyz_cmf`] / [`super::d65`] (values agree to ~1e-7
+/// relative; see `tests::f32_cie_table_matches_f64`). Built at compile time.
+static CMF_D65_F32: [[f32; 4]; super::N_TABLE_NM] = {
+    let (cmf, d65) = (&super::tables::CIE_CMF_1NM, &super::tables::CIE_D65_1NM);
+    let mut out = [[0.0f32; 4]; super::N_TABLE_NM];
+    let mut i = 0;
+    while i < super::N_TABLE_NM {
+        out[i] = [
+            cmf[i][0] as f32,
+            cmf[i][1] as f32,
+            cmf[i][2] as f32,
+            (d65[i] / super::RGB_ILLUMINANT_D65_NORM) as f32,
+        ];
+        i += 1;
+    }
+    out
+};
+
+/// Linear-sRGB matching functions per nm, (r̄, ḡ, b̄, 0) = XYZ→sRGB · (x̄, ȳ, z̄) divided by
+/// the Monte-Carlo normalisation N·∫ȳ: a sample's RGB is Σ_k rgb̄(λ_k)·L_k/p(λ_k) directly,
+/// without the XYZ step and its f64 matrix product.
+static RGB_CMF_F32: [[f32; 4]; super::N_TABLE_NM] = {
+    let cmf = &super::tables::CIE_CMF_1NM;
+    let m = &super::XYZ_TO_SRGB;
+    let norm = 1.0 / (N_SPECTRUM_SAMPLES as f64 * CIE_Y_INTEGRAL);
+    let mut out = [[0.0f32; 4]; super::N_TABLE_NM];
+    let mut i = 0;
+    while i < super::N_TABLE_NM {
+        let c = cmf[i];
+        let mut r = 0;
+        while r < 3 {
+            out[i][r] = ((m[r][0] * c[0] + m[r][1] * c[1] + m[r][2] * c[2]) * norm) as f32;
+            r += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
+/// Linear interpolation in a 1 nm f32 table; zero outside 360–830 nm (and for NaN).
+#[inline]
+fn lerp_table(table: &[[f32; 4]; super::N_TABLE_NM], lambda_nm: f32) -> glam::Vec4 {
+    let x = lambda_nm - LAMBDA_MIN_NM as f32;
+    let n = super::N_TABLE_NM;
+    if !(x >= 0.0 && x <= (n - 1) as f32) {
+        return glam::Vec4::ZERO;
+    }
+    let i = (x as usize).min(n - 2);
+    let t = x - i as f32;
+    let (a, b) = (glam::Vec4::from(table[i]), glam::Vec4::from(table[i + 1]));
+    a + (b - a) * t
+}
+
+/// (x̄, ȳ, z̄, D65/[`super::RGB_ILLUMINANT_D65_NORM`]) at `lambda_nm`, linearly interpolated
+/// in f32 from the 1 nm tables; zero outside 360–830 nm (and for NaN).
+#[inline]
+pub fn cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
+    lerp_table(&CMF_D65_F32, lambda_nm).to_array()
+}
 
 /// Wavelengths carried by one path.
 pub const N_SPECTRUM_SAMPLES: usize = 4;
@@ -188,10 +251,10 @@ impl SampledSpectrum {
             if pdf == 0.0 {
                 continue;
             }
-            let cmf = cie_xyz_cmf(wavelengths.lambda[k] as f64);
+            let cmf = cmf_d65_f32(wavelengths.lambda[k]);
             let w = self.0[k] / pdf;
             for c in 0..3 {
-                xyz[c] += cmf[c] as f32 * w;
+                xyz[c] += cmf[c] * w;
             }
         }
         let norm = 1.0 / (N_SPECTRUM_SAMPLES as f64 * CIE_Y_INTEGRAL) as f32;
@@ -199,9 +262,18 @@ impl SampledSpectrum {
     }
 
     /// Monte-Carlo estimate of linear sRGB (XYZ → Rec.709, D65), as the film records it.
+    /// Uses the per-nm sRGB matching functions (the XYZ→sRGB matrix folded into the table),
+    /// equal to `xyz_to_linear_srgb(to_xyz)` up to f32 rounding.
     pub fn to_linear_srgb(&self, wavelengths: &SampledWavelengths) -> [f32; 3] {
-        let xyz = self.to_xyz(wavelengths);
-        super::xyz_to_linear_srgb(xyz.map(f64::from)).map(|v| v as f32)
+        let mut rgb = glam::Vec4::ZERO;
+        for k in 0..N_SPECTRUM_SAMPLES {
+            let pdf = wavelengths.pdf[k];
+            if pdf == 0.0 {
+                continue;
+            }
+            rgb += lerp_table(&RGB_CMF_F32, wavelengths.lambda[k]) * (self.0[k] / pdf);
+        }
+        [rgb.x, rgb.y, rgb.z]
     }
 }
 
@@ -289,6 +361,52 @@ mod tests {
     use super::*;
 
     #[test]
+    fn rgb_table_matches_xyz_then_matrix() {
+        for i in 0..2000 {
+            let w = SampledWavelengths::sample_visible(i as f32 / 2000.0);
+            let l = SampledSpectrum([0.3, 1.7, 0.02, 5.0]);
+            let want = super::super::xyz_to_linear_srgb(l.to_xyz(&w).map(f64::from));
+            let got = l.to_linear_srgb(&w);
+            // f32 accumulation: error relative to the sample's overall magnitude (channels
+            // can cancel to near zero).
+            let scale: f64 = want.iter().map(|v| v.abs()).sum();
+            for c in 0..3 {
+                let tol = 2e-6 * scale;
+                assert!(
+                    (got[c] as f64 - want[c]).abs() <= tol,
+                    "{i} {c}: {got:?} {want:?}"
+                );
+            }
+        }
+        // Terminated secondaries (pdf 0) contribute nothing in both forms.
+        let mut w = SampledWavelengths::sample_visible(0.3);
+        w.pdf[1] = 0.0;
+        let l = SampledSpectrum([0.0, 1e30, 0.0, 0.0]);
+        assert_eq!(l.to_linear_srgb(&w), [0.0; 3]);
+    }
+
+    #[test]
+    fn f32_cie_table_matches_f64() {
+        for i in 0..=47_000 {
+            let l = 360.0 + i as f32 * 0.01;
+            let fast = cmf_d65_f32(l);
+            let cmf = super::super::cie_xyz_cmf(l as f64);
+            let d = super::super::d65(l as f64) / super::super::RGB_ILLUMINANT_D65_NORM;
+            for (c, want) in [cmf[0], cmf[1], cmf[2], d].into_iter().enumerate() {
+                assert!(
+                    (fast[c] as f64 - want).abs() <= 2e-6 * want.abs().max(1e-3),
+                    "λ {l} channel {c}: {} vs {want}",
+                    fast[c]
+                );
+            }
+        }
+        for l in [359.99, 830.01, f32::NAN, f32::INFINITY, -1.0] {
+            assert_eq!(cmf_d65_f32(l), [0.0; 4], "λ {l}");
+        }
+        assert!(cmf_d65_f32(830.0)[3] > 0.0 && cmf_d65_f32(360.0)[3] > 0.0);
+    }
+
+    #[test]
     fn sample_visible_ends_and_rotation() {
         let w = SampledWavelengths::sample_visible(0.0);
         assert!((w.lambda[0] - 360.0).abs() < 1e-3, "{:?}", w.lambda);
@@ -324,7 +442,7 @@ mod tests {
         // The 4-sample average of L/pdf equals L0/p0 alone.
         let l = SampledSpectrum([2.0, 5.0, 7.0, 9.0]);
         let xyz = l.to_xyz(&w);
-        let cmf = cie_xyz_cmf(w.lambda[0] as f64);
+        let cmf = super::super::cie_xyz_cmf(w.lambda[0] as f64);
         let expect = cmf[1] as f32 * 2.0 / p0 / CIE_Y_INTEGRAL as f32;
         assert!((xyz[1] - expect).abs() <= 1e-5 * expect.abs().max(1e-6));
     }

@@ -130,6 +130,12 @@ pub fn run(args: Args) -> Result<()> {
         s.shadow_rays,
         s.film_evals
     );
+    if s.secondary_terminations > 0 {
+        println!(
+            "dispersion: {} paths kept only their hero wavelength after a dispersive refraction",
+            s.secondary_terminations
+        );
+    }
     if s.invalid_samples > 0 {
         eprintln!(
             "warning: {} samples were NaN/inf and were discarded",

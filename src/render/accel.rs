@@ -340,7 +340,7 @@ fn closest_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> Option
         state,
         node.intersect_ray(&traverse_ray, state.oct_inv4),
         {
-            let t = tris[state.primitive_id as usize].intersect(&traverse_ray);
+            let t = intersect_triangle(&tris[state.primitive_id as usize], &traverse_ray);
             if t < traverse_ray.tmax {
                 best_id = state.primitive_id;
                 traverse_ray.tmax = t;
@@ -348,6 +348,27 @@ fn closest_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> Option
         }
     );
     (best_id != u32::MAX).then_some((traverse_ray.tmax, best_id))
+}
+
+/// Ray–triangle distance, or +inf: obvhs's `RtTriangle::intersect` (Möller–Trumbore on
+/// precomputed edges) except that the barycentric test is `≥ 0` instead of a sign-bit test.
+/// The sign-bit test rejects −0.0, so a ray exactly on the edge two triangles share (the
+/// centre of a two-triangle rectangle seen straight on) missed both; here it hits one.
+#[inline(always)]
+fn intersect_triangle(tri: &RtTriangle, ray: &obvhs::ray::Ray) -> f32 {
+    let c = tri.v0 - ray.origin;
+    let r = ray.direction.cross(c);
+    let inv_det = 1.0 / tri.ng.dot(ray.direction);
+    let u = r.dot(tri.e2) * inv_det;
+    let v = r.dot(tri.e1) * inv_det;
+    let w = 1.0 - u - v;
+    if inv_det != 0.0 && u >= 0.0 && v >= 0.0 && w >= 0.0 {
+        let t = tri.ng.dot(c) * inv_det;
+        if t >= ray.tmin && t <= ray.tmax {
+            return t;
+        }
+    }
+    f32::INFINITY
 }
 
 /// True if any triangle is hit (shadow rays: stops at the first hit).
@@ -364,7 +385,7 @@ fn any_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> bool {
             state,
             node.intersect_ray(&ray, state.oct_inv4),
             {
-                if tris[state.primitive_id as usize].intersect(&ray) < ray.tmax {
+                if intersect_triangle(&tris[state.primitive_id as usize], &ray) < ray.tmax {
                     hit = true;
                     break 'outer;
                 }
@@ -394,7 +415,7 @@ fn cpu_has_avx2() -> bool {
 /// (`tests::avx2_traversal_matches_baseline`).
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::RtTriangle;
+    use super::{intersect_triangle, RtTriangle};
     use glam::{UVec2, Vec3A};
     use obvhs::cwbvh::node::CwBvhNode;
     use obvhs::cwbvh::CwBvh;
@@ -486,7 +507,7 @@ mod x86 {
             state,
             node_hits(node, &traverse_ray, state.oct_inv4),
             {
-                let t = tris[state.primitive_id as usize].intersect(&traverse_ray);
+                let t = intersect_triangle(&tris[state.primitive_id as usize], &traverse_ray);
                 if t < traverse_ray.tmax {
                     best_id = state.primitive_id;
                     traverse_ray.tmax = t;
@@ -507,7 +528,7 @@ mod x86 {
         let mut node;
         'outer: {
             obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
-                if tris[state.primitive_id as usize].intersect(&ray) < ray.tmax {
+                if intersect_triangle(&tris[state.primitive_id as usize], &ray) < ray.tmax {
                     hit = true;
                     break 'outer;
                 }
@@ -608,6 +629,56 @@ mod tests {
         assert!(
             hits > 2_000 && occluded > 2_000,
             "{hits} hits, {occluded} occluded"
+        );
+    }
+
+    /// Axis-aligned rays onto an axis-aligned flat quad (a zero-thickness box, infinite
+    /// inverse direction components): a camera looking straight down at a floor.
+    #[test]
+    fn axis_aligned_rays_hit_a_flat_quad() {
+        let (a, b, c, d) = (
+            Vec3::new(-1.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, 1.0),
+            Vec3::new(-1.0, 0.0, 1.0),
+        );
+        let tri = |p: Vec3, q: Vec3, r: Vec3| Triangle {
+            v0: p.into(),
+            v1: q.into(),
+            v2: r.into(),
+        };
+        let tris = vec![tri(a, b, c), tri(a, c, d)];
+        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &tris,
+            obvhs::BvhBuildParams::slow_build(),
+            &mut std::time::Duration::default(),
+        );
+        let rt: Vec<RtTriangle> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .collect();
+        let mut misses = Vec::new();
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let (x, z) = (i as f32 * 0.09 - 0.9, j as f32 * 0.09 - 0.9);
+                for (o, dir) in [
+                    (Vec3::new(x, 1.0, z), Vec3::NEG_Y),
+                    (Vec3::new(x, -1.0, z), Vec3::Y),
+                ] {
+                    let r = obvhs::ray::Ray::new(o.into(), dir.into(), 0.0, f32::INFINITY);
+                    let hit = closest_hit(&bvh, &rt, r);
+                    if hit.map_or(true, |(t, _)| (t - 1.0).abs() > 1e-5) || !any_hit(&bvh, &rt, r) {
+                        misses.push((o, dir));
+                    }
+                }
+            }
+        }
+        assert!(
+            misses.is_empty(),
+            "{} misses, e.g. {:?}",
+            misses.len(),
+            &misses[..misses.len().min(4)]
         );
     }
 

@@ -61,6 +61,9 @@ pub struct RenderStats {
     pub rays: u64,
     pub shadow_rays: u64,
     pub film_evals: u64,
+    /// Paths whose secondary wavelengths were dropped at a dispersive refraction (0 unless
+    /// the scene declares dispersion: the proof that the 4-wavelength fast path is kept).
+    pub secondary_terminations: u64,
     /// Samples whose estimate was NaN or infinite and were discarded (should be 0).
     pub invalid_samples: u64,
     pub triangles: usize,
@@ -395,6 +398,7 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
             rays: counters.rays,
             shadow_rays: counters.shadow_rays,
             film_evals: counters.film_evals,
+            secondary_terminations: counters.secondary_terminations,
             invalid_samples: counters.invalid_samples,
             triangles: scene.accel.triangle_count(),
             degenerate_triangles: scene.degenerate_triangles,

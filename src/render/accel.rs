@@ -668,7 +668,7 @@ mod tests {
                 ] {
                     let r = obvhs::ray::Ray::new(o.into(), dir.into(), 0.0, f32::INFINITY);
                     let hit = closest_hit(&bvh, &rt, r);
-                    if hit.map_or(true, |(t, _)| (t - 1.0).abs() > 1e-5) || !any_hit(&bvh, &rt, r) {
+                    if hit.is_none_or(|(t, _)| (t - 1.0).abs() > 1e-5) || !any_hit(&bvh, &rt, r) {
                         misses.push((o, dir));
                     }
                 }

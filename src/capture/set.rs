@@ -10,7 +10,6 @@ use super::envi::{self, EnviFile};
 use super::{AngleCapture, CaptureSet, GroundTruth, InvalidCounts, Polarization};
 use crate::optics::{Complex64, Ior};
 use anyhow::{bail, Context, Result};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -197,7 +196,6 @@ fn reflectance(
 ) -> (Vec<f32>, Vec<bool>, InvalidCounts) {
     let h = &file.header;
     let (w, nb) = (h.samples, h.bands);
-    let mut data = file.to_bip_f32();
     let ignore = h.ignore_value.map(|v| v as f32);
     let sat = h.data_type.saturation_value().map(|v| v as f32);
     // Per band: (offset, scale) with R = (raw − offset) · scale, or None if the band's
@@ -212,45 +210,74 @@ fn reflectance(
             }
         })
         .collect();
-    let mut valid = vec![true; w * h.lines];
-    let counts = data
-        .par_chunks_mut(w * nb)
-        .zip(valid.par_chunks_mut(w))
-        .map(|(row, valid_row)| {
-            let mut c = InvalidCounts::default();
-            for (px, ok) in row.chunks_mut(nb).zip(valid_row.iter_mut()) {
-                for (b, v) in px.iter_mut().enumerate() {
-                    let raw = *v;
-                    let cause = if !raw.is_finite() {
-                        Some(&mut c.non_finite)
-                    } else if Some(raw) == ignore {
-                        Some(&mut c.ignore_value)
-                    } else if sat.is_some_and(|s| raw >= s) {
-                        Some(&mut c.saturated)
-                    } else if let Some((offset, scale)) = band_map[b] {
-                        let r = ((raw as f64 - offset) * scale) as f32;
-                        if r.is_finite() {
-                            *v = r;
-                            None
-                        } else {
-                            Some(&mut c.non_finite)
-                        }
-                    } else {
-                        Some(&mut c.bad_reference)
-                    };
-                    if let Some(counter) = cause {
-                        *counter += 1;
-                        *v = f32::NAN;
-                        *ok = false;
+    // Fast path per pixel (branch-free, vectorises): every raw sample usable and every
+    // band reference usable → calibrate in place. Anything else → the per-sample path
+    // below, which counts the cause. Same results either way.
+    let identity = white.is_none();
+    let all_refs = band_map.iter().all(Option::is_some);
+    let offset: Vec<f64> = band_map.iter().map(|m| m.map_or(0.0, |m| m.0)).collect();
+    let scale: Vec<f64> = band_map.iter().map(|m| m.map_or(1.0, |m| m.1)).collect();
+    let ignore_v = ignore.unwrap_or(f32::NAN); // NaN never compares equal
+    let sat_v = sat.unwrap_or(f32::INFINITY); // inf is caught as non-finite anyway
+                                              // Calibrated and masked row by row as each row is decoded (still in cache).
+    let (data, rows) = file.decode_bip_rows(|_, row| {
+        let mut c = InvalidCounts::default();
+        let mut valid_row = vec![true; w];
+        let mut cal = vec![0f32; nb];
+        for (px, ok) in row.chunks_mut(nb).zip(valid_row.iter_mut()) {
+            if all_refs {
+                let bad = px.iter().fold(false, |bad, &v| {
+                    bad | !v.is_finite() | (v == ignore_v) | (v >= sat_v)
+                });
+                if !bad {
+                    if identity {
+                        continue;
+                    }
+                    for (((o, &v), &off), &sc) in
+                        cal.iter_mut().zip(px.iter()).zip(&offset).zip(&scale)
+                    {
+                        *o = ((v as f64 - off) * sc) as f32;
+                    }
+                    if cal.iter().all(|v| v.is_finite()) {
+                        px.copy_from_slice(&cal);
+                        continue;
                     }
                 }
             }
-            c
-        })
-        .reduce(InvalidCounts::default, |mut a, b| {
-            a.add(&b);
-            a
-        });
+            for (b, v) in px.iter_mut().enumerate() {
+                let raw = *v;
+                let cause = if !raw.is_finite() {
+                    Some(&mut c.non_finite)
+                } else if Some(raw) == ignore {
+                    Some(&mut c.ignore_value)
+                } else if sat.is_some_and(|s| raw >= s) {
+                    Some(&mut c.saturated)
+                } else if let Some((offset, scale)) = band_map[b] {
+                    let r = ((raw as f64 - offset) * scale) as f32;
+                    if r.is_finite() {
+                        *v = r;
+                        None
+                    } else {
+                        Some(&mut c.non_finite)
+                    }
+                } else {
+                    Some(&mut c.bad_reference)
+                };
+                if let Some(counter) = cause {
+                    *counter += 1;
+                    *v = f32::NAN;
+                    *ok = false;
+                }
+            }
+        }
+        (valid_row, c)
+    });
+    let mut valid = Vec::with_capacity(w * h.lines);
+    let mut counts = InvalidCounts::default();
+    for (valid_row, c) in rows {
+        valid.extend_from_slice(&valid_row);
+        counts.add(&c);
+    }
     (data, valid, counts)
 }
 

@@ -73,6 +73,7 @@ pub fn run(args: Args) -> Result<()> {
         fit,
         delta_e: de,
         truth,
+        ..
     } = report::fit_capture_dir(
         &args.capture_dir,
         &args.out,

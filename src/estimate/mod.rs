@@ -20,12 +20,56 @@ pub mod model;
 pub mod peaks;
 pub mod report;
 pub mod synth;
+pub mod table;
 
 use crate::capture::CaptureSet;
 use anyhow::{bail, Result};
-use model::{FilmModel, Geometry};
+use model::{FilmModel, Geometry, PassSums};
 use rayon::prelude::*;
 use std::time::Instant;
+
+/// CPU seconds (user + system, all threads) used by this process so far, from
+/// `/proc/self/stat` (Linux, 10 ms ticks); `None` where that is unavailable. Benchmarks on
+/// a shared machine report it beside wall-clock time, which other load inflates.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name: state is field 3, utime 14, stime 15.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0) // USER_HZ is 100 on every Linux ABI Rust targets
+}
+
+/// Wall-clock and CPU seconds of one stage.
+pub(crate) struct Stopwatch {
+    wall: Instant,
+    cpu: Option<f64>,
+}
+
+/// Per-stage wall-clock and CPU seconds, in stage order.
+#[derive(Default)]
+pub(crate) struct Stages {
+    wall: Vec<(String, f64)>,
+    cpu: Vec<(String, f64)>,
+}
+
+impl Stopwatch {
+    pub(crate) fn start() -> Self {
+        Stopwatch {
+            wall: Instant::now(),
+            cpu: process_cpu_seconds(),
+        }
+    }
+    pub(crate) fn stop(self, name: &str, stages: &mut Stages) {
+        stages
+            .wall
+            .push((name.to_string(), self.wall.elapsed().as_secs_f64()));
+        if let (Some(a), Some(b)) = (self.cpu, process_cpu_seconds()) {
+            stages.cpu.push((name.to_string(), b - a));
+        }
+    }
+}
+use table::ThicknessTable;
 
 /// Which estimator to run.
 #[derive(
@@ -113,6 +157,8 @@ pub struct Fit {
     /// Pixels with data but no thickness (e.g. no peak for `paper`).
     pub unfitted_pixels: usize,
     pub stage_seconds: Vec<(String, f64)>,
+    /// CPU seconds (all threads) per stage, where the platform reports them.
+    pub stage_cpu_seconds: Vec<(String, f64)>,
     pub warnings: Vec<String>,
 }
 
@@ -271,13 +317,20 @@ fn score_step(bands: usize) -> usize {
     (bands / 40).max(1)
 }
 
+/// Largest thickness table [`DSolver::with_table`] builds; beyond it (very wide thickness
+/// ranges or thousands of bands) the solver evaluates the model directly.
+const MAX_TABLE_BYTES: usize = 256 << 20;
+
 /// Thickness search context for one film index.
 struct DSolver<'a> {
     model: &'a FilmModel,
-    /// Point-sampled model (no band quadrature) used for the coarse scan only: the scan
-    /// just has to land in the right basin, and the quadrature triples its cost. The
-    /// Gauss–Newton refinement always uses `model`.
+    /// Point-sampled model (no band quadrature) used for the coarse scan only when there
+    /// is no table: the scan just has to land in the right basin, and the quadrature
+    /// triples its cost. The Gauss–Newton refinement always uses `model` (or its table).
     scan_model: Option<FilmModel>,
+    /// `model` tabulated over [d_min, d_max] (see [`table`]): scan and refinement become
+    /// dot products and Hermite interpolation instead of Airy evaluations.
+    table: Option<ThicknessTable>,
     d_min: f64,
     d_max: f64,
     /// Coarse scan step: 1/8 of a fringe at the shortest wavelength, so some scan point
@@ -304,6 +357,7 @@ impl<'a> DSolver<'a> {
         DSolver {
             model,
             scan_model,
+            table: None,
             d_min: opts.min_thickness_nm,
             d_max: opts.max_thickness_nm,
             scan_step: fringe / 8.0,
@@ -312,20 +366,45 @@ impl<'a> DSolver<'a> {
         }
     }
 
+    /// As [`DSolver::new`], plus a thickness table with 64 nodes per scan fringe (8 per
+    /// scan step) when it fits in [`MAX_TABLE_BYTES`]. Worth it when many pixels share
+    /// the index: building costs about as much as fitting a few hundred pixels directly.
+    fn with_table(model: &'a FilmModel, geom: &Geometry, opts: &Options) -> Self {
+        let mut s = Self::new(model, geom, opts);
+        let step = s.scan_step / 8.0;
+        if step > 0.0 && ThicknessTable::bytes_for(model, s.d_min, s.d_max, step) <= MAX_TABLE_BYTES
+        {
+            s.table = Some(ThicknessTable::build(model, s.d_min, s.d_max, step));
+            s.scan_model = None;
+        }
+        s
+    }
+
+    #[inline]
+    fn pass(&self, d: f64, y: &[f32], mask: &[bool]) -> PassSums {
+        match &self.table {
+            Some(t) => t.pass(d, y, mask),
+            None => self.model.pass(d, y, mask),
+        }
+    }
+
     /// Damped Gauss–Newton in d from `d0`.
     fn refine(&self, y: &[f32], mask: &[bool], d0: f64, iters: usize) -> (f64, f64) {
         let mut d = d0.clamp(self.d_min, self.d_max);
-        let mut cur = self.model.pass(d, y, mask);
+        let mut cur = self.pass(d, y, mask);
         for _ in 0..iters {
             if !(cur.hess > 0.0) {
                 break;
             }
             let mut step =
                 (-cur.grad / cur.hess).clamp(-self.max_newton_step, self.max_newton_step);
+            if !(step.abs() > 1e-2) {
+                break; // converged: 0.01 nm is far below the accuracy needed
+            }
             let mut moved = false;
             for _ in 0..6 {
                 let dn = (d + step).clamp(self.d_min, self.d_max);
-                let nw = self.model.pass(dn, y, mask);
+                let nw = self.pass(dn, y, mask);
                 if nw.sse <= cur.sse {
                     moved = (dn - d).abs() > 1e-2; // 0.01 nm: far below the accuracy needed
                     d = dn;
@@ -341,16 +420,41 @@ impl<'a> DSolver<'a> {
         (d, cur.sse)
     }
 
+    /// Coarse scan scores (d, SSE) over [d_min, d_max] every `scan_step`.
+    fn scan(&self, y: &[f32], mask: &[bool]) -> Vec<(f64, f64)> {
+        if let Some(t) = &self.table {
+            // Same spacing as the direct scan, on table nodes, every band, exact model.
+            let stride = ((self.scan_step / t.step_nm).round() as usize).max(1);
+            let last = (((self.d_max - t.d_min) / t.step_nm).ceil() as usize).min(t.nodes - 1);
+            let yy: f32 = y.iter().map(|v| v * v).sum();
+            let mut idx: Vec<usize> = (0..=last).step_by(stride).collect();
+            if idx.last() != Some(&last) {
+                idx.push(last);
+            }
+            return idx
+                .into_iter()
+                .map(|i| {
+                    (
+                        t.node_d(i).min(self.d_max),
+                        t.node_sse(i, y, mask, yy) as f64,
+                    )
+                })
+                .collect();
+        }
+        let steps = ((self.d_max - self.d_min) / self.scan_step).ceil() as usize + 1;
+        let scan = self.scan_model.as_ref().unwrap_or(self.model);
+        (0..steps)
+            .map(|i| {
+                let d = (self.d_min + i as f64 * self.scan_step).min(self.d_max);
+                (d, scan.sse(d, y, mask, self.score_step))
+            })
+            .collect()
+    }
+
     /// Global search: coarse scan (covering whole- and half-order fringe positions alike)
     /// then Gauss–Newton from the best few local minima.
     fn search(&self, y: &[f32], mask: &[bool]) -> (f64, f64) {
-        let steps = ((self.d_max - self.d_min) / self.scan_step).ceil() as usize + 1;
-        let mut scores = Vec::with_capacity(steps);
-        let scan = self.scan_model.as_ref().unwrap_or(self.model);
-        for i in 0..steps {
-            let d = (self.d_min + i as f64 * self.scan_step).min(self.d_max);
-            scores.push((d, scan.sse(d, y, mask, self.score_step)));
-        }
+        let scores = self.scan(y, mask);
         let mut minima: Vec<(f64, f64)> = (0..scores.len())
             .filter(|&i| {
                 let s = scores[i].1;
@@ -383,7 +487,7 @@ struct Thickness {
 /// are removed with the spatial smoothness of d (seed assumption 3).
 fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> Thickness {
     let model = geom.model(n);
-    let solver = DSolver::new(&model, geom, opts);
+    let solver = DSolver::with_table(&model, geom, opts);
     let px = Pixels::new(set);
     let (w, h) = (set.width, set.height);
     let (na, nb) = (set.angles.len(), set.bands());
@@ -433,36 +537,60 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
             .map(|&p| (sse[p] as f64 / samples[p] as f64).sqrt())
             .collect();
         let typical = median(&mut seed_rmse).unwrap_or(0.0);
+        // A fit this good is taken as the right order (no global search).
+        let good_rmse = 2.0 * typical + 1e-4;
         let rows: Vec<(usize, Vec<(f32, f32, u32)>)> = (0..h)
             .into_par_iter()
             .map_init(
                 || (vec![0f32; na * nb], vec![false; na]),
                 |(yb, m), yy| {
                     let mut row = Vec::with_capacity(w);
+                    // Last well-fitting thickness in this row: d is smooth (seed assumption
+                    // 3), so the left neighbour predicts d far better than the seed lattice
+                    // and Gauss–Newton converges in one or two steps. Rows only depend on
+                    // the seeds, so the result does not depend on the thread schedule.
+                    let mut left: Option<f64> = None;
                     for x in 0..w {
                         let p = yy * w + x;
                         if yy % stride == 0 && x % stride == 0 {
                             row.push((d[p], sse[p], samples[p]));
+                            let ok = samples[p] > 0
+                                && (sse[p] as f64 / samples[p] as f64).sqrt() <= good_rmse;
+                            left = (ok && d[p].is_finite()).then_some(d[p] as f64);
                             continue;
                         }
                         let used = px.get(p, yb, m);
                         if used == 0 {
                             row.push((f32::NAN, 0.0, 0));
+                            left = None;
                             continue;
                         }
-                        let init = interpolate_seed(&seed_d, gw, gh, stride, x, yy);
+                        let init =
+                            left.or_else(|| interpolate_seed(&seed_d, gw, gh, stride, x, yy));
                         let (mut dd, mut s) = match init {
                             Some(d0) => solver.refine(yb, m, d0, 5),
                             None => (f64::NAN, f64::INFINITY),
                         };
-                        let rmse = (s / (used * nb) as f64).sqrt();
-                        if !(rmse <= 2.0 * typical + 1e-4) {
+                        let mut rmse = (s / (used * nb) as f64).sqrt();
+                        if !(rmse <= good_rmse) && left.is_some() {
+                            // The neighbour may sit on another order: try the seeds.
+                            if let Some(d0) = interpolate_seed(&seed_d, gw, gh, stride, x, yy) {
+                                let (d2, s2) = solver.refine(yb, m, d0, 5);
+                                if s2 < s {
+                                    (dd, s) = (d2, s2);
+                                    rmse = (s / (used * nb) as f64).sqrt();
+                                }
+                            }
+                        }
+                        if !(rmse <= good_rmse) {
                             let (d2, s2) = solver.search(yb, m);
                             if s2 < s {
                                 dd = d2;
                                 s = s2;
                             }
                         }
+                        let ok = (s / (used * nb) as f64).sqrt() <= good_rmse;
+                        left = (ok && dd.is_finite()).then_some(dd);
                         row.push((dd as f32, s as f32, (used * nb) as u32));
                     }
                     (yy, row)
@@ -569,8 +697,8 @@ fn median_filter(d: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
             if buf.is_empty() {
                 return f32::NAN;
             }
-            buf.sort_by(f32::total_cmp);
-            buf[buf.len() / 2]
+            let mid = buf.len() / 2;
+            *buf.select_nth_unstable_by(mid, f32::total_cmp).1
         })
         .collect()
 }
@@ -863,7 +991,7 @@ fn index_scan(set: &CaptureSet, geom: &Geometry, pixels: &[usize], opts: &Option
 
 fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let geom = Geometry::from_capture(set, opts.band_integration);
-    let mut stages = Vec::new();
+    let mut stages = Stages::default();
     let mut warnings = Vec::new();
     let (n, sigma, note) = if let Some(n) = opts.film_ior {
         if n <= geom.max_kx() {
@@ -874,7 +1002,7 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         }
         (n, None, "given (--film-ior)".to_string())
     } else {
-        let t = Instant::now();
+        let t = Stopwatch::start();
         let pixels = multi_angle_pixels(set);
         if pixels.is_empty() {
             bail!("no pixel is valid at two or more angles: the film index cannot be estimated");
@@ -891,8 +1019,8 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
                     .ok_or_else(|| anyhow::anyhow!("index scan found no candidate"))?
             }
         };
-        stages.push(("index_from_peaks".to_string(), t.elapsed().as_secs_f64()));
-        let t = Instant::now();
+        t.stop("index_from_peaks", &mut stages);
+        let t = Stopwatch::start();
         let joint = spread(&pixels, opts.joint_pixels.max(1));
         let px = Pixels::new(set);
         let (na, nb) = (set.angles.len(), set.bands());
@@ -907,7 +1035,7 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
                 break;
             }
             let m = geom.model(n);
-            let s = DSolver::new(&m, &geom, opts);
+            let s = DSolver::with_table(&m, &geom, opts);
             let d0: Vec<f64> = joint
                 .par_iter()
                 .map_init(
@@ -922,7 +1050,7 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             n = n2;
             sigma = s2;
         }
-        stages.push(("joint_refinement".to_string(), t.elapsed().as_secs_f64()));
+        t.stop("joint_refinement", &mut stages);
         let note = match first {
             Some((n0, _, k)) => format!(
                 "sub-band peaks: median of {k} tracks {n0:.4}; joint Gauss–Newton on {} pixels; σ from the Schur complement",
@@ -932,9 +1060,9 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         };
         (n, sigma, note)
     };
-    let t = Instant::now();
+    let t = Stopwatch::start();
     let th = fit_thickness(set, &geom, n, opts);
-    stages.push(("thickness".to_string(), t.elapsed().as_secs_f64()));
+    t.stop("thickness", &mut stages);
     Ok(finish(
         set,
         Method::Full,
@@ -955,7 +1083,7 @@ fn finish(
     sigma: Option<f64>,
     note: String,
     th: Thickness,
-    stage_seconds: Vec<(String, f64)>,
+    stages: Stages,
     warnings: Vec<String>,
 ) -> Fit {
     let invalid = (0..set.width * set.height)
@@ -976,7 +1104,8 @@ fn finish(
         sse: th.sse,
         samples: th.samples,
         invalid_pixels: invalid,
-        stage_seconds,
+        stage_seconds: stages.wall,
+        stage_cpu_seconds: stages.cpu,
         warnings,
     }
 }
@@ -988,9 +1117,9 @@ fn paper(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let (na, nb) = (set.angles.len(), set.bands());
     let order = angle_order(set);
     let lambdas = &set.wavelengths_nm;
-    let mut stages = Vec::new();
+    let mut stages = Stages::default();
     let mut warnings = Vec::new();
-    let t = Instant::now();
+    let t = Stopwatch::start();
     // Band-quantised peak per pixel and angle.
     let peaks_of = |y: &[f32], m: &[bool]| -> Vec<Option<f64>> {
         (0..na)
@@ -1048,8 +1177,8 @@ fn paper(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     if n <= geom.max_kx() {
         bail!("paper method: index {n} ≤ n1 sinθ: eq. (13) has no real solution");
     }
-    stages.push(("index_eq12".to_string(), t.elapsed().as_secs_f64()));
-    let t = Instant::now();
+    t.stop("index_eq12", &mut stages);
+    let t = Stopwatch::start();
     let m = geom.model(n);
     let pb = progress_bar(opts, all.len(), "thickness");
     let res: Vec<(f32, f32, u32)> = all
@@ -1097,7 +1226,7 @@ fn paper(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             "{nopeak} pixels had no peak at any angle: no thickness (eq. 13 needs a peak)"
         ));
     }
-    stages.push(("thickness_eq13_14".to_string(), t.elapsed().as_secs_f64()));
+    t.stop("thickness_eq13_14", &mut stages);
     let th = Thickness {
         d: res.iter().map(|r| r.0).collect(),
         sse: res
@@ -1125,7 +1254,7 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let px = Pixels::new(set);
     let (na, nb) = (set.angles.len(), set.bands());
     let (w, h) = (set.width, set.height);
-    let mut stages = Vec::new();
+    let mut stages = Stages::default();
     let d_steps = ((opts.max_thickness_nm - opts.min_thickness_nm) / opts.grid_thickness_step_nm)
         .floor() as usize
         + 1;
@@ -1136,7 +1265,7 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .unwrap_or((f64::NAN, f64::INFINITY))
     };
-    let t = Instant::now();
+    let t = Stopwatch::start();
     let (n, note) = if let Some(n) = opts.film_ior {
         (n, "given (--film-ior)".to_string())
     } else {
@@ -1186,8 +1315,8 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             ),
         )
     };
-    stages.push(("index_grid".to_string(), t.elapsed().as_secs_f64()));
-    let t = Instant::now();
+    t.stop("index_grid", &mut stages);
+    let t = Stopwatch::start();
     let m = geom.model(n);
     let res: Vec<(f32, f32, u32)> = (0..w * h)
         .into_par_iter()
@@ -1203,7 +1332,7 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             },
         )
         .collect();
-    stages.push(("thickness_grid".to_string(), t.elapsed().as_secs_f64()));
+    t.stop("thickness_grid", &mut stages);
     let th = Thickness {
         d: res.iter().map(|r| r.0).collect(),
         sse: res.iter().map(|r| r.1).collect(),

@@ -30,12 +30,16 @@ pub struct Stats {
     pub max: f64,
 }
 
-/// Linear-interpolated percentile of sorted data.
-fn pct(sorted: &[f64], q: f64) -> f64 {
-    let x = q * (sorted.len() - 1) as f64;
+/// Linear-interpolated percentile (same definition as on sorted data: between the
+/// ⌊q(n−1)⌋-th and the next order statistic), found by selection in O(n) — a
+/// megapixel map is sorted in ~0.1 s, and the outputs ask for several percentiles.
+/// Reorders `v`; `v` must be non-empty and NaN-free.
+fn pct(v: &mut [f64], q: f64) -> f64 {
+    let x = q * (v.len() - 1) as f64;
     let i = x.floor() as usize;
-    let j = (i + 1).min(sorted.len() - 1);
-    sorted[i] + (sorted[j] - sorted[i]) * (x - i as f64)
+    let (_, &mut lo, right) = v.select_nth_unstable_by(i, f64::total_cmp);
+    let hi = right.iter().copied().min_by(f64::total_cmp).unwrap_or(lo);
+    lo + (hi - lo) * (x - i as f64)
 }
 
 pub fn thickness_stats(d: &[f32]) -> Option<Stats> {
@@ -47,14 +51,17 @@ pub fn thickness_stats(d: &[f32]) -> Option<Stats> {
     if v.is_empty() {
         return None;
     }
-    v.sort_by(f64::total_cmp);
+    // Mean in the input's order (selection reorders v).
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     Some(Stats {
-        mean: v.iter().sum::<f64>() / v.len() as f64,
-        median: pct(&v, 0.5),
-        p5: pct(&v, 0.05),
-        p95: pct(&v, 0.95),
-        min: v[0],
-        max: v[v.len() - 1],
+        mean,
+        median: pct(&mut v, 0.5),
+        p5: pct(&mut v, 0.05),
+        p95: pct(&mut v, 0.95),
+        min,
+        max,
     })
 }
 
@@ -110,22 +117,33 @@ pub fn mean_delta_e(
         crate::spectrum::xyz_to_lab(xyz, white)
     };
     let run = || {
-        let mut r = vec![0f32; nb];
-        let (mut sum, mut count) = (0.0, 0usize);
-        for &p in &pixels {
-            for (a, ang) in set.angles.iter().enumerate() {
-                let y = &ang.reflectance[p * nb..(p + 1) * nb];
-                if !ang.valid[p] || y.iter().any(|v| !v.is_finite()) {
-                    continue;
-                }
-                model.spectrum(a, fit.thickness_nm[p] as f64, &mut r);
-                let de = crate::spectrum::delta_e76(lab(y), lab(&r));
-                if de.is_finite() {
-                    sum += de;
-                    count += 1;
-                }
-            }
-        }
+        use rayon::prelude::*;
+        // Per-pixel sums in parallel, added in pixel order (same result on any thread count).
+        let per_pixel: Vec<(f64, usize)> = pixels
+            .par_iter()
+            .map_init(
+                || vec![0f32; nb],
+                |r, &p| {
+                    let (mut sum, mut count) = (0.0, 0usize);
+                    for (a, ang) in set.angles.iter().enumerate() {
+                        let y = &ang.reflectance[p * nb..(p + 1) * nb];
+                        if !ang.valid[p] || y.iter().any(|v| !v.is_finite()) {
+                            continue;
+                        }
+                        model.spectrum(a, fit.thickness_nm[p] as f64, r);
+                        let de = crate::spectrum::delta_e76(lab(y), lab(r));
+                        if de.is_finite() {
+                            sum += de;
+                            count += 1;
+                        }
+                    }
+                    (sum, count)
+                },
+            )
+            .collect();
+        let (sum, count) = per_pixel
+            .iter()
+            .fold((0.0, 0usize), |a, b| (a.0 + b.0, a.1 + b.1));
         (count > 0).then(|| sum / count as f64)
     };
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)) {
@@ -287,11 +305,10 @@ pub fn write_colormap_png(
         .filter(|v| v.is_finite())
         .map(|&v| v as f64)
         .collect();
-    finite.sort_by(f64::total_cmp);
     let (lo, hi) = if finite.is_empty() {
         (0.0, 1.0)
     } else {
-        let (a, b) = (pct(&finite, 0.005), pct(&finite, 0.995));
+        let (a, b) = (pct(&mut finite, 0.005), pct(&mut finite, 0.995));
         if b > a {
             (a, b)
         } else {
@@ -514,6 +531,10 @@ pub struct FitRun {
     /// Mean ΔE*ab (D65) between measured and model spectra, or why it is unavailable.
     pub delta_e: Result<f64, String>,
     pub truth: Option<TruthErrors>,
+    /// Wall-clock seconds of the stages around the fit: `load`, `delta_e`, `write`.
+    pub io_seconds: Vec<(String, f64)>,
+    /// CPU seconds (all threads) of the same stages, where the platform reports them.
+    pub io_cpu_seconds: Vec<(String, f64)>,
 }
 
 /// The whole `thinfilm estimate` job: load the capture set in `capture_dir`, fit it, compare
@@ -524,14 +545,16 @@ pub fn fit_capture_dir(
     opts: &super::Options,
     ground_truth: Option<&Path>,
 ) -> Result<FitRun> {
-    let t = std::time::Instant::now();
+    use super::{Stages, Stopwatch};
+    let mut io = Stages::default();
+    let t = Stopwatch::start();
     let set = crate::capture::load_capture_set(capture_dir)
         .with_context(|| format!("loading capture set {}", capture_dir.display()))?;
-    let load_s = t.elapsed().as_secs_f64();
+    t.stop("load", &mut io);
     let fit = super::estimate(&set, opts)?;
-    let t = std::time::Instant::now();
+    let t = Stopwatch::start();
     let delta_e = mean_delta_e(&set, &fit, opts.band_integration, 20_000);
-    let de_s = t.elapsed().as_secs_f64();
+    t.stop("delta_e", &mut io);
     let truth = match ground_truth {
         Some(dir) => {
             let gt = crate::capture::load_ground_truth(dir)
@@ -540,12 +563,43 @@ pub fn fit_capture_dir(
         }
         None => None,
     };
-    let extra = vec![("load".to_string(), load_s), ("delta_e".to_string(), de_s)];
-    let json = fit_json(&set, &fit, &delta_e, truth.as_ref(), &extra);
+    let json = fit_json(&set, &fit, &delta_e, truth.as_ref(), &io.wall);
+    let t = Stopwatch::start();
     write_outputs(out, &set, &fit, &json)?;
+    t.stop("write", &mut io);
     Ok(FitRun {
         fit,
         delta_e,
         truth,
+        io_seconds: io.wall,
+        io_cpu_seconds: io.cpu,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Selection-based percentiles equal interpolation between sorted order statistics.
+    #[test]
+    fn percentiles_match_sorted_definition() {
+        let data: Vec<f64> = (0..1001)
+            .map(|i| ((i * 7919) % 1009) as f64 * 0.5)
+            .collect();
+        let mut sorted = data.clone();
+        sorted.sort_by(f64::total_cmp);
+        for q in [0.0, 0.005, 0.05, 0.5, 0.95, 0.995, 1.0] {
+            let x = q * (sorted.len() - 1) as f64;
+            let i = x.floor() as usize;
+            let j = (i + 1).min(sorted.len() - 1);
+            let want = sorted[i] + (sorted[j] - sorted[i]) * (x - i as f64);
+            let mut v = data.clone();
+            assert_eq!(pct(&mut v, q), want, "q={q}");
+        }
+        let single = thickness_stats(&[f32::NAN, 3.0, f32::INFINITY]).unwrap();
+        assert_eq!((single.min, single.median, single.max), (3.0, 3.0, 3.0));
+        let s = thickness_stats(&[4.0, 1.0, 3.0, 2.0]).unwrap();
+        assert_eq!((s.min, s.median, s.max, s.mean), (1.0, 2.5, 4.0, 2.5));
+        assert!(thickness_stats(&[f32::NAN]).is_none());
+    }
 }

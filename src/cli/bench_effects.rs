@@ -2,7 +2,8 @@
 //!
 //! Renders the same scene (the teapot of `scenes/teapot_mgf2_400.xml` in the studio
 //! environment) with only its material swapped — diffuse, smooth conductor, one Airy film
-//! (constant and textured thickness), multilayer stacks (2 and 13 layers, transfer-matrix
+//! (constant and textured thickness), the same film and gold seen through an S polariser
+//! (polarised integrator), multilayer stacks (2 and 13 layers, transfer-matrix
 //! method), a free-standing film (bubble: reflection and transmission), AR-coated glass, and glass with a
 //! constant or a dispersive index — plus the prism scene with its Sellmeier glass against the
 //! same glass at constant index. Every variant uses the same resolution, spp, seed and thread
@@ -77,6 +78,9 @@ const THICKNESS_MAP: &str = r#"<texture type="bitmap" name="thickness">
                 <boolean name="raw" value="true"/>
             </texture>"#;
 
+/// The sensor element of the teapot scenes (a sensor polariser is added after it).
+const SENSOR: &str = r#"<sensor type="perspective">"#;
+
 /// (label, effect switched on, scene file, text to replace, replacement).
 fn variants() -> Vec<(String, &'static str, &'static str, String, String)> {
     let teapot = |label: &str, effect: &'static str, bsdf: String| {
@@ -108,6 +112,20 @@ fn variants() -> Vec<(String, &'static str, &'static str, String, String)> {
             format!(
                 r#"<bsdf type="thinfilm"><float name="film_ior" value="1.37"/>{THICKNESS_MAP}<float name="substrate_ior" value="1.64"/></bsdf>"#
             ),
+        ),
+        (
+            "thin film 400 nm, S polariser".into(),
+            "interference + polarisation",
+            "teapot_mgf2_400.xml",
+            SENSOR.into(),
+            format!(r#"{SENSOR}<string name="polarizer" value="s"/>"#),
+        ),
+        (
+            "smooth conductor (Au), S polariser".into(),
+            "polarisation (Mueller Fresnel)",
+            "teapot_gold.xml",
+            SENSOR.into(),
+            format!(r#"{SENSOR}<string name="polarizer" value="s"/>"#),
         ),
         teapot(
             "rough thin film α=0.15",

@@ -15,6 +15,9 @@ pub struct Reference {
     pub width: usize,
     pub height: usize,
     pub spp: u64,
+    /// Mitsuba variant the reference was rendered with, when recorded (the polarised scenes
+    /// need `*_polarized`); None = the default `llvm_ad_spectral`.
+    pub variant: Option<String>,
 }
 
 /// Reads the manifest at `root/tests/references/manifest.json` (paths inside are relative to
@@ -49,6 +52,7 @@ pub fn load_manifest(root: &Path) -> Result<Vec<Reference>> {
             width: num("width")? as usize,
             height: num("height")? as usize,
             spp: num("spp")?,
+            variant: r["variant"].as_str().map(str::to_string),
         });
     }
     out.sort_by(|a, b| a.name.cmp(&b.name));

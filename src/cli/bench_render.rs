@@ -80,12 +80,7 @@ fn run_mitsuba(
         .args(["--seed", &args.seed.to_string()])
         .arg("--out-dir")
         .arg(out_dir)
-        .args([
-            "--json",
-            "--skip-tmm-check",
-            "--variant",
-            variant,
-        ]);
+        .args(["--json", "--skip-tmm-check", "--variant", variant]);
     if std::env::var_os("DRJIT_LIBLLVM_PATH").is_none() {
         cmd.env(
             "DRJIT_LIBLLVM_PATH",

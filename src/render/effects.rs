@@ -228,7 +228,11 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     // The polarised integrator has Mueller matrices for the single film, conductors,
     // dielectrics, plastic and diffuse; the layered and free-standing films would silently
     // act as depolarisers there, so refuse rather than render something wrong.
-    let unpolarisable: Vec<&String> = bubbles.iter().chain(stacks.iter()).collect();
+    let unpolarisable: Vec<String> = bubbles
+        .iter()
+        .map(|b| format!("thinfilm_bubble ({b})"))
+        .chain(stacks.iter().map(|s| format!("layered film {s}")))
+        .collect();
     if e.polarization && !unpolarisable.is_empty() {
         anyhow::bail!(
             "the scene asks for polarisation ({}) but uses {}, whose Mueller matrices are not \

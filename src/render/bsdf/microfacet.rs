@@ -2,6 +2,9 @@
 //! (Heitz 2018, "Sampling the GGX Distribution of Visible Normals", JCGT 7(4)) and the
 //! separable Smith shadowing term G = G1(wi) G1(wo) that Mitsuba 3 uses.
 
+use super::fresnel::{reflect, reflect_local};
+use super::BsdfSample;
+use crate::render::texture::Spec;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -124,6 +127,58 @@ impl Ggx {
         let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
         // Section 3.4: transform the normal back to the ellipsoid configuration.
         Vec3::new(self.alpha_u * nh.x, self.alpha_v * nh.y, nh.z.max(1e-7)).normalize()
+    }
+}
+
+/// The lobe of an opaque reflector (conductor, thin film, layer stack): a mirror when `ggx`
+/// is None, else a GGX lobe; `fresnel(cos θ)` is the reflectance at the (micro)facet angle.
+/// f·|cos θo| at (wi, wo); zero for the mirror (a delta lobe).
+#[inline]
+pub fn reflection_eval(
+    ggx: Option<Ggx>,
+    wi: Vec3,
+    wo: Vec3,
+    fresnel: impl FnOnce(f32) -> Spec,
+) -> Spec {
+    match ggx.and_then(|ggx| ggx.reflection(wi, wo)) {
+        Some((m, weight)) => fresnel(wi.dot(m)) * weight,
+        None => Spec::ZERO,
+    }
+}
+
+/// Solid-angle pdf of [`reflection_sample`] (zero for the mirror).
+#[inline]
+pub fn reflection_lobe_pdf(ggx: Option<Ggx>, wi: Vec3, wo: Vec3) -> f32 {
+    ggx.map_or(0.0, |ggx| ggx.reflection_pdf(wi, wo))
+}
+
+/// Samples the opaque reflector's lobe: the mirror direction, or a visible GGX normal
+/// (weight eval / pdf = F · G1(wo), separable Smith G). None below the surface.
+#[inline]
+pub fn reflection_sample(
+    ggx: Option<Ggx>,
+    wi: Vec3,
+    u: Vec2,
+    fresnel: impl FnOnce(f32) -> Spec,
+) -> Option<BsdfSample> {
+    if wi.z <= 0.0 {
+        return None;
+    }
+    match ggx {
+        None => Some(BsdfSample::delta(reflect_local(wi), fresnel(wi.z))),
+        Some(ggx) => {
+            let m = ggx.sample_visible(wi, u);
+            let wo = reflect(wi, m);
+            if wo.z <= 0.0 {
+                return None;
+            }
+            let pdf = ggx.pdf_visible(wi, m) / (4.0 * wo.dot(m));
+            if !(pdf > 0.0 && pdf.is_finite()) {
+                return None;
+            }
+            let weight = fresnel(wi.dot(m)) * ggx.g1(wo, m);
+            Some(BsdfSample::smooth(wo, weight, pdf))
+        }
     }
 }
 

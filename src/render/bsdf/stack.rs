@@ -12,8 +12,8 @@
 //! dielectric: the stack's R and T (from whichever side the light arrives) replace the Fresnel
 //! terms of a smooth glass interface.
 
-use super::fresnel::{reflect, reflect_local};
-use super::microfacet::Ggx;
+use super::fresnel::reflect_local;
+use super::microfacet::{reflection_eval, reflection_lobe_pdf, reflection_sample, Ggx};
 use super::{BsdfSample, Counters, ShadingCtx};
 use crate::optics::{Ior, Layer, Stack};
 use crate::render::texture::Spec;
@@ -59,14 +59,11 @@ impl StackBsdf {
     }
 
     pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3, counters: &mut Counters) -> Spec {
-        match self.ggx.and_then(|ggx| ggx.reflection(wi, wo)) {
-            Some((m, weight)) => self.reflectance(ctx, wi.dot(m), counters) * weight,
-            None => Spec::ZERO,
-        }
+        reflection_eval(self.ggx, wi, wo, |c| self.reflectance(ctx, c, counters))
     }
 
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
-        self.ggx.map_or(0.0, |ggx| ggx.reflection_pdf(wi, wo))
+        reflection_lobe_pdf(self.ggx, wi, wo)
     }
 
     pub fn sample(
@@ -76,28 +73,7 @@ impl StackBsdf {
         u: Vec2,
         counters: &mut Counters,
     ) -> Option<BsdfSample> {
-        if wi.z <= 0.0 {
-            return None;
-        }
-        match self.ggx {
-            None => Some(BsdfSample::delta(
-                reflect_local(wi),
-                self.reflectance(ctx, wi.z, counters),
-            )),
-            Some(ggx) => {
-                let m = ggx.sample_visible(wi, u);
-                let wo = reflect(wi, m);
-                if wo.z <= 0.0 {
-                    return None;
-                }
-                let pdf = ggx.pdf_visible(wi, m) / (4.0 * wo.dot(m));
-                if !(pdf > 0.0 && pdf.is_finite()) {
-                    return None;
-                }
-                let weight = self.reflectance(ctx, wi.dot(m), counters) * ggx.g1(wo, m);
-                Some(BsdfSample::smooth(wo, weight, pdf))
-            }
-        }
+        reflection_sample(self.ggx, wi, u, |c| self.reflectance(ctx, c, counters))
     }
 }
 

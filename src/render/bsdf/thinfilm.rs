@@ -5,8 +5,7 @@
 //! 2017 without their spectral antialiasing). Light transmitted into the substrate is absorbed.
 //! One-sided.
 
-use super::fresnel::{reflect, reflect_local};
-use super::microfacet::Ggx;
+use super::microfacet::{reflection_eval, reflection_lobe_pdf, reflection_sample, Ggx};
 use super::{BsdfSample, Counters, ShadingCtx};
 use crate::optics::film_f32::ThinFilmX4;
 use crate::optics::{Ior, ThinFilm};
@@ -74,14 +73,11 @@ impl ThinFilmBsdf {
     }
 
     pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3, counters: &mut Counters) -> Spec {
-        match self.ggx.and_then(|ggx| ggx.reflection(wi, wo)) {
-            Some((m, weight)) => self.reflectance(ctx, wi.dot(m), counters) * weight,
-            None => Spec::ZERO,
-        }
+        reflection_eval(self.ggx, wi, wo, |c| self.reflectance(ctx, c, counters))
     }
 
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
-        self.ggx.map_or(0.0, |ggx| ggx.reflection_pdf(wi, wo))
+        reflection_lobe_pdf(self.ggx, wi, wo)
     }
 
     pub fn sample(
@@ -91,27 +87,6 @@ impl ThinFilmBsdf {
         u: Vec2,
         counters: &mut Counters,
     ) -> Option<BsdfSample> {
-        if wi.z <= 0.0 {
-            return None;
-        }
-        match self.ggx {
-            None => Some(BsdfSample::delta(
-                reflect_local(wi),
-                self.reflectance(ctx, wi.z, counters),
-            )),
-            Some(ggx) => {
-                let m = ggx.sample_visible(wi, u);
-                let wo = reflect(wi, m);
-                if wo.z <= 0.0 {
-                    return None;
-                }
-                let pdf = ggx.pdf_visible(wi, m) / (4.0 * wo.dot(m));
-                if !(pdf > 0.0 && pdf.is_finite()) {
-                    return None;
-                }
-                let weight = self.reflectance(ctx, wi.dot(m), counters) * ggx.g1(wo, m);
-                Some(BsdfSample::smooth(wo, weight, pdf))
-            }
-        }
+        reflection_sample(self.ggx, wi, u, |c| self.reflectance(ctx, c, counters))
     }
 }

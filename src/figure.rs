@@ -194,6 +194,7 @@ pub fn teapot_scene(settings: &RenderSettings) -> Scene {
         },
         spp: settings.spp,
         seed: settings.seed,
+        sampler: crate::scene::SamplerKind::Sobol,
         shapes: vec![Shape {
             geometry: Geometry::Mesh(teapot::teapot_mesh(teapot::DEFAULT_SUBDIVISIONS)),
             bsdf: 0,

@@ -34,6 +34,7 @@ fn base_scene(
         integrator: IntegratorSettings::default(),
         spp,
         seed: 0,
+        sampler: SamplerKind::default(),
         shapes,
         bsdfs,
         emitters,
@@ -236,10 +237,17 @@ fn bits(img: &thinfilm::image_io::RgbImage) -> Vec<u32> {
         .collect()
 }
 
-/// Same seed and spp: bit-identical images with 1 and 2 threads.
+/// Same seed and spp: bit-identical images with 1 and 2 threads, for both samplers.
 #[test]
 fn deterministic_across_thread_counts() {
-    let scene = film_scene(20, 8);
+    for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
+        deterministic_across_thread_counts_with(sampler);
+    }
+}
+
+fn deterministic_across_thread_counts_with(sampler: SamplerKind) {
+    let mut scene = film_scene(20, 8);
+    scene.sampler = sampler;
     let one = render(
         &scene,
         &RenderOptions {
@@ -270,10 +278,17 @@ fn deterministic_across_thread_counts() {
 }
 
 /// Renders of samples 0:32 and 32:64 merge (sample-weighted mean) to exactly the 0:64 render,
-/// also after a round trip through EXR files.
+/// also after a round trip through EXR files, for both samplers.
 #[test]
 fn sample_ranges_merge_exactly() {
-    let scene = film_scene(12, 64);
+    for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
+        sample_ranges_merge_exactly_with(sampler);
+    }
+}
+
+fn sample_ranges_merge_exactly_with(sampler: SamplerKind) {
+    let mut scene = film_scene(12, 64);
+    scene.sampler = sampler;
     let full = render(
         &scene,
         &RenderOptions {

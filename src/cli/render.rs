@@ -19,6 +19,11 @@ pub struct Args {
     /// Sampler seed (overrides the scene's).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Sample sequence, overriding the scene's sampler type: `independent` (PCG, Mitsuba's
+    /// `independent`) or `sobol` (Owen-scrambled Sobol', used for Mitsuba's `ldsampler`,
+    /// `stratified`, `multijitter`, `orthogonal`): same expected image, less noise.
+    #[arg(long)]
+    pub sampler: Option<thinfilm::render::sampler::SamplerKind>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -102,6 +107,7 @@ pub fn run(args: Args) -> Result<()> {
         max_depth: args.max_depth,
         resolution: args.resolution,
         sample_range: args.sample_range,
+        sampler: args.sampler,
         progress: true,
     };
     let out =

@@ -91,7 +91,12 @@ pub fn li(
         // ---- Emitter sampling ----
         if bsdf.has_smooth_component() && !lights.lights.is_empty() {
             let n = lights.lights.len();
-            let pick = ((sampler.next_1d() * n as f32) as usize).min(n - 1);
+            let pick = if n == 1 {
+                sampler.skip(1, 0);
+                0
+            } else {
+                ((sampler.next_1d() * n as f32) as usize).min(n - 1)
+            };
             let light = &lights.lights[pick];
             if let Some(ls) = light.sample(si.p, sampler.next_2d(), wl) {
                 let wo = si.shading.to_local(ls.wi);
@@ -123,8 +128,7 @@ pub fn li(
             }
         } else {
             // Keep the random stream layout fixed regardless of the branch.
-            sampler.next_1d();
-            sampler.next_2d();
+            sampler.skip(1, 1);
         }
 
         // ---- BSDF sampling ----

@@ -47,6 +47,8 @@ pub struct RenderOptions {
     pub resolution: Option<(u32, u32)>,
     /// Render only global sample indices [start, end).
     pub sample_range: Option<(u32, u32)>,
+    /// Sample sequence (None: the scene's sampler type).
+    pub sampler: Option<sampler::SamplerKind>,
     /// Draw a progress bar on stderr (only when it is a terminal).
     pub progress: bool,
 }
@@ -105,6 +107,7 @@ pub struct PreparedScene {
     pub height: u32,
     pub filter: Filter,
     pub seed: u64,
+    pub sampler: sampler::SamplerKind,
     pub sample_range: (u32, u32),
     pub effects: Effects,
     pub degenerate_triangles: usize,
@@ -172,6 +175,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         height,
         filter: Filter::new(&scene.film.filter)?,
         seed: options.seed.unwrap_or(scene.seed),
+        sampler: options.sampler.unwrap_or(scene.sampler),
         sample_range,
         effects,
         degenerate_triangles,
@@ -189,9 +193,9 @@ fn trace_sample(
     s: u32,
     counters: &mut Counters,
 ) -> (Vec2, SampledSpectrum, SampledWavelengths) {
-    let mut sampler = sampler::Sampler::for_sample(x, y, s, scene.seed);
-    let mut wl = sample_visible_wavelengths(sampler.next_1d());
-    let jitter = sampler.next_2d();
+    let mut sampler = sampler::Sampler::new(scene.sampler, x, y, s, scene.seed);
+    let (u_lambda, jitter) = sampler.camera_sample();
+    let mut wl = sample_visible_wavelengths(u_lambda);
     let pos = Vec2::new(x as f32 + jitter.x, y as f32 + jitter.y);
     let film_uv = pos / Vec2::new(scene.width as f32, scene.height as f32);
     let ray = scene.camera.generate_ray(film_uv);

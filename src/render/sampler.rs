@@ -1,14 +1,31 @@
-//! Deterministic random numbers: one PCG32 stream per (pixel, sample index, seed).
+//! Deterministic sample streams: one per (pixel, sample index, seed).
 //!
-//! The stream of a sample depends only on its pixel, its global sample index and the scene
+//! The numbers of a sample depend only on its pixel, its global sample index and the scene
 //! seed, never on the thread that renders it or on which samples were rendered before. So a
 //! render is bit-identical for any thread count, and `--sample-range` splits reproduce exactly
-//! the samples of a full render (O'Neill 2014, "PCG: a family of simple fast space-efficient
-//! statistically good algorithms for random number generation").
+//! the samples of a full render.
+//!
+//! Two kinds, chosen by the scene's `<sampler type=…>` or `--sampler`:
+//! - [`SamplerKind::Independent`]: PCG32 streams (O'Neill 2014, "PCG: a family of simple fast
+//!   space-efficient statistically good algorithms for random number generation"); Mitsuba's
+//!   `independent`.
+//! - [`SamplerKind::Sobol`]: Owen-scrambled, Owen-shuffled Sobol' points (Burley 2020,
+//!   "Practical Hash-based Owen Scrambling", JCGT 9(4)). The camera sample (pixel position and
+//!   hero wavelength) is one 3-D Sobol' point, so film position and wavelength are stratified
+//!   jointly; every later request is a padded 1-D or 2-D Sobol' point with its own shuffle and
+//!   scramble (pbrt-v4's `PaddedSobolSampler`). The index shuffle is a nested uniform
+//!   scramble of the sample index, which maps every power-of-two prefix {0 … 2^m − 1} onto an
+//!   aligned block of the sequence, and aligned blocks of a Sobol' sequence are (t, m, s)-nets:
+//!   the first 2^m samples of every pixel are stratified whatever the total sample count, so
+//!   sample ranges still merge exactly.
+
+use glam::Vec2;
+
+pub use crate::scene::SamplerKind;
 
 /// PCG32 (XSH-RR output, 64-bit LCG state) random number generator.
 #[derive(Debug, Clone)]
-pub struct Sampler {
+struct Pcg32 {
     state: u64,
     inc: u64,
 }
@@ -23,19 +40,67 @@ fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-impl Sampler {
-    /// The stream for sample `sample_index` of pixel (`x`, `y`) under `seed`.
-    pub fn for_sample(x: u32, y: u32, sample_index: u32, seed: u64) -> Self {
-        let pixel = ((y as u64) << 32) | x as u64;
-        let key = mix64(pixel ^ mix64(seed.wrapping_add(0x9e37_79b9_7f4a_7c15)));
+impl Pcg32 {
+    fn new(key: u64, sample_index: u32) -> Self {
         let state0 = mix64(key ^ (sample_index as u64).wrapping_mul(0xd1b5_4a32_d192_ed03));
         // The increment selects one of 2^63 streams; it must be odd.
         let inc = (mix64(key.rotate_left(17) ^ sample_index as u64) << 1) | 1;
-        let mut s = Sampler { state: 0, inc };
+        let mut s = Pcg32 { state: 0, inc };
         s.next_u32();
         s.state = s.state.wrapping_add(state0);
         s.next_u32();
         s
+    }
+
+    #[inline]
+    fn next_u32(&mut self) -> u32 {
+        let old = self.state;
+        self.state = old.wrapping_mul(PCG_MULT).wrapping_add(self.inc);
+        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
+        let rot = (old >> 59) as u32;
+        xorshifted.rotate_right(rot)
+    }
+}
+
+/// The numbers of one camera sample and its path.
+#[derive(Debug, Clone)]
+pub struct Sampler {
+    kind: SamplerKind,
+    pcg: Pcg32,
+    /// Sobol': global sample index, per-pixel scramble seed, next padded dimension.
+    index: u32,
+    pixel_seed: u32,
+    dim: u32,
+}
+
+/// 24 random mantissa bits → [0, 1), never rounded up to 1.
+#[inline]
+fn to_unit(v: u32) -> f32 {
+    (v >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+impl Sampler {
+    /// The independent (PCG32) stream for sample `sample_index` of pixel (`x`, `y`).
+    pub fn for_sample(x: u32, y: u32, sample_index: u32, seed: u64) -> Self {
+        Self::new(SamplerKind::Independent, x, y, sample_index, seed)
+    }
+
+    /// The numbers of sample `sample_index` of pixel (`x`, `y`) under `seed`.
+    pub fn new(kind: SamplerKind, x: u32, y: u32, sample_index: u32, seed: u64) -> Self {
+        let pixel = ((y as u64) << 32) | x as u64;
+        let key = mix64(pixel ^ mix64(seed.wrapping_add(0x9e37_79b9_7f4a_7c15)));
+        let pcg = match kind {
+            SamplerKind::Independent => Pcg32::new(key, sample_index),
+            // Unused by Sobol'; not worth two hashes per sample.
+            SamplerKind::Sobol => Pcg32 { state: 0, inc: 1 },
+        };
+        Sampler {
+            kind,
+            pcg,
+            index: sample_index,
+            pixel_seed: (key ^ (key >> 32)) as u32,
+            dim: 0,
+        }
     }
 
     /// A generator from a single seed (tests, tables).
@@ -45,25 +110,213 @@ impl Sampler {
 
     #[inline]
     pub fn next_u32(&mut self) -> u32 {
-        let old = self.state;
-        self.state = old.wrapping_mul(PCG_MULT).wrapping_add(self.inc);
-        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
-        let rot = (old >> 59) as u32;
-        xorshifted.rotate_right(rot)
+        match self.kind {
+            SamplerKind::Independent => self.pcg.next_u32(),
+            SamplerKind::Sobol => {
+                let d = self.next_dim();
+                sobol_padded_1d(self.index, d)
+            }
+        }
     }
 
-    /// Uniform in [0, 1): 24 random mantissa bits, so the value is never rounded up to 1.
+    #[inline]
+    fn next_dim(&mut self) -> u32 {
+        let d = self.dim;
+        self.dim += 1;
+        hash_u32(self.pixel_seed ^ d.wrapping_mul(0x9e37_79b9))
+    }
+
+    /// Consumes `n_1d` one-dimensional and `n_2d` two-dimensional requests without computing
+    /// them: keeps every path's dimension layout fixed when a branch does not need them.
+    #[inline]
+    pub fn skip(&mut self, n_1d: u32, n_2d: u32) {
+        match self.kind {
+            SamplerKind::Independent => {
+                for _ in 0..n_1d + 2 * n_2d {
+                    self.pcg.next_u32();
+                }
+            }
+            SamplerKind::Sobol => self.dim += n_1d + n_2d,
+        }
+    }
+
+    /// Uniform in [0, 1).
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
-        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+        to_unit(self.next_u32())
     }
 
+    /// Uniform in [0, 1)²; with Sobol' a padded 2-D (0, 2)-sequence point.
     #[inline]
-    pub fn next_2d(&mut self) -> glam::Vec2 {
-        let a = self.next_1d();
-        let b = self.next_1d();
-        glam::Vec2::new(a, b)
+    pub fn next_2d(&mut self) -> Vec2 {
+        match self.kind {
+            SamplerKind::Independent => {
+                let a = self.next_1d();
+                let b = self.next_1d();
+                Vec2::new(a, b)
+            }
+            SamplerKind::Sobol => {
+                let d = self.next_dim();
+                let [a, b] = sobol_padded_2d(self.index, d);
+                Vec2::new(to_unit(a), to_unit(b))
+            }
+        }
     }
+
+    /// The camera sample: (hero-wavelength number, film jitter in the pixel). With Sobol' the
+    /// three are one 3-D point (dimensions 0–2), so wavelength and film position are
+    /// stratified jointly.
+    #[inline]
+    pub fn camera_sample(&mut self) -> (f32, Vec2) {
+        match self.kind {
+            SamplerKind::Independent => {
+                let u = self.next_1d();
+                (u, self.next_2d())
+            }
+            SamplerKind::Sobol => {
+                // No index shuffle: the three share one index, and the per-pixel scrambles
+                // already decorrelate pixels.
+                let seed = self.next_dim();
+                let i = self.index;
+                let x = scrambled_vdc(i, hash_u32(seed ^ 0x68bc_21eb));
+                let y = scrambled_sobol(1, i, hash_u32(seed ^ 0x02e5_be93));
+                let l = scrambled_sobol(2, i, hash_u32(seed ^ 0x967a_889b));
+                (to_unit(l), Vec2::new(to_unit(x), to_unit(y)))
+            }
+        }
+    }
+}
+
+/// A 32-bit avalanche hash (Wellons' lowbias32).
+#[inline]
+fn hash_u32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
+}
+
+/// A random bijection of 32 bits in which output bit k depends only on input bits 0 … k:
+/// Owen scrambling with the least significant bit as the first digit (Laine–Karras, with
+/// Vegdahl's 2021 constants, "Building a Better LK Hash").
+#[inline]
+fn lk_hash(mut x: u32, seed: u32) -> u32 {
+    x ^= x.wrapping_mul(0x3d20_adea);
+    x = x.wrapping_add(seed);
+    x = x.wrapping_mul((seed >> 16) | 1);
+    x ^= x.wrapping_mul(0x0552_6c56);
+    x ^= x.wrapping_mul(0x53a2_2864);
+    x
+}
+
+/// Owen scrambling of an index or binary fraction, most significant bit first (Burley 2020
+/// `nested_uniform_scramble`). As an index shuffle it sends {0 … 2^m − 1} to an aligned block
+/// of 2^m indices: output bits ≥ m depend only on input bits ≥ m, which are zero.
+#[inline]
+fn owen_scramble(x: u32, seed: u32) -> u32 {
+    lk_hash(x.reverse_bits(), seed).reverse_bits()
+}
+
+/// Owen-scrambled van der Corput point `i`: owen(reverse(i)) = reverse(lk(i)).
+#[inline]
+fn scrambled_vdc(i: u32, seed: u32) -> u32 {
+    lk_hash(i, seed).reverse_bits()
+}
+
+/// Owen-scrambled Sobol' point `i` in dimension `dim` ∈ {1, 2}; the tables hold the
+/// bit-reversed generator columns, so one `reverse_bits` is saved.
+#[inline]
+fn scrambled_sobol(dim: usize, i: u32, seed: u32) -> u32 {
+    lk_hash(sobol_dim_reversed(dim, i), seed).reverse_bits()
+}
+
+#[inline]
+fn sobol_padded_1d(index: u32, seed: u32) -> u32 {
+    let i = owen_scramble(index, seed);
+    scrambled_vdc(i, hash_u32(seed ^ 0x68bc_21eb))
+}
+
+#[inline]
+fn sobol_padded_2d(index: u32, seed: u32) -> [u32; 2] {
+    let i = owen_scramble(index, seed);
+    [
+        scrambled_vdc(i, hash_u32(seed ^ 0x68bc_21eb)),
+        scrambled_sobol(1, i, hash_u32(seed ^ 0x02e5_be93)),
+    ]
+}
+
+/// Sobol' direction numbers for one dimension with primitive polynomial degree `s`,
+/// coefficients `a` and initial numbers `m` (Joe & Kuo 2008, new-joe-kuo-6.21201).
+const fn directions(s: usize, a: u32, m: [u32; 3]) -> [u32; 32] {
+    let mut v = [0u32; 32];
+    let mut i = 0;
+    while i < 32 {
+        if i < s {
+            v[i] = m[i] << (31 - i);
+        } else {
+            let mut x = v[i - s] ^ (v[i - s] >> s);
+            let mut k = 1;
+            while k < s {
+                if (a >> (s - 1 - k)) & 1 == 1 {
+                    x ^= v[i - k];
+                }
+                k += 1;
+            }
+            v[i] = x;
+        }
+        i += 1;
+    }
+    v
+}
+
+/// Byte tables of the generator matrix: sobol(i) = ⊕_b T[b][byte b of i].
+const fn byte_tables(v: [u32; 32]) -> [[u32; 256]; 4] {
+    let mut t = [[0u32; 256]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut j = 0;
+        while j < 256 {
+            let mut x = 0u32;
+            let mut bit = 0;
+            while bit < 8 {
+                if (j >> bit) & 1 == 1 {
+                    x ^= v[b * 8 + bit];
+                }
+                bit += 1;
+            }
+            t[b][j] = x;
+            j += 1;
+        }
+        b += 1;
+    }
+    t
+}
+
+const fn reversed(mut v: [u32; 32]) -> [u32; 32] {
+    let mut i = 0;
+    while i < 32 {
+        v[i] = v[i].reverse_bits();
+        i += 1;
+    }
+    v
+}
+
+/// Dimensions 1 and 2 (dimension 0 is the van der Corput sequence), bit-reversed.
+static SOBOL_TABLES_REVERSED: [[[u32; 256]; 4]; 2] = [
+    byte_tables(reversed(directions(1, 0, [1, 0, 0]))),
+    byte_tables(reversed(directions(2, 1, [1, 3, 0]))),
+];
+
+/// Unscrambled Sobol' point `i` in dimension `dim` ∈ {1, 2}, bit-reversed (reverse_bits gives
+/// the 32-bit binary fraction; reversal commutes with the XOR of the generator columns).
+#[inline]
+fn sobol_dim_reversed(dim: usize, i: u32) -> u32 {
+    let t = &SOBOL_TABLES_REVERSED[dim - 1];
+    t[0][(i & 0xff) as usize]
+        ^ t[1][((i >> 8) & 0xff) as usize]
+        ^ t[2][((i >> 16) & 0xff) as usize]
+        ^ t[3][(i >> 24) as usize]
 }
 
 #[cfg(test)]
@@ -72,17 +325,15 @@ mod tests {
 
     #[test]
     fn streams_are_reproducible_and_distinct() {
-        let mut a = Sampler::for_sample(3, 4, 5, 6);
-        let mut b = Sampler::for_sample(3, 4, 5, 6);
-        let mut c = Sampler::for_sample(3, 4, 6, 6);
-        let mut d = Sampler::for_sample(4, 3, 5, 6);
-        let va: Vec<u32> = (0..8).map(|_| a.next_u32()).collect();
-        let vb: Vec<u32> = (0..8).map(|_| b.next_u32()).collect();
-        let vc: Vec<u32> = (0..8).map(|_| c.next_u32()).collect();
-        let vd: Vec<u32> = (0..8).map(|_| d.next_u32()).collect();
-        assert_eq!(va, vb);
-        assert_ne!(va, vc);
-        assert_ne!(va, vd);
+        for kind in [SamplerKind::Independent, SamplerKind::Sobol] {
+            let draw = |x, y, s| {
+                let mut a = Sampler::new(kind, x, y, s, 6);
+                (0..8).map(|_| a.next_u32()).collect::<Vec<_>>()
+            };
+            assert_eq!(draw(3, 4, 5), draw(3, 4, 5));
+            assert_ne!(draw(3, 4, 5), draw(3, 4, 6));
+            assert_ne!(draw(3, 4, 5), draw(4, 3, 5));
+        }
     }
 
     #[test]
@@ -96,5 +347,109 @@ mod tests {
             sum += u as f64;
         }
         assert!((sum / n as f64 - 0.5).abs() < 0.005);
+    }
+
+    #[test]
+    fn unscrambled_sobol_matches_published_points() {
+        // Dimensions 2 and 3 of Joe & Kuo's generator: scipy.stats.qmc.Sobol(3,
+        // scramble=False) columns 1 and 2, first eight points times 8, taken out of scipy's
+        // Gray-code order into index order (point i = ⊕ of the direction numbers of i's bits).
+        let d1: Vec<u32> = (0..8).map(|i| sobol_dim_reversed(1, i).reverse_bits() >> 29).collect();
+        let d2: Vec<u32> = (0..8).map(|i| sobol_dim_reversed(2, i).reverse_bits() >> 29).collect();
+        assert_eq!(d1, [0, 4, 6, 2, 5, 1, 3, 7]);
+        assert_eq!(d2, [0, 4, 6, 2, 3, 7, 5, 1]);
+    }
+
+    /// Every elementary interval of area 2^−m holds exactly one of the first 2^m points.
+    fn is_02_net(pts: &[[u32; 2]], m: u32) -> bool {
+        (0..=m).all(|kx| {
+            let ky = m - kx;
+            let mut seen = vec![false; 1 << m];
+            pts.iter().all(|p| {
+                let cx = if kx == 0 { 0 } else { p[0] >> (32 - kx) };
+                let cy = if ky == 0 { 0 } else { p[1] >> (32 - ky) };
+                let cell = ((cx << ky) | cy) as usize;
+                !std::mem::replace(&mut seen[cell], true)
+            })
+        })
+    }
+
+    #[test]
+    fn every_power_of_two_prefix_is_a_02_net_after_shuffle_and_scramble() {
+        for seed in [1u32, 77, 0xdead_beef] {
+            for m in 0..=10 {
+                let pts: Vec<[u32; 2]> = (0..1u32 << m).map(|i| sobol_padded_2d(i, seed)).collect();
+                assert!(is_02_net(&pts, m), "seed {seed} m {m}");
+                // The camera's (x, y) pair and its wavelength are stratified too.
+                let mut cam: Vec<(f32, Vec2)> = Vec::new();
+                let mut strata = vec![0u32; 1 << m];
+                for i in 0..1u32 << m {
+                    let mut s = Sampler::new(SamplerKind::Sobol, 5, 9, i, seed as u64);
+                    let c = s.camera_sample();
+                    strata[(c.0 * (1u32 << m) as f32) as usize] += 1;
+                    cam.push(c);
+                }
+                assert!(strata.iter().all(|&n| n == 1), "λ strata, m {m}");
+                let xy: Vec<[u32; 2]> = cam
+                    .iter()
+                    .map(|c| [((c.1.x * 16_777_216.0) as u32) << 8, ((c.1.y * 16_777_216.0) as u32) << 8])
+                    .collect();
+                assert!(is_02_net(&xy, m), "camera xy, seed {seed} m {m}");
+            }
+        }
+        // A plain random set is not a net (the test can fail).
+        let mut r = Sampler::from_seed(3);
+        let pts: Vec<[u32; 2]> = (0..64).map(|_| [r.next_u32(), r.next_u32()]).collect();
+        assert!(!is_02_net(&pts, 6));
+    }
+
+    #[test]
+    fn padded_dimensions_are_decorrelated() {
+        // Correlation between consecutive padded dimensions over 4096 samples of one pixel.
+        let n = 4096;
+        let (mut sa, mut sb, mut sab, mut saa, mut sbb) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        for i in 0..n {
+            let mut s = Sampler::new(SamplerKind::Sobol, 1, 2, i, 0);
+            let a = s.next_1d() as f64;
+            let b = s.next_1d() as f64;
+            sa += a;
+            sb += b;
+            sab += a * b;
+            saa += a * a;
+            sbb += b * b;
+        }
+        let nf = n as f64;
+        let cov = sab / nf - sa * sb / (nf * nf);
+        let var_a = saa / nf - (sa / nf).powi(2);
+        let var_b = sbb / nf - (sb / nf).powi(2);
+        let corr = cov / (var_a * var_b).sqrt();
+        assert!(corr.abs() < 0.05, "correlation {corr}");
+    }
+
+    #[test]
+    fn sobol_integrates_a_smooth_2d_function_far_better_than_independent() {
+        // ∫∫ sin(πx)·sin(πy) dx dy = 4/π², RMS error over 256 pixels.
+        let exact = 4.0 / std::f64::consts::PI.powi(2);
+        let rms = |kind, n: u32| {
+            let mut e2 = 0.0;
+            for px in 0..256u32 {
+                let mut sum = 0.0f64;
+                for i in 0..n {
+                    let mut s = Sampler::new(kind, px, 0, i, 9);
+                    let p = s.next_2d();
+                    sum += (std::f64::consts::PI * p.x as f64).sin()
+                        * (std::f64::consts::PI * p.y as f64).sin();
+                }
+                e2 += (sum / n as f64 - exact).powi(2);
+            }
+            (e2 / 256.0).sqrt()
+        };
+        // Measured: 16 spp 0.022 vs 0.071, 64 spp 0.0037 vs 0.034, 1024 spp 8.2e-5 vs 9.3e-3.
+        let (e_ind, e_sob) = (rms(SamplerKind::Independent, 64), rms(SamplerKind::Sobol, 64));
+        assert!(e_sob * 5.0 < e_ind, "sobol {e_sob} vs independent {e_ind}");
+        // Owen-scrambled nets converge as ~N^−1.5 on smooth integrands (Monte Carlo: N^−0.5):
+        // 16× the samples must cut the error by far more than 4×.
+        let e_sob_1024 = rms(SamplerKind::Sobol, 1024);
+        assert!(e_sob_1024 * 20.0 < e_sob, "sobol 64: {e_sob}, 1024: {e_sob_1024}");
     }
 }

@@ -403,6 +403,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         integrator: IntegratorSettings::default(),
         spp: DEFAULT_SPP,
         seed: 0,
+        sampler: super::SamplerKind::Sobol,
         shapes,
         bsdfs,
         emitters: vec![default_environment()],

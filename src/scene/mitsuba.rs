@@ -6,7 +6,7 @@
 //! `perspective` sensor (`fov`, `fov_axis`, `focal_length`, `near_clip`, `far_clip`, `to_world`)
 //! with `hdrfilm`
 //! (`width`, `height`, `rfilter` box/tent/gaussian; format options accepted and ignored since
-//! they do not change pixel values) and any sampler (`sample_count`, `seed`), `path`
+//! they do not change pixel values) and any sampler (`sample_count`, `seed`; `independent` → PCG, the stratified types → Owen-scrambled Sobol'), `path`
 //! integrator (`max_depth`, `rr_depth`, `hide_emitters`), shapes `obj`, `ply`, `sphere`,
 //! `rectangle`, `cube`, `disk` (`to_world`, `flip_normals`, `face_normals`), emitters
 //! `envmap`, `constant`, `area`, `point`, BSDFs `diffuse`, `conductor`, `roughconductor`,
@@ -26,7 +26,7 @@
 
 use super::{
     look_at, shapes, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
-    IntegratorSettings, Polarizer, ReconstructionFilter, Scene, Shape, SpectrumDesc, TextureDesc,
+    IntegratorSettings, Polarizer, ReconstructionFilter, SamplerKind, Scene, Shape, SpectrumDesc, TextureDesc,
     TextureFilter, WrapMode,
 };
 use crate::optics::{dispersion, Complex64, Ior};
@@ -124,6 +124,7 @@ struct Sensor {
     film: FilmSettings,
     spp: u32,
     seed: u64,
+    sampler: SamplerKind,
     polarizer: Option<Polarizer>,
 }
 
@@ -145,7 +146,7 @@ enum Val {
     BsdfRef(usize),
     Emitter(Emitter),
     Film(FilmSettings),
-    Sampler(u32, u64),
+    Sampler(u32, u64, SamplerKind),
     Rfilter(ReconstructionFilter),
 }
 
@@ -415,8 +416,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
         }
         let integrator = self.integrator.unwrap_or_default();
-        let (camera, film, spp, seed, polarizer) = match self.sensor.clone() {
-            Some(s) => (s.camera, s.film, s.spp, s.seed, s.polarizer),
+        let (camera, film, spp, seed, sampler, polarizer) = match self.sensor.clone() {
+            Some(s) => (s.camera, s.film, s.spp, s.seed, s.sampler, s.polarizer),
             None => {
                 // Mitsuba would use a default 45° camera at the origin; framing the scene is
                 // more useful and documented here.
@@ -427,6 +428,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     FilmSettings::default(),
                     4,
                     0,
+                    SamplerKind::Independent,
                     None,
                 )
             }
@@ -437,6 +439,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             integrator,
             spp,
             seed,
+            sampler,
             shapes: std::mem::take(&mut self.shapes),
             bsdfs: std::mem::take(&mut self.bsdfs),
             emitters: std::mem::take(&mut self.emitters),
@@ -816,8 +819,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
             "film" => Val::Film(self.build_film(&mut p)?),
             "sampler" => {
-                let (n, s) = self.build_sampler(&mut p)?;
-                Val::Sampler(n, s)
+                let (n, s, k) = self.build_sampler(&mut p)?;
+                Val::Sampler(n, s, k)
             }
             "rfilter" => Val::Rfilter(self.build_rfilter(&mut p)?),
             _ => return Err(self.err(node, "unsupported object")),
@@ -1624,7 +1627,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         for q in std::mem::take(&mut p.list) {
             match q.val {
                 Val::Film(f) => film = Some(f),
-                Val::Sampler(n, s) => sampler = Some((n, s)),
+                Val::Sampler(n, s, k) => sampler = Some((n, s, k)),
                 _ => rest.push(q),
             }
         }
@@ -1634,7 +1637,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             height: 576,
             filter: ReconstructionFilter::Gaussian { stddev: 0.5 },
         });
-        let (spp, seed) = sampler.unwrap_or((4, 0));
+        let (spp, seed, sampler) = sampler.unwrap_or((4, 0, SamplerKind::Independent));
         Ok(Sensor {
             camera: Camera {
                 to_world,
@@ -1646,6 +1649,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             film,
             spp,
             seed,
+            sampler,
             polarizer,
         })
     }
@@ -1702,7 +1706,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         })
     }
 
-    fn build_sampler(&mut self, p: &mut Props<'a, 'i>) -> Result<(u32, u64)> {
+    fn build_sampler(&mut self, p: &mut Props<'a, 'i>) -> Result<(u32, u64, SamplerKind)> {
         const KNOWN: &[&str] = &[
             "independent",
             "stratified",
@@ -1722,7 +1726,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
             return Err(self.err(p.node, "seed must be ≥ 0"));
         }
         p.accept(&["jitter"], self, |v| matches!(v, Val::Bool(_)))?;
-        Ok((n as u32, seed as u64))
+        let kind = if p.plugin == "independent" {
+            SamplerKind::Independent
+        } else {
+            SamplerKind::Sobol
+        };
+        Ok((n as u32, seed as u64, kind))
     }
 
     fn build_integrator(&mut self, p: &mut Props<'a, 'i>) -> Result<IntegratorSettings> {

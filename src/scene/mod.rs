@@ -12,6 +12,40 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 /// Everything needed to render one image.
+/// The sample sequence of a render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SamplerKind {
+    /// Independent uniform numbers: Mitsuba's `independent` (its default).
+    #[default]
+    Independent,
+    /// Owen-scrambled Sobol' (Burley 2020): thinfilm's low-discrepancy sampler, used for
+    /// Mitsuba's stratified samplers `ldsampler`, `stratified`, `multijitter` and
+    /// `orthogonal`, and for meshes rendered without a scene file.
+    Sobol,
+}
+
+impl SamplerKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            SamplerKind::Independent => "independent",
+            SamplerKind::Sobol => "sobol",
+        }
+    }
+}
+
+impl std::str::FromStr for SamplerKind {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "independent" => Ok(SamplerKind::Independent),
+            "sobol" => Ok(SamplerKind::Sobol),
+            _ => Err(format!(
+                "unknown sampler {s:?}: expected \"independent\" or \"sobol\""
+            )),
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct Scene {
     pub camera: Camera,
@@ -21,6 +55,8 @@ pub struct Scene {
     pub spp: u32,
     /// Sampler seed (Mitsuba `seed`, default 0).
     pub seed: u64,
+    /// Which sequence the samples come from (the sampler's plugin type).
+    pub sampler: SamplerKind,
     pub shapes: Vec<Shape>,
     pub bsdfs: Vec<BsdfDesc>,
     pub emitters: Vec<EmitterDesc>,
@@ -429,6 +465,7 @@ fn scene_for_mesh(mut mesh: TriangleMesh, path: &Path) -> Result<Scene> {
         integrator: IntegratorSettings::default(),
         spp: DEFAULT_SPP,
         seed: 0,
+        sampler: SamplerKind::Sobol,
         shapes: vec![Shape {
             geometry: Geometry::Mesh(mesh),
             bsdf: 0,

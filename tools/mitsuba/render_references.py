@@ -19,9 +19,10 @@ Scenes in NO_MITSUBA_REFERENCE (prism.xml: dispersion) are skipped with the reas
 
 Other modes:
     --material path/to/material.xml   also render a material written by `thinfilm estimate`
-    --bench SCENE --spp 16,64,256 --out-dir DIR --json
-                                      timed renders for `thinfilm bench render --mitsuba`;
-                                      prints one JSON object to stdout.
+    --bench SCENE --spp 16,64,256 --out-dir DIR --json [--sampler TYPE]
+                                      timed renders for `thinfilm bench render --mitsuba`
+                                      with the scene's sampler type (or TYPE); prints one
+                                      JSON object to stdout.
 
 The sensor of each scene is replaced by an equivalent one (same to_world, horizontal field
 of view, clip planes) with a `size`-pixel-wide hdrfilm (height keeps the aspect ratio), a box
@@ -57,7 +58,13 @@ def _scalar(v):
     return float(np.array(v, dtype=np.float64).ravel()[0])
 
 
-def make_sensor(mi, scene, size):
+def scene_sampler_type(path):
+    """The `<sampler type=…>` of the scene file's sensor ("independent" if it has none)."""
+    node = ET.parse(path).getroot().find(".//sensor/sampler")
+    return node.get("type") if node is not None else "independent"
+
+
+def make_sensor(mi, scene, size, sampler_type="independent"):
     import numpy as np
 
     sensor = scene.sensors()[0]
@@ -83,7 +90,7 @@ def make_sensor(mi, scene, size):
                     "pixel_format": "rgb",
                     "component_format": "float32",
                 },
-                "sampler": {"type": "independent"},
+                "sampler": {"type": sampler_type},
             }
         ),
         (ow, oh),
@@ -219,6 +226,7 @@ def main():
     ap.add_argument("--out-dir", help="bench mode: where to write the EXRs")
     ap.add_argument("--json", action="store_true", help="bench mode: print JSON")
     ap.add_argument("--skip-tmm-check", action="store_true")
+    ap.add_argument("--sampler", help="bench mode: Mitsuba sampler type (default: the scene's)")
     args = ap.parse_args()
 
     variant = thinfilm_mitsuba.setup(args.variant)
@@ -232,7 +240,8 @@ def main():
     if args.bench:
         spps = [int(s) for s in args.spp.split(",")]
         scene = mi.load_file(args.bench)
-        sensor, (w, h) = make_sensor(mi, scene, args.size)
+        sampler_type = args.sampler or scene_sampler_type(args.bench)
+        sensor, (w, h) = make_sensor(mi, scene, args.size, sampler_type)
         os.makedirs(args.out_dir, exist_ok=True)
         # Warm-up: JIT-compile the kernels once so timings measure rendering.
         render(mi, scene, sensor, min(spps), args.seed + 99)
@@ -243,7 +252,14 @@ def main():
             write_exr(mi, out, arr)
             results.append({"spp": spp, "seconds": secs, "exr": out})
             log(f"  {spp:5d} spp  {secs:8.3f} s")
-        doc = {"variant": variant, "mitsuba_version": mi.__version__, "width": w, "height": h, "runs": results}
+        doc = {
+            "variant": variant,
+            "sampler": sampler_type,
+            "mitsuba_version": mi.__version__,
+            "width": w,
+            "height": h,
+            "runs": results,
+        }
         print(json.dumps(doc))
         return
 

@@ -52,6 +52,16 @@ fn defaults_and_overrides() {
     let s = load(SENSOR).unwrap();
     assert_eq!(s.spp, 16);
     assert_eq!(s.seed, 7);
+    assert_eq!(s.sampler, SamplerKind::Independent);
+    // Mitsuba's stratified samplers are rendered with the Owen-scrambled Sobol' sampler.
+    for t in ["ldsampler", "stratified", "multijitter", "orthogonal"] {
+        let body = SENSOR.replace("\"independent\"", &format!("\"{t}\""));
+        assert_eq!(load(&body).unwrap().sampler, SamplerKind::Sobol, "{t}");
+    }
+    // No sampler: Mitsuba's default, independent.
+    let no_sampler = r#"<sensor type="perspective"><float name="fov" value="30"/></sensor>"#;
+    assert_eq!(load(no_sampler).unwrap().sampler, SamplerKind::Independent);
+    assert!(err(&SENSOR.replace("\"independent\"", "\"halton\"")).contains("halton"));
     assert_eq!((s.film.width, s.film.height), (64, 32));
     assert_eq!(s.film.filter, ReconstructionFilter::Tent { radius: 1.5 });
     assert_eq!(s.camera.fov_deg, 30.0);

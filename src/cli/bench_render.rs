@@ -2,7 +2,7 @@
 //!
 //! For each scene in `tests/references/manifest.json`, renders with our path tracer at each
 //! spp (16 … 1024 by default) at the reference's size, timing the render (BVH/light setup
-//! excluded) and measuring RMSE against the 4096-spp Mitsuba reference. With `--mitsuba` the
+//! excluded) and measuring RMSE against the high-spp Mitsuba reference. With `--mitsuba` the
 //! same spp are rendered by Mitsuba 3 (`llvm_ad_spectral`, the Python thinfilm plugin) in the
 //! same run through `tools/mitsuba/render_references.py --bench` (warm JIT, render time only),
 //! and each of our rows gets "our time ÷ Mitsuba's time at equal error", interpolated on
@@ -11,10 +11,11 @@
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 use std::process::Command;
-use thinfilm::compare::metrics::compare_images;
+use thinfilm::compare::metrics::{compare_images, downsample_box};
 use thinfilm::compare::plot::{plot_error_vs_time, time_at_error, Series};
 use thinfilm::compare::references::load_manifest;
 use thinfilm::image_io::read_exr_rgb;
+use thinfilm::render::sampler::SamplerKind;
 use thinfilm::render::{render, RenderOptions};
 
 #[derive(clap::Args, Debug)]
@@ -50,6 +51,16 @@ pub struct Args {
     /// Worker threads for our renderer (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Sample sequence for both renderers, overriding each scene's sampler type:
+    /// `independent` (both independent) or `sobol` (ours Owen-scrambled Sobol', Mitsuba's
+    /// `ldsampler`). Default: each scene's own sampler, for both.
+    #[arg(long)]
+    pub sampler: Option<SamplerKind>,
+    /// Render both at K× the reference's size and box-downsample by K before comparing
+    /// (a K²-pixel box average is exactly the reference's box-filtered pixel), e.g.
+    /// `--scale 2` times the 256×256 teapot of issue 6 against the 128×128 references.
+    #[arg(long, default_value_t = 1)]
+    pub scale: u32,
     #[command(flatten)]
     pub effects: super::bench_effects::Args,
 }
@@ -68,7 +79,7 @@ fn run_mitsuba(
     variant: &str,
     size: usize,
     out_dir: &std::path::Path,
-) -> Result<(String, Vec<Row>)> {
+) -> Result<(String, String, Vec<Row>)> {
     let script = args.root.join("tools/mitsuba/render_references.py");
     let spp: Vec<String> = args.spp.iter().map(|s| s.to_string()).collect();
     let mut cmd = Command::new(&args.python);
@@ -81,6 +92,15 @@ fn run_mitsuba(
         .arg("--out-dir")
         .arg(out_dir)
         .args(["--json", "--skip-tmm-check", "--variant", variant]);
+    if let Some(kind) = args.sampler {
+        cmd.args([
+            "--sampler",
+            match kind {
+                SamplerKind::Independent => "independent",
+                SamplerKind::Sobol => "ldsampler",
+            },
+        ]);
+    }
     if std::env::var_os("DRJIT_LIBLLVM_PATH").is_none() {
         cmd.env(
             "DRJIT_LIBLLVM_PATH",
@@ -109,6 +129,7 @@ fn run_mitsuba(
         )
     })?;
     let variant = doc["variant"].as_str().unwrap_or("?").to_string();
+    let sampler = doc["sampler"].as_str().unwrap_or("?").to_string();
     let runs = doc["runs"]
         .as_array()
         .context("Mitsuba bench JSON: no runs")?;
@@ -121,7 +142,7 @@ fn run_mitsuba(
             delta_e00: f64::NAN,
         });
     }
-    Ok((variant, rows))
+    Ok((variant, sampler, rows))
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -132,6 +153,11 @@ pub fn run(args: Args) -> Result<()> {
     if args.spp.is_empty() || args.spp.contains(&0) {
         bail!("--spp needs positive sample counts");
     }
+    if args.scale == 0 || args.scale > 16 {
+        bail!("--scale must be between 1 and 16, got {}", args.scale);
+    }
+    let k = args.scale as usize;
+    let at_reference_size = |img: &thinfilm::image_io::RgbImage| downsample_box(img, k);
     let mut refs = load_manifest(&args.root)?;
     if !args.only.is_empty() {
         for n in &args.only {
@@ -170,11 +196,12 @@ pub fn run(args: Args) -> Result<()> {
                     spp: Some(spp),
                     seed: Some(args.seed),
                     threads: args.threads,
-                    resolution: Some((r.width as u32, r.height as u32)),
+                    resolution: Some((k as u32 * r.width as u32, k as u32 * r.height as u32)),
+                    sampler: args.sampler,
                     ..Default::default()
                 },
             )?;
-            let m = compare_images(&out.image, &reference)
+            let m = compare_images(&at_reference_size(&out.image)?, &reference)
                 .with_context(|| format!("{}: comparing with {}", r.name, r.exr.display()))?;
             eprintln!(
                 "{:24} ours    {spp:5} spp {:8.3} s RMSE {:.5}",
@@ -190,16 +217,16 @@ pub fn run(args: Args) -> Result<()> {
         let mut theirs: Vec<Row> = Vec::new();
         if args.mitsuba {
             let dir = tmp.join(&r.name);
-            let (variant, mut rows) = run_mitsuba(
+            let (variant, sampler, mut rows) = run_mitsuba(
                 &args,
                 &r.scene,
                 r.variant.as_deref().unwrap_or("llvm_ad_spectral"),
-                r.width.max(r.height),
+                k * r.width.max(r.height),
                 &dir,
             )?;
             for row in &mut rows {
                 let img = read_exr_rgb(&dir.join(format!("mitsuba_{}spp.exr", row.spp)))?;
-                let m = compare_images(&img, &reference)?;
+                let m = compare_images(&at_reference_size(&img)?, &reference)?;
                 row.rmse = m.rmse;
                 row.delta_e00 = m.delta_e00_mean;
                 eprintln!(
@@ -207,7 +234,7 @@ pub fn run(args: Args) -> Result<()> {
                     r.name, row.spp, row.seconds, row.rmse
                 );
             }
-            mitsuba_variants.insert(variant);
+            mitsuba_variants.insert(format!("{variant} ({sampler})"));
             theirs = rows;
         }
         let their_curve: Vec<(f64, f64)> = theirs.iter().map(|r| (r.seconds, r.rmse)).collect();
@@ -268,7 +295,7 @@ pub fn run(args: Args) -> Result<()> {
     println!("{table}");
     if !mitsuba_variants.is_empty() {
         let v = mitsuba_variants.into_iter().collect::<Vec<_>>().join(", ");
-        println!("Mitsuba variant(s): {v} (polarised scenes use a *_polarized variant). Time ratio < 1: we reach the same RMSE faster.");
+        println!("Mitsuba variant(s) (sampler): {v} (polarised scenes use a *_polarized variant). Time ratio < 1: we reach the same RMSE faster.");
         for (n, x, de) in &summary {
             println!("- {n}: our time ÷ Mitsuba's at equal error (at {} spp) {x:.2}; our mean ΔE00 {de:.3}", args.spp.last().unwrap());
         }
@@ -276,9 +303,14 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(p) = &args.table {
         thinfilm::image_io::write_atomically(p, |tmp| Ok(std::fs::write(tmp, &table)?))?;
     }
+    let ref_spp: std::collections::BTreeSet<u64> = refs.iter().map(|r| r.spp).collect();
+    let ref_spp: Vec<String> = ref_spp.iter().map(|s| s.to_string()).collect();
     plot_error_vs_time(
         &series,
-        "RMSE against render time (vs Mitsuba 3 references, 4096 spp)",
+        &format!(
+            "RMSE against render time (vs Mitsuba 3 references, {} spp)",
+            ref_spp.join("/")
+        ),
         "RMSE",
         &args.plot,
         (1000, 700),

@@ -194,8 +194,8 @@ fn trace_sample(
     counters: &mut Counters,
 ) -> (Vec2, SampledSpectrum, SampledWavelengths) {
     let mut sampler = sampler::Sampler::new(scene.sampler, x, y, s, scene.seed);
-    let (u_lambda, jitter) = sampler.camera_sample();
-    let mut wl = sample_visible_wavelengths(u_lambda);
+    let (lambda_bits, jitter) = sampler.camera_sample(!scene.effects.dispersion);
+    let mut wl = sample_visible_wavelengths(hero_wavelength_u(lambda_bits));
     let pos = Vec2::new(x as f32 + jitter.x, y as f32 + jitter.y);
     let film_uv = pos / Vec2::new(scene.width as f32, scene.height as f32);
     let ray = scene.camera.generate_ray(film_uv);
@@ -204,6 +204,24 @@ fn trace_sample(
         Some(setup) => integrator_polarized::li(scene, setup, ray, &mut wl, &mut sampler, counters),
     };
     (pos, SampledSpectrum(l.to_array()), wl)
+}
+
+/// The number u ∈ [0, 1) whose hero set {u + k/4 mod 1} are a sample's four wavelengths,
+/// from 32 sampler bits whose *high* bits are stratified across a pixel's samples.
+///
+/// The hero set depends only on u mod ¼: the quarter ⌊4u⌋ only chooses which of the four is
+/// the hero. Mapping a stratified number straight to u would spend its two most significant
+/// (best stratified) digits on that choice, so 16 Sobol' samples would place their 64
+/// wavelengths in only 16 strata (4 per stratum). Here the stratified bits become
+/// u mod ¼ and two low, random bits pick the quarter: the 64 wavelengths of 16 samples fall
+/// one per 1/64 stratum (test `hero_sets_of_stratified_samples_fill_every_stratum`), which
+/// cut the colour noise of a 16-spp teapot by ~4× (mean ΔE00 1.47 → see README). The
+/// distribution of each single sample is unchanged (u uniform).
+#[inline]
+pub(crate) fn hero_wavelength_u(bits: u32) -> f32 {
+    let quarter = bits & 3;
+    let offset = bits >> 10; // 22 stratified bits: u mod ¼ in units of 2^−24
+    ((quarter << 22) | offset) as f32 * (1.0 / 16_777_216.0)
 }
 
 /// Visible-range wavelength importance sampling (pbrt-v4 / Mitsuba), the same distribution as
@@ -439,6 +457,31 @@ mod tests {
             x *= 1.000_37;
         }
         assert_eq!(ln_fast(1.0), 0.0);
+    }
+
+    #[test]
+    fn hero_sets_of_stratified_samples_fill_every_stratum() {
+        use sampler::{Sampler, SamplerKind};
+        for (x, y, grid) in [(0, 0, true), (7, 3, true), (100, 250, false), (1, 2, false)] {
+            let mut strata = [0u32; 64];
+            for s in 0..16 {
+                let (bits, _) = Sampler::new(SamplerKind::Sobol, x, y, s, 4).camera_sample(grid);
+                let u = hero_wavelength_u(bits);
+                assert!((0.0..1.0).contains(&u));
+                for k in 0..4 {
+                    let v = (u + k as f32 * 0.25) % 1.0;
+                    strata[(v * 64.0) as usize] += 1;
+                }
+            }
+            assert!(
+                strata.iter().all(|&n| n == 1),
+                "pixel ({x}, {y}): {strata:?}"
+            );
+        }
+        // u stays uniform and below 1 at the extremes.
+        assert_eq!(hero_wavelength_u(0), 0.0);
+        assert!(hero_wavelength_u(u32::MAX) < 1.0);
+        assert!((hero_wavelength_u(2) - 0.5).abs() < 1e-7);
     }
 
     #[test]

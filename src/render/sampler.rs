@@ -163,14 +163,24 @@ impl Sampler {
         }
     }
 
-    /// The camera sample: (hero-wavelength number, film jitter in the pixel). With Sobol' the
-    /// three are one 3-D point (dimensions 0–2), so wavelength and film position are
-    /// stratified jointly.
+    /// The camera sample: (hero-wavelength number as 32 bits, film jitter in the pixel). With
+    /// Sobol' the three are one 3-D point (dimensions 0–2), so wavelength and film position
+    /// are stratified jointly; the stratified digits are the high bits of the wavelength
+    /// number, its low bits are random (see `render::hero_wavelength_u`).
+    ///
+    /// `wavelength_grid`: the scene is not dispersive, so all four wavelengths follow every
+    /// path and the radiance is a smooth, almost periodic function of u mod ¼. A random
+    /// digital shift then keeps a pixel's 2^m wavelength numbers an equally spaced grid,
+    /// which integrates such a function far better than Owen's random positions (16 spp:
+    /// constant environment RMS error 0.0002 vs 0.0046; thin-film teapot mean ΔE00 0.24 vs
+    /// 0.49). With dispersion only the hero survives refraction, the integrand has narrow
+    /// spectral features a grid aliases (prism, 256 spp: seed-to-seed RMSE 0.062 vs 0.020),
+    /// so the wavelength stays Owen-scrambled there.
     #[inline]
-    pub fn camera_sample(&mut self) -> (f32, Vec2) {
+    pub fn camera_sample(&mut self, wavelength_grid: bool) -> (u32, Vec2) {
         match self.kind {
             SamplerKind::Independent => {
-                let u = self.next_1d();
+                let u = self.next_u32();
                 (u, self.next_2d())
             }
             SamplerKind::Sobol => {
@@ -180,8 +190,16 @@ impl Sampler {
                 let i = self.index;
                 let x = scrambled_vdc(i, hash_u32(seed ^ 0x68bc_21eb));
                 let y = scrambled_sobol(1, i, hash_u32(seed ^ 0x02e5_be93));
-                let l = scrambled_sobol(2, i, hash_u32(seed ^ 0x967a_889b));
-                (to_unit(l), Vec2::new(to_unit(x), to_unit(y)))
+                let owen = scrambled_sobol(2, i, hash_u32(seed ^ 0x967a_889b));
+                let l = if wavelength_grid {
+                    // The two low bits that pick the hero's quarter come from the
+                    // Owen-scrambled copy, so the hero is stratified and varies per sample.
+                    let shift = hash_u32(seed ^ 0x5bd1_e995);
+                    ((sobol_dim_reversed(2, i).reverse_bits() ^ shift) & !3) | (owen >> 30)
+                } else {
+                    owen
+                };
+                (l, Vec2::new(to_unit(x), to_unit(y)))
             }
         }
     }
@@ -354,8 +372,12 @@ mod tests {
         // Dimensions 2 and 3 of Joe & Kuo's generator: scipy.stats.qmc.Sobol(3,
         // scramble=False) columns 1 and 2, first eight points times 8, taken out of scipy's
         // Gray-code order into index order (point i = ⊕ of the direction numbers of i's bits).
-        let d1: Vec<u32> = (0..8).map(|i| sobol_dim_reversed(1, i).reverse_bits() >> 29).collect();
-        let d2: Vec<u32> = (0..8).map(|i| sobol_dim_reversed(2, i).reverse_bits() >> 29).collect();
+        let d1: Vec<u32> = (0..8)
+            .map(|i| sobol_dim_reversed(1, i).reverse_bits() >> 29)
+            .collect();
+        let d2: Vec<u32> = (0..8)
+            .map(|i| sobol_dim_reversed(2, i).reverse_bits() >> 29)
+            .collect();
         assert_eq!(d1, [0, 4, 6, 2, 5, 1, 3, 7]);
         assert_eq!(d2, [0, 4, 6, 2, 3, 7, 5, 1]);
     }
@@ -381,18 +403,24 @@ mod tests {
                 let pts: Vec<[u32; 2]> = (0..1u32 << m).map(|i| sobol_padded_2d(i, seed)).collect();
                 assert!(is_02_net(&pts, m), "seed {seed} m {m}");
                 // The camera's (x, y) pair and its wavelength are stratified too.
-                let mut cam: Vec<(f32, Vec2)> = Vec::new();
+                let mut cam: Vec<(u32, Vec2)> = Vec::new();
                 let mut strata = vec![0u32; 1 << m];
                 for i in 0..1u32 << m {
                     let mut s = Sampler::new(SamplerKind::Sobol, 5, 9, i, seed as u64);
-                    let c = s.camera_sample();
-                    strata[(c.0 * (1u32 << m) as f32) as usize] += 1;
+                    // Both wavelength modes (Owen, shifted grid) on alternate m.
+                    let c = s.camera_sample(m % 2 == 0);
+                    strata[(c.0 as u64 * (1u64 << m) >> 32) as usize] += 1;
                     cam.push(c);
                 }
                 assert!(strata.iter().all(|&n| n == 1), "λ strata, m {m}");
                 let xy: Vec<[u32; 2]> = cam
                     .iter()
-                    .map(|c| [((c.1.x * 16_777_216.0) as u32) << 8, ((c.1.y * 16_777_216.0) as u32) << 8])
+                    .map(|c| {
+                        [
+                            ((c.1.x * 16_777_216.0) as u32) << 8,
+                            ((c.1.y * 16_777_216.0) as u32) << 8,
+                        ]
+                    })
                     .collect();
                 assert!(is_02_net(&xy, m), "camera xy, seed {seed} m {m}");
             }
@@ -445,11 +473,17 @@ mod tests {
             (e2 / 256.0).sqrt()
         };
         // Measured: 16 spp 0.022 vs 0.071, 64 spp 0.0037 vs 0.034, 1024 spp 8.2e-5 vs 9.3e-3.
-        let (e_ind, e_sob) = (rms(SamplerKind::Independent, 64), rms(SamplerKind::Sobol, 64));
+        let (e_ind, e_sob) = (
+            rms(SamplerKind::Independent, 64),
+            rms(SamplerKind::Sobol, 64),
+        );
         assert!(e_sob * 5.0 < e_ind, "sobol {e_sob} vs independent {e_ind}");
         // Owen-scrambled nets converge as ~N^−1.5 on smooth integrands (Monte Carlo: N^−0.5):
         // 16× the samples must cut the error by far more than 4×.
         let e_sob_1024 = rms(SamplerKind::Sobol, 1024);
-        assert!(e_sob_1024 * 20.0 < e_sob, "sobol 64: {e_sob}, 1024: {e_sob_1024}");
+        assert!(
+            e_sob_1024 * 20.0 < e_sob,
+            "sobol 64: {e_sob}, 1024: {e_sob_1024}"
+        );
     }
 }

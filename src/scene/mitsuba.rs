@@ -26,8 +26,8 @@
 
 use super::{
     look_at, shapes, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
-    IntegratorSettings, Polarizer, ReconstructionFilter, SamplerKind, Scene, Shape, SpectrumDesc, TextureDesc,
-    TextureFilter, WrapMode,
+    IntegratorSettings, Polarizer, ReconstructionFilter, SamplerKind, Scene, Shape, SpectrumDesc,
+    TextureDesc, TextureFilter, WrapMode,
 };
 use crate::optics::{dispersion, Complex64, Ior};
 use anyhow::{anyhow, bail, Context, Result};

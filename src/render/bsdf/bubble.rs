@@ -65,16 +65,25 @@ impl BubbleBsdf {
         (Spec::from_array(r), Spec::from_array(t))
     }
 
-    /// Probability of choosing the reflection lobe.
+    /// Each lobe is chosen with probability ≥ this. The Fresnel-proportional choice
+    /// R̄/(R̄ + T̄) sends only ~5 % of the samples at near-normal incidence into the
+    /// reflection, which carries the interference colours and the bright mirrored studio
+    /// lights; a defensive floor (still unbiased: weights R/P_R and T/(1 − P_R)) lowers the
+    /// noise where it shows. `scenes/bubble.xml`, 128², 256 spp, two seeds: RMSE 0.042 → 0.034,
+    /// mean ΔE00 between the seeds 1.60 → 1.04 (a floor of 0.4 gave 1.20: 0.25 kept).
+    pub const MIN_LOBE_PROBABILITY: f32 = 0.25;
+
+    /// Probability of choosing the reflection lobe: R̄/(R̄ + T̄) over the live wavelengths,
+    /// clamped to [`min_probability`, 1 − `min_probability`].
     #[inline]
-    pub fn reflect_probability(ctx: &ShadingCtx, r: Spec, t: Spec) -> f32 {
+    pub fn reflect_probability(ctx: &ShadingCtx, r: Spec, t: Spec, min_probability: f32) -> f32 {
         let (rs, ts) = if ctx.wl.secondary_terminated() {
             (r.x, t.x)
         } else {
             (r.element_sum(), t.element_sum())
         };
         if rs + ts > 0.0 {
-            rs / (rs + ts)
+            (rs / (rs + ts)).clamp(min_probability, 1.0 - min_probability)
         } else {
             // Nothing leaves the film (fully absorbing): any choice has weight 0.
             0.5
@@ -92,7 +101,7 @@ impl BubbleBsdf {
             return None;
         }
         let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
-        let p_r = Self::reflect_probability(ctx, r, t);
+        let p_r = Self::reflect_probability(ctx, r, t, Self::MIN_LOBE_PROBABILITY);
         let mut s = if u1 < p_r {
             let mut s = BsdfSample::delta(Vec3::new(-wi.x, -wi.y, wi.z), r / p_r);
             s.pdf = p_r;

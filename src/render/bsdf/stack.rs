@@ -160,7 +160,7 @@ impl CoatedDielectric {
             return None;
         }
         let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
-        let p_r = super::BubbleBsdf::reflect_probability(ctx, r, t);
+        let p_r = super::BubbleBsdf::reflect_probability(ctx, r, t, 0.0);
         if u1 < p_r {
             let mut s = BsdfSample::delta(reflect_local(wi), r / p_r);
             s.pdf = p_r;

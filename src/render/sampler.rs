@@ -409,7 +409,7 @@ mod tests {
                     let mut s = Sampler::new(SamplerKind::Sobol, 5, 9, i, seed as u64);
                     // Both wavelength modes (Owen, shifted grid) on alternate m.
                     let c = s.camera_sample(m % 2 == 0);
-                    strata[(c.0 as u64 * (1u64 << m) >> 32) as usize] += 1;
+                    strata[((c.0 as u64 * (1u64 << m)) >> 32) as usize] += 1;
                     cam.push(c);
                 }
                 assert!(strata.iter().all(|&n| n == 1), "λ strata, m {m}");

@@ -161,7 +161,8 @@ pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
         return f32::NAN;
     }
     let (ax, ay) = (x.abs(), y.abs());
-    let (mx, mn) = (ax.max(ay), ax.min(ay));
+    // No NaN here (checked above): plain compares, not `f32::max`'s NaN handling.
+    let (mx, mn) = if ax >= ay { (ax, ay) } else { (ay, ax) };
     if mx == 0.0 {
         // atan2(±0, +0) = ±0, atan2(±0, −0) = ±π.
         return if x.is_sign_negative() {
@@ -288,9 +289,20 @@ impl EnvMap {
             xi -= 1;
         }
         let fx = x - xi as f32;
-        let c0 = xi.rem_euclid(w as i64) as usize;
-        let c1 = (c0 + 1) % w;
-        let r0 = (y as usize).min(h - 2);
+        // Column wrap without integer division (two `div`s were the slowest instructions
+        // here): u ∈ [0, 1) puts xi in [−1, w − 1]; the general case is kept for safety.
+        let wi = w as i64;
+        let c0 = if (0..wi).contains(&xi) {
+            xi as usize
+        } else if xi == -1 {
+            w - 1
+        } else {
+            xi.rem_euclid(wi) as usize
+        };
+        let c1 = if c0 + 1 == w { 0 } else { c0 + 1 };
+        // y ∈ [0, h − 1] (clamped above; NaN casts to 0 either way): an i32 cast is exact
+        // and cheaper than f32 → usize.
+        let r0 = (y as i32 as usize).min(h - 2);
         let fy = y - r0 as f32;
         // The four texels share the D65 factor: evaluate it once per wavelength.
         let d65 = Spec::from_array(

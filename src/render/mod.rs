@@ -29,7 +29,7 @@ use crate::scene::{IntegratorSettings, Scene};
 use crate::spectrum::{SampledSpectrum, SampledWavelengths};
 use anyhow::{bail, Context, Result};
 use bsdf::{Bsdf, Counters};
-use film::{sample_to_rgb, tree_sum, Filter};
+use film::{sample_to_rgb, tree_sum_in_place, Filter};
 use glam::{Vec2, Vec4};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -355,7 +355,7 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
                 }
             }
             if reach == 0 {
-                let sum = tree_sum(&samples);
+                let sum = tree_sum_in_place(&mut samples);
                 buf[x] = [sum[0], sum[1], sum[2], n as f32];
             }
         }

@@ -532,9 +532,19 @@ mod x86 {
             return;
         }
         let nodes = &bvh.nodes[..];
-        let oct_inv4 = (if ray.direction.x < 0.0 { 0 } else { 0x0404_0404u32 })
-            | if ray.direction.y < 0.0 { 0 } else { 0x0202_0202 }
-            | if ray.direction.z < 0.0 { 0 } else { 0x0101_0101 };
+        let oct_inv4 = (if ray.direction.x < 0.0 {
+            0
+        } else {
+            0x0404_0404u32
+        }) | if ray.direction.y < 0.0 {
+            0
+        } else {
+            0x0202_0202
+        } | if ray.direction.z < 0.0 {
+            0
+        } else {
+            0x0101_0101
+        };
         let signs = ray_signs(ray);
         let mut stack = [(0u32, 0u32); STACK_SIZE];
         let mut sp = 0usize;

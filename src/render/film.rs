@@ -177,7 +177,11 @@ mod tests {
             let reference = tree_sum(&vals);
             let mut buf = vals.clone();
             let fast = tree_sum_in_place(&mut buf);
-            assert_eq!(reference.map(f32::to_bits), fast.map(f32::to_bits), "n = {n}");
+            assert_eq!(
+                reference.map(f32::to_bits),
+                fast.map(f32::to_bits),
+                "n = {n}"
+            );
         }
     }
 

@@ -220,7 +220,11 @@ fn atan2_fast2(y0: f32, x0: f32, y1: f32, x1: f32) -> (f32, f32) {
         p = p * z2 + Vec4::splat(c);
     }
     let mut r = z * p;
-    r = Vec4::select(ay.cmpgt(ax), Vec4::splat(std::f32::consts::FRAC_PI_2) - r, r);
+    r = Vec4::select(
+        ay.cmpgt(ax),
+        Vec4::splat(std::f32::consts::FRAC_PI_2) - r,
+        r,
+    );
     r = Vec4::select(x.cmplt(Vec4::ZERO), Vec4::splat(PI) - r, r);
     let r = r.copysign(y);
     (r.x, r.y)
@@ -712,7 +716,16 @@ mod tests {
     #[test]
     fn atan2_fast2_is_bit_identical_to_scalar() {
         let mut rng = crate::render::sampler::Sampler::from_seed(11);
-        let specials = [0.0f32, -0.0, 1.0, -1.0, 1e-30, -1e-30, f32::NAN, f32::INFINITY];
+        let specials = [
+            0.0f32,
+            -0.0,
+            1.0,
+            -1.0,
+            1e-30,
+            -1e-30,
+            f32::NAN,
+            f32::INFINITY,
+        ];
         for i in 0..20_000 {
             let mut v = [0.0f32; 4];
             for c in &mut v {

@@ -270,7 +270,8 @@ fn ln_fast4(x: Vec4) -> Vec4 {
     let s = (m - Vec4::ONE) / (m + Vec4::ONE);
     let s2 = s * s;
     let c = |v: f32| Vec4::splat(v);
-    let p = c(1.0) + s2 * (c(1.0 / 3.0) + s2 * (c(1.0 / 5.0) + s2 * (c(1.0 / 7.0) + s2 * c(1.0 / 9.0))));
+    let p = c(1.0)
+        + s2 * (c(1.0 / 3.0) + s2 * (c(1.0 / 5.0) + s2 * (c(1.0 / 7.0) + s2 * c(1.0 / 9.0))));
     e * c(std::f32::consts::LN_2) + c(2.0) * s * p
 }
 

@@ -546,7 +546,8 @@ mod x86 {
             0x0101_0101
         };
         let signs = ray_signs(ray);
-        let mut stack = [(0u32, 0u32); STACK_SIZE];
+        // Not zeroed per ray: every entry is written by a push before a pop reads it.
+        let mut stack = [std::mem::MaybeUninit::<(u32, u32)>::uninit(); STACK_SIZE];
         let mut sp = 0usize;
         // (first child node index, node hit bits << 24 | imask) and (first primitive index,
         // primitive hit bits), as in obvhs' `Traversal`.
@@ -566,7 +567,7 @@ mod x86 {
                 cur_bits &= !(1u32 << child_index_offset);
                 if cur_bits & 0xff00_0000 != 0 {
                     // Saturating push (obvhs `StackStack::push`).
-                    *stack.get_unchecked_mut(sp) = (cur_base, cur_bits);
+                    stack.get_unchecked_mut(sp).write((cur_base, cur_bits));
                     sp = (sp + 1).min(STACK_SIZE - 1);
                 }
                 let slot_index = (child_index_offset - 24) ^ (oct_inv4 & 0xff);
@@ -585,7 +586,7 @@ mod x86 {
                     return;
                 }
                 sp -= 1;
-                (cur_base, cur_bits) = *stack.get_unchecked(sp);
+                (cur_base, cur_bits) = stack.get_unchecked(sp).assume_init();
             }
         }
     }

@@ -399,6 +399,8 @@ fn cpu_has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("popcnt")
+            && std::arch::is_x86_feature_detected!("lzcnt")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -416,7 +418,7 @@ fn cpu_has_avx2() -> bool {
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use super::{intersect_triangle, RtTriangle};
-    use glam::{UVec2, Vec3A};
+    use glam::Vec3A;
     use obvhs::cwbvh::node::CwBvhNode;
     use obvhs::cwbvh::CwBvh;
     use obvhs::ray::Ray;
@@ -425,9 +427,29 @@ mod x86 {
     /// obvhs' node-test epsilon (`cwbvh::node::EPSILON`, crate-private there).
     const NODE_EPSILON: f32 = 0.0001;
 
+    /// Per-ray constants of the node test: lanes all-ones where the direction component is
+    /// negative (the near plane of a child box is then its max plane).
+    #[derive(Clone, Copy)]
+    struct RaySigns {
+        neg: [__m256; 3],
+    }
+
     #[inline]
     #[target_feature(enable = "avx2")]
-    fn node_hits(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    fn ray_signs(ray: &Ray) -> RaySigns {
+        let m = |neg: bool| _mm256_castsi256_ps(_mm256_set1_epi32(if neg { -1 } else { 0 }));
+        RaySigns {
+            neg: [
+                m(ray.direction.x < 0.0),
+                m(ray.direction.y < 0.0),
+                m(ray.direction.z < 0.0),
+            ],
+        }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2,popcnt,lzcnt")]
+    fn node_hits(node: &CwBvhNode, ray: &Ray, signs: &RaySigns, oct_inv4: u32) -> u32 {
         let adj_dir_inv = node.compute_extent() * ray.inv_direction;
         let adj_orig = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
         let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
@@ -441,9 +463,11 @@ mod x86 {
                 )))
             }
         }
-        let slab = |lo: &[u8; 8], hi: &[u8; 8], neg: bool, dinv: f32, orig: f32| {
+        // Near/far planes picked per ray with a blend instead of a branch per axis and node.
+        let slab = |lo: &[u8; 8], hi: &[u8; 8], neg: __m256, dinv: f32, orig: f32| {
             let (q_lo, q_hi) = (widen(lo), widen(hi));
-            let (near, far) = if neg { (q_hi, q_lo) } else { (q_lo, q_hi) };
+            let near = _mm256_blendv_ps(q_lo, q_hi, neg);
+            let far = _mm256_blendv_ps(q_hi, q_lo, neg);
             let (d, o) = (_mm256_set1_ps(dinv), _mm256_set1_ps(orig));
             (
                 _mm256_add_ps(_mm256_mul_ps(near, d), o),
@@ -453,21 +477,21 @@ mod x86 {
         let (tmin_x, tmax_x) = slab(
             &node.child_min_x,
             &node.child_max_x,
-            ray.direction.x < 0.0,
+            signs.neg[0],
             adj_dir_inv.x,
             adj_orig.x,
         );
         let (tmin_y, tmax_y) = slab(
             &node.child_min_y,
             &node.child_max_y,
-            ray.direction.y < 0.0,
+            signs.neg[1],
             adj_dir_inv.y,
             adj_orig.y,
         );
         let (tmin_z, tmax_z) = slab(
             &node.child_min_z,
             &node.child_max_z,
-            ray.direction.z < 0.0,
+            signs.neg[2],
             adj_dir_inv.z,
             adj_orig.z,
         );
@@ -487,11 +511,91 @@ mod x86 {
         hit_mask
     }
 
+    /// CWBVH traversal with the AVX2 node test: obvhs' `traverse!` macro step for step (same
+    /// node and primitive visiting order, same saturating 32-entry stack), so hits are
+    /// bit-identical, but written as one tight loop: the traversal state stays in registers
+    /// (through the macro's `Traversal` struct it lived on the stack and was stored back on
+    /// every step), the stack is not zeroed per ray, and the bit counts compile to single
+    /// `popcnt`/`lzcnt` instructions (enabled together with AVX2: every AVX2 CPU has them,
+    /// and [`super::cpu_has_avx2`] checks all of them).
+    ///
+    /// `on_prim(id, ray)` tests primitive `id`, may shorten `ray.tmax`, and returns true to
+    /// stop the traversal (any-hit queries).
+    #[inline(always)]
+    unsafe fn traverse_avx2(
+        bvh: &CwBvh,
+        ray: &mut Ray,
+        mut on_prim: impl FnMut(u32, &mut Ray) -> bool,
+    ) {
+        const STACK_SIZE: usize = 32;
+        if bvh.nodes.is_empty() {
+            return;
+        }
+        let nodes = &bvh.nodes[..];
+        let oct_inv4 = (if ray.direction.x < 0.0 {
+            0
+        } else {
+            0x0404_0404u32
+        }) | if ray.direction.y < 0.0 {
+            0
+        } else {
+            0x0202_0202
+        } | if ray.direction.z < 0.0 {
+            0
+        } else {
+            0x0101_0101
+        };
+        let signs = ray_signs(ray);
+        // Not zeroed per ray: every entry is written by a push before a pop reads it.
+        let mut stack = [std::mem::MaybeUninit::<(u32, u32)>::uninit(); STACK_SIZE];
+        let mut sp = 0usize;
+        // (first child node index, node hit bits << 24 | imask) and (first primitive index,
+        // primitive hit bits), as in obvhs' `Traversal`.
+        let (mut cur_base, mut cur_bits) = (0u32, 0x8000_0000u32);
+        let (mut prim_base, mut prim_bits) = (0u32, 0u32);
+        loop {
+            while prim_bits != 0 {
+                let local = 31 - prim_bits.leading_zeros();
+                prim_bits &= !(1u32 << local);
+                if on_prim(prim_base + local, ray) {
+                    return;
+                }
+            }
+            if cur_bits & 0xff00_0000 != 0 {
+                let hits_imask = cur_bits;
+                let child_index_offset = 31 - hits_imask.leading_zeros();
+                cur_bits &= !(1u32 << child_index_offset);
+                if cur_bits & 0xff00_0000 != 0 {
+                    // Saturating push (obvhs `StackStack::push`).
+                    stack.get_unchecked_mut(sp).write((cur_base, cur_bits));
+                    sp = (sp + 1).min(STACK_SIZE - 1);
+                }
+                let slot_index = (child_index_offset - 24) ^ (oct_inv4 & 0xff);
+                let relative_index = (hits_imask & !(0xffff_ffffu32 << slot_index)).count_ones();
+                let node = &nodes[(cur_base + relative_index) as usize];
+                let hitmask = node_hits(node, ray, &signs, oct_inv4);
+                cur_base = node.child_base_idx;
+                cur_bits = (hitmask & 0xff00_0000) | node.imask as u32;
+                prim_base = node.primitive_base_idx;
+                prim_bits = hitmask & 0x00ff_ffff;
+            } else {
+                cur_bits = 0;
+            }
+            if prim_bits == 0 && cur_bits & 0xff00_0000 == 0 {
+                if sp == 0 {
+                    return;
+                }
+                sp -= 1;
+                (cur_base, cur_bits) = stack.get_unchecked(sp).assume_init();
+            }
+        }
+    }
+
     /// [`super::closest_hit`] with the AVX2 node test.
     ///
     /// # Safety
-    /// The CPU must support AVX2.
-    #[target_feature(enable = "avx2")]
+    /// The CPU must support AVX2, POPCNT and LZCNT.
+    #[target_feature(enable = "avx2,popcnt,lzcnt")]
     pub(super) unsafe fn closest_hit_avx2(
         bvh: &CwBvh,
         tris: &[RtTriangle],
@@ -499,41 +603,29 @@ mod x86 {
     ) -> Option<(f32, u32)> {
         let mut traverse_ray = ray;
         let mut best_id = u32::MAX;
-        let mut state = bvh.new_traversal(ray.direction);
-        let mut node;
-        obvhs::traverse!(
-            bvh,
-            node,
-            state,
-            node_hits(node, &traverse_ray, state.oct_inv4),
-            {
-                let t = intersect_triangle(&tris[state.primitive_id as usize], &traverse_ray);
-                if t < traverse_ray.tmax {
-                    best_id = state.primitive_id;
-                    traverse_ray.tmax = t;
-                }
+        traverse_avx2(bvh, &mut traverse_ray, |id, r| {
+            let t = intersect_triangle(&tris[id as usize], r);
+            if t < r.tmax {
+                best_id = id;
+                r.tmax = t;
             }
-        );
+            false
+        });
         (best_id != u32::MAX).then_some((traverse_ray.tmax, best_id))
     }
 
     /// [`super::any_hit`] with the AVX2 node test.
     ///
     /// # Safety
-    /// The CPU must support AVX2.
-    #[target_feature(enable = "avx2")]
+    /// As [`closest_hit_avx2`].
+    #[target_feature(enable = "avx2,popcnt,lzcnt")]
     pub(super) unsafe fn any_hit_avx2(bvh: &CwBvh, tris: &[RtTriangle], ray: Ray) -> bool {
         let mut hit = false;
-        let mut state = bvh.new_traversal(ray.direction);
-        let mut node;
-        'outer: {
-            obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
-                if intersect_triangle(&tris[state.primitive_id as usize], &ray) < ray.tmax {
-                    hit = true;
-                    break 'outer;
-                }
-            });
-        }
+        let mut r = ray;
+        traverse_avx2(bvh, &mut r, |id, r| {
+            hit = intersect_triangle(&tris[id as usize], r) < r.tmax;
+            hit
+        });
         hit
     }
 }

@@ -8,7 +8,7 @@ use super::texture::{Spec, Spectrum};
 use crate::image_io::RgbImage;
 use crate::scene::{EmitterDesc, Geometry, Scene};
 use crate::spectrum::{RgbIlluminantSpectrum, SampledWavelengths};
-use glam::{Mat3, Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3, Vec4};
 use std::f32::consts::PI;
 
 /// Piecewise-constant 1-D distribution on [0, 1) (pbrt-v4 `PiecewiseConstant1D`).
@@ -161,7 +161,8 @@ pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
         return f32::NAN;
     }
     let (ax, ay) = (x.abs(), y.abs());
-    let (mx, mn) = (ax.max(ay), ax.min(ay));
+    // No NaN here (checked above): plain compares, not `f32::max`'s NaN handling.
+    let (mx, mn) = if ax >= ay { (ax, ay) } else { (ay, ax) };
     if mx == 0.0 {
         // atan2(±0, +0) = ±0, atan2(±0, −0) = ±π.
         return if x.is_sign_negative() {
@@ -184,6 +185,49 @@ pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
         r = PI - r;
     }
     r.copysign(y)
+}
+
+/// Two [`atan2_fast`] evaluations at once, (atan2(y0, x0), atan2(y1, x1)), in the lanes of
+/// one `Vec4`: the same operations per lane, so the results are bit-identical to two scalar
+/// calls (`tests::atan2_fast2_is_bit_identical_to_scalar`); the envmap lookup needs both
+/// angles of every escaped ray. NaN or (0, 0) inputs take the scalar path.
+#[inline]
+fn atan2_fast2(y0: f32, x0: f32, y1: f32, x1: f32) -> (f32, f32) {
+    const C: [f32; 8] = [
+        0.999_999_34,
+        -0.333_298_6,
+        0.199_465_66,
+        -0.139_086_34,
+        0.096_422_08,
+        -0.055_912_48,
+        0.021_863_066,
+        -0.004_054_597,
+    ];
+    let y = Vec4::new(y0, y1, y0, y1);
+    let x = Vec4::new(x0, x1, x0, x1);
+    let (ax, ay) = (x.abs(), y.abs());
+    let x_ge_y = ax.cmpge(ay);
+    let mx = Vec4::select(x_ge_y, ax, ay);
+    // NaN lanes and atan2(±0, ±0) take the scalar path (its special cases).
+    if x.is_nan_mask().any() || y.is_nan_mask().any() || mx.cmpeq(Vec4::ZERO).any() {
+        return (atan2_fast(y0, x0), atan2_fast(y1, x1));
+    }
+    let mn = Vec4::select(x_ge_y, ay, ax);
+    let z = mn / mx;
+    let z2 = z * z;
+    let mut p = Vec4::splat(C[7]);
+    for &c in C[..7].iter().rev() {
+        p = p * z2 + Vec4::splat(c);
+    }
+    let mut r = z * p;
+    r = Vec4::select(
+        ay.cmpgt(ax),
+        Vec4::splat(std::f32::consts::FRAC_PI_2) - r,
+        r,
+    );
+    r = Vec4::select(x.cmplt(Vec4::ZERO), Vec4::splat(PI) - r, r);
+    let r = r.copysign(y);
+    (r.x, r.y)
 }
 
 /// Lat-long environment map.
@@ -265,13 +309,14 @@ impl EnvMap {
         let d = (self.to_local * dir).normalize();
         // atan2 ∈ [−π, π] so u ∈ [−½, ½]: rem_euclid(1) is one conditional add (rem_euclid
         // calls libm floor without SSE4.1).
-        let mut u = atan2_fast(d.x, -d.z) * (0.5 / PI);
+        // acos y = atan2(√((1 − y)(1 + y)), y), accurate also near the poles.
+        let y = d.y.clamp(-1.0, 1.0);
+        let (phi, theta) = atan2_fast2(d.x, -d.z, ((1.0 - y) * (1.0 + y)).sqrt(), y);
+        let mut u = phi * (0.5 / PI);
         if u < 0.0 {
             u += 1.0;
         }
-        // acos y = atan2(√((1 − y)(1 + y)), y), accurate also near the poles.
-        let y = d.y.clamp(-1.0, 1.0);
-        let v = atan2_fast(((1.0 - y) * (1.0 + y)).sqrt(), y) / PI;
+        let v = theta / PI;
         Vec2::new(if u >= 1.0 { 0.0 } else { u }, v)
     }
 
@@ -288,9 +333,20 @@ impl EnvMap {
             xi -= 1;
         }
         let fx = x - xi as f32;
-        let c0 = xi.rem_euclid(w as i64) as usize;
-        let c1 = (c0 + 1) % w;
-        let r0 = (y as usize).min(h - 2);
+        // Column wrap without integer division (two `div`s were the slowest instructions
+        // here): u ∈ [0, 1) puts xi in [−1, w − 1]; the general case is kept for safety.
+        let wi = w as i64;
+        let c0 = if (0..wi).contains(&xi) {
+            xi as usize
+        } else if xi == -1 {
+            w - 1
+        } else {
+            xi.rem_euclid(wi) as usize
+        };
+        let c1 = if c0 + 1 == w { 0 } else { c0 + 1 };
+        // y ∈ [0, h − 1] (clamped above; NaN casts to 0 either way): an i32 cast is exact
+        // and cheaper than f32 → usize.
+        let r0 = (y as i32 as usize).min(h - 2);
         let fy = y - r0 as f32;
         // The four texels share the D65 factor: evaluate it once per wavelength.
         let d65 = Spec::from_array(
@@ -655,6 +711,37 @@ mod tests {
         assert_eq!(atan2_fast(-0.0, -1.0), -PI);
         assert_eq!(atan2_fast(1.0, 0.0), std::f32::consts::FRAC_PI_2);
         assert!(atan2_fast(f32::NAN, 1.0).is_nan());
+    }
+
+    #[test]
+    fn atan2_fast2_is_bit_identical_to_scalar() {
+        let mut rng = crate::render::sampler::Sampler::from_seed(11);
+        let specials = [
+            0.0f32,
+            -0.0,
+            1.0,
+            -1.0,
+            1e-30,
+            -1e-30,
+            f32::NAN,
+            f32::INFINITY,
+        ];
+        for i in 0..20_000 {
+            let mut v = [0.0f32; 4];
+            for c in &mut v {
+                *c = (rng.next_1d() - 0.5) * 4.0;
+            }
+            if i % 5 == 0 {
+                v[i % 4] = specials[(i / 5) % specials.len()];
+            }
+            let (a, b) = atan2_fast2(v[0], v[1], v[2], v[3]);
+            let (ra, rb) = (atan2_fast(v[0], v[1]), atan2_fast(v[2], v[3]));
+            assert_eq!(
+                (a.to_bits(), b.to_bits()),
+                (ra.to_bits(), rb.to_bits()),
+                "{v:?}: {a} {b} vs {ra} {rb}"
+            );
+        }
     }
 
     #[test]

@@ -29,8 +29,8 @@ use crate::scene::{IntegratorSettings, Scene};
 use crate::spectrum::{SampledSpectrum, SampledWavelengths};
 use anyhow::{bail, Context, Result};
 use bsdf::{Bsdf, Counters};
-use film::{sample_to_rgb, tree_sum, Filter};
-use glam::Vec2;
+use film::{sample_to_rgb, tree_sum_in_place, Filter};
+use glam::{Vec2, Vec4};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -231,48 +231,73 @@ pub(crate) fn hero_wavelength_u(bits: u32) -> f32 {
 /// `cosh`, and atanh x = ½·ln((1 + x)/(1 − x)) is one `ln`. The wavelength-sampling
 /// transcendental calls were ~15 % of a teapot render; values agree with the spectrum
 /// module's to f32 rounding (see `render::tests::fast_wavelength_sampling_matches_spectrum`).
+///
+/// Written lane-wise (each step over all four wavelengths, no branches but the rare
+/// range-end fallback) so that it compiles to 4-wide SSE: the same IEEE operations in the
+/// same order per lane, so the values are those of the scalar loop bit for bit.
 #[inline]
 pub(crate) fn sample_visible_wavelengths(u: f32) -> SampledWavelengths {
-    use crate::spectrum::{LAMBDA_MAX_NM, LAMBDA_MIN_NM, N_SPECTRUM_SAMPLES};
+    use crate::spectrum::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
     const VISIBLE_PDF_NORM: f32 = 0.003_939_804;
     let (lo, hi) = (LAMBDA_MIN_NM as f32, LAMBDA_MAX_NM as f32);
-    let mut lambda = [0.0; N_SPECTRUM_SAMPLES];
-    let mut pdf = [0.0; N_SPECTRUM_SAMPLES];
-    for k in 0..N_SPECTRUM_SAMPLES {
-        let mut up = u + k as f32 / N_SPECTRUM_SAMPLES as f32;
-        if up > 1.0 {
-            up -= 1.0;
-        }
-        let x = 0.856_910_6 - 1.827_502 * up;
-        let l = 538.0 - 138.888_89 * (0.5 * ln_fast((1.0 + x) / (1.0 - x)));
+    let up = Vec4::splat(u) + Vec4::new(0.0, 0.25, 0.5, 0.75);
+    let up = Vec4::select(up.cmpgt(Vec4::ONE), up - Vec4::ONE, up);
+    let x = Vec4::splat(0.856_910_6) - Vec4::splat(1.827_502) * up;
+    let ln = ln_fast4((Vec4::ONE + x) / (Vec4::ONE - x));
+    let l = Vec4::splat(538.0) - Vec4::splat(138.888_89) * (Vec4::splat(0.5) * ln);
+    let pdf4 = Vec4::splat(VISIBLE_PDF_NORM) * (Vec4::ONE - x * x);
+    let (l, mut lambda, mut pdf) = (l.to_array(), l.to_array(), pdf4.to_array());
+    for k in 0..4 {
         // f32 rounding can overshoot the range ends by ~1e-4 nm (as in the spectrum module).
-        let l_in = l.clamp(lo, hi);
-        lambda[k] = l_in;
-        pdf[k] = if l_in == l {
-            VISIBLE_PDF_NORM * (1.0 - x * x)
-        } else {
-            crate::spectrum::visible_wavelengths_pdf(l_in)
-        };
+        let l_in = l[k].clamp(lo, hi);
+        if l_in != l[k] {
+            lambda[k] = l_in;
+            pdf[k] = crate::spectrum::visible_wavelengths_pdf(l_in);
+        }
     }
     SampledWavelengths::new(lambda, pdf)
 }
 
-/// ln x for positive normal x, inline (libm `logf` was ~3 % of a teapot render, four calls
-/// per sample): x = m·2^e with m ∈ [√½, √2), ln m = 2 atanh s = 2(s + s³/3 + … + s⁹/9) with
-/// s = (m − 1)/(m + 1), |s| ≤ 0.172 (truncation < 2e-9). Relative error ~1e-7, i.e. ≤ 2e-5 nm
-/// in λ (`tests::fast_wavelength_sampling_matches_spectrum` allows 2e-3 nm). Here x ∈
-/// [0.0149, 13] always (see `sample_visible_wavelengths`).
+/// ln x on four lanes for positive normal x (libm `logf` was ~3 % of a teapot render, four
+/// calls per sample): x = m·2^e with m ∈ [√½, √2), ln m = 2 atanh s = 2(s + s³/3 + … + s⁹/9)
+/// with s = (m − 1)/(m + 1), |s| ≤ 0.172 (truncation < 2e-9). Relative error ~1e-7, i.e.
+/// ≤ 2e-5 nm in λ (`tests::fast_wavelength_sampling_matches_spectrum` allows 2e-3 nm). Here
+/// x ∈ [0.0149, 13] always (see `sample_visible_wavelengths`). 4-wide SSE2 on x86-64, the
+/// same operations per lane as the scalar fallback.
+#[inline]
+fn ln_fast4(x: Vec4) -> Vec4 {
+    // Exponent relative to [√½, √2): shift the mantissa boundary from 1 to √½ (bits of √½).
+    const SQRT_HALF_BITS: u32 = 0x3f35_04f3;
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    // SAFETY: SSE2 is enabled at compile time (x86-64 baseline); register-only intrinsics.
+    let (e, m) = unsafe {
+        use std::arch::x86_64::*;
+        let bits = _mm_castps_si128(x.into());
+        let e = _mm_srai_epi32::<23>(_mm_sub_epi32(bits, _mm_set1_epi32(SQRT_HALF_BITS as i32)));
+        let m = _mm_castsi128_ps(_mm_sub_epi32(bits, _mm_slli_epi32::<23>(e)));
+        (Vec4::from(_mm_cvtepi32_ps(e)), Vec4::from(m))
+    };
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    let (e, m) = {
+        let bits = x.to_array().map(f32::to_bits);
+        let e = bits.map(|b| (b.wrapping_sub(SQRT_HALF_BITS) as i32) >> 23);
+        let m: [f32; 4] =
+            std::array::from_fn(|k| f32::from_bits(bits[k].wrapping_sub((e[k] as u32) << 23)));
+        (Vec4::from_array(e.map(|v| v as f32)), Vec4::from_array(m))
+    };
+    let s = (m - Vec4::ONE) / (m + Vec4::ONE);
+    let s2 = s * s;
+    let c = |v: f32| Vec4::splat(v);
+    let p = c(1.0)
+        + s2 * (c(1.0 / 3.0) + s2 * (c(1.0 / 5.0) + s2 * (c(1.0 / 7.0) + s2 * c(1.0 / 9.0))));
+    e * c(std::f32::consts::LN_2) + c(2.0) * s * p
+}
+
+/// One lane of [`ln_fast4`] (tests).
+#[cfg(test)]
 #[inline]
 fn ln_fast(x: f32) -> f32 {
-    let bits = x.to_bits();
-    // Exponent relative to [√½, √2): shift the mantissa boundary from 1 to √½.
-    let shifted = bits.wrapping_sub(0x3f35_04f3); // bits of √½
-    let e = (shifted as i32) >> 23;
-    let m = f32::from_bits(bits.wrapping_sub((e as u32) << 23));
-    let s = (m - 1.0) / (m + 1.0);
-    let s2 = s * s;
-    let p = 1.0 + s2 * (1.0 / 3.0 + s2 * (1.0 / 5.0 + s2 * (1.0 / 7.0 + s2 * (1.0 / 9.0))));
-    e as f32 * std::f32::consts::LN_2 + 2.0 * s * p
+    ln_fast4(Vec4::splat(x)).x
 }
 
 #[inline]
@@ -349,7 +374,7 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
                 }
             }
             if reach == 0 {
-                let sum = tree_sum(&samples);
+                let sum = tree_sum_in_place(&mut samples);
                 buf[x] = [sum[0], sum[1], sum[2], n as f32];
             }
         }

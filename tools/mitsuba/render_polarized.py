@@ -91,7 +91,8 @@ def main():
         path = os.path.join(sdir, fname)
         print(f"rendering {name} ({rr.rel(path)}) with {variant} at {args.spp} spp …")
         scene = mi.load_file(path, **params)
-        sensor, (w, h) = rr.make_sensor(mi, scene, args.size)
+        sampler_type = rr.scene_sampler_type(path)
+        sensor, (w, h) = rr.make_sensor(mi, scene, args.size, sampler_type)
         arr, secs = rr.render(mi, scene, sensor, args.spp, args.seed)
         exr = os.path.join(out_dir, f"{name}.exr")
         rr.write_exr(mi, exr, arr)
@@ -104,6 +105,7 @@ def main():
             "width": w,
             "height": h,
             "spp": args.spp,
+            "sampler": sampler_type,
             "seed": args.seed,
             "rfilter": "box",
             "seconds": round(secs, 2),

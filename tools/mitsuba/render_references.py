@@ -286,7 +286,10 @@ def main():
     for name, path, material in scenes:
         log(f"rendering {name} ({rel(path)}) at {spp} spp …")
         scene = mi.load_file(path)
-        sensor, (w, h) = make_sensor(mi, scene, args.size)
+        # The scene's own sampler: with `ldsampler` the reference converges far faster than
+        # with independent samples (each 1024-spp pass is an independent randomisation).
+        sampler_type = scene_sampler_type(path)
+        sensor, (w, h) = make_sensor(mi, scene, args.size, sampler_type)
         arr, secs = render(mi, scene, sensor, spp, args.seed)
         exr = os.path.join(out_dir, f"{name}.exr")
         write_exr(mi, exr, arr)
@@ -298,6 +301,7 @@ def main():
             "width": w,
             "height": h,
             "spp": spp,
+            "sampler": sampler_type,
             "seed": args.seed,
             "rfilter": "box",
             "seconds": round(secs, 2),

@@ -4,10 +4,23 @@ use num_complex::Complex64;
 use proptest::prelude::*;
 use thinfilm::optics::{Layer, OpticsError, Stack, ThinFilm};
 
+/// 96 cases from a fixed seed, so CI is reproducible; `PROPTEST_CASES` and
+/// `PROPTEST_RNG_SEED` override both for longer local explorations.
 fn cfg() -> ProptestConfig {
+    let from_env = ProptestConfig::default();
+    let set = |var: &str| std::env::var_os(var).is_some();
     ProptestConfig {
-        cases: 96,
-        ..ProptestConfig::default()
+        cases: if set("PROPTEST_CASES") {
+            from_env.cases
+        } else {
+            96
+        },
+        rng_seed: if set("PROPTEST_RNG_SEED") {
+            from_env.rng_seed
+        } else {
+            proptest::test_runner::RngSeed::Fixed(0x7468_696e_6669_6c6d)
+        },
+        ..from_env
     }
 }
 
@@ -108,9 +121,11 @@ proptest! {
             prop_assert!(x.is_finite() && y.is_finite());
             prop_assert!((x - y).abs() < 1e-3, "jump {x} → {y} at {deg}°");
         }
-        // Grazing limit: everything reflects.
-        let g = s.response_at_angle(lambda, 89.99).unwrap();
-        prop_assert!(g.r() > 0.9, "{g:?}");
+        // Grazing limit: everything reflects as cos θ → 0. Not at 89.99° itself: a layer
+        // that nearly index-matches the ambient (n = 1.001, cos θ₂ ≈ 0.05) leaves
+        // |r₁₂| ≈ 0.993, and a resonant cavity behind it can still bring R down to ~0.7.
+        let g = s.response(lambda, 1e-9);
+        prop_assert!(g.r() > 0.99, "{g:?}");
     }
 
     #[test]
@@ -118,13 +133,16 @@ proptest! {
         n2 in 1.2f64..2.5, k2 in 0.0f64..2e-6, n3 in any_index(), lambda in 400.0f64..800.0,
         deg in 0.0f64..80.0,
     ) {
-        // 1 mm film, 20 nm band: ~200 fringes; 8000 samples resolve each fringe.
+        // 1 mm film, 40 nm band: N = 2·n₂·d·cos θ₂·Δλ/λ² ≥ 87 fringes (fewest at n₂ = 1.2,
+        // 800 nm, 80°); 16000 samples resolve each. The box average over a non-integer
+        // number of fringes keeps a partial-fringe residual of roughly 0.1/N (≈ 2e-3 was
+        // measured with a 20 nm band, N ≈ 48), hence the wide band.
         let film_ior = Complex64::new(n2, k2);
         let coh = Stack { ambient_ior: 1.0, layers: vec![Layer::coherent(film_ior, 1e6)], substrate_ior: n3 };
         let inc = Stack { ambient_ior: 1.0, layers: vec![Layer::incoherent(film_ior, 1e6)], substrate_ior: n3 };
         let cos1 = cos_of(deg);
-        let avg = coh.band_averaged_response(lambda, 20.0, 8000, cos1);
-        let want = inc.band_averaged_response(lambda, 20.0, 32, cos1);
+        let avg = coh.band_averaged_response(lambda, 40.0, 16000, cos1);
+        let want = inc.band_averaged_response(lambda, 40.0, 32, cos1);
         prop_assert!((avg.r_s - want.r_s).abs() < 2e-3 && (avg.r_p - want.r_p).abs() < 2e-3,
             "{avg:?} vs {want:?}");
         prop_assert!((avg.t_s - want.t_s).abs() < 2e-3 && (avg.t_p - want.t_p).abs() < 2e-3,

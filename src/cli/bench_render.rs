@@ -23,12 +23,9 @@ pub struct Args {
     /// Also render with Mitsuba 3 (needs Python with `mitsuba`; see tools/mitsuba/).
     #[arg(long)]
     pub mitsuba: bool,
-    /// Samples per pixel to try, comma-separated.
-    #[arg(
-        long,
-        default_value = "16,32,64,128,256,512,1024",
-        value_delimiter = ','
-    )]
+    /// Samples per pixel to try, comma-separated. Powers of 4: Mitsuba's `ldsampler` rounds
+    /// other counts up to the next square power of two.
+    #[arg(long, default_value = "16,64,256,1024", value_delimiter = ',')]
     pub spp: Vec<u32>,
     /// Only these reference scenes (names in the manifest); repeatable.
     #[arg(long)]
@@ -122,7 +119,14 @@ fn run_mitsuba(
                 .join(" | ")
         );
     }
-    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).with_context(|| {
+    // Mitsuba logs warnings to stdout; the JSON document is the last line that is one.
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let json_line = stdout
+        .lines()
+        .rev()
+        .find(|l| l.trim_start().starts_with('{'))
+        .unwrap_or("");
+    let doc: serde_json::Value = serde_json::from_str(json_line).with_context(|| {
         format!(
             "parsing the Mitsuba bench JSON: {}",
             String::from_utf8_lossy(&out.stdout)

@@ -661,3 +661,124 @@ fn area_light_enclosure() {
     );
     assert!((furnace_deviation(&scene, &centre, 200, 1.0) - 1.0).abs() < 1e-6);
 }
+
+/// Per-path estimates at one film position and four fixed wavelengths (the first one's
+/// value per path), with `splits` Fresnel splits; unpolarised or polarised integrator.
+fn path_estimates(scene: &Scene, uv: Vec2, n: u32, splits: u32) -> Vec<f64> {
+    use thinfilm::render::{
+        bsdf::Counters, integrator, integrator_polarized, prepare, sampler::Sampler,
+    };
+    use thinfilm::spectrum::SampledWavelengths;
+    let prepared = prepare(
+        scene,
+        &RenderOptions {
+            fresnel_splits: Some(splits),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(prepared.fresnel_splits, splits);
+    let mut counters = Counters::default();
+    let out = (0..n)
+        .map(|s| {
+            let mut sampler = Sampler::for_sample(0, 0, s, 3);
+            let mut wl = SampledWavelengths {
+                lambda: [450.0, 520.0, 600.0, 680.0],
+                pdf: [1.0; 4],
+            };
+            let ray = prepared.camera.generate_ray(uv);
+            let l = match &prepared.polarized {
+                None => integrator::li(&prepared, ray, &mut wl, &mut sampler, &mut counters),
+                Some(setup) => integrator_polarized::li(
+                    &prepared,
+                    setup,
+                    ray,
+                    &mut wl,
+                    &mut sampler,
+                    &mut counters,
+                ),
+            };
+            l.x as f64
+        })
+        .collect();
+    assert_eq!(counters.invalid_samples, 0);
+    out
+}
+
+/// Fresnel splitting follows both lobes of a smooth glass interface with their full weights:
+/// the estimate keeps its expectation (the mean of Mitsuba-style one-lobe sampling) and loses
+/// the lobe-choice variance — over a single glass interface in a white environment, every
+/// path gives R + T/η² exactly. Unpolarised and polarised (sensor polariser) integrators.
+#[test]
+fn fresnel_splitting_keeps_the_mean_and_removes_lobe_noise() {
+    for polarizer in [None, Some(Polarizer::AngleDeg(30.0))] {
+        let mut scene = base_scene(
+            vec![floor(0.0, 50.0, 0)],
+            vec![BsdfDesc::Dielectric {
+                int_ior: Ior::real(1.5),
+                ext_ior: Ior::real(1.0),
+                alpha: 0.0,
+            }],
+            vec![white_env()],
+            8,
+            1,
+        );
+        scene.camera = camera(Vec3::new(0.0, 1.0, -2.0), Vec3::ZERO, 30.0);
+        scene.polarizer = polarizer;
+        let uv = Vec2::new(0.5, 0.5);
+        let n = 4096;
+        let one_lobe = path_estimates(&scene, uv, n, 0);
+        let split = path_estimates(&scene, uv, n, 2);
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let (m0, m2) = (mean(&one_lobe), mean(&split));
+        let var0 = one_lobe.iter().map(|x| (x - m0).powi(2)).sum::<f64>() / n as f64;
+        let spread2 = split.iter().map(|x| (x - m2).abs()).fold(0.0, f64::max);
+        // One-lobe sampling is a Bernoulli choice between 1 and 1/η²: real noise…
+        assert!(
+            var0.sqrt() > 0.05,
+            "{polarizer:?}: one-lobe std {}",
+            var0.sqrt()
+        );
+        // …which splitting removes (only the polariser's angle varies nothing per path here),
+        assert!(spread2 < 1e-5, "{polarizer:?}: split spread {spread2}");
+        // and the means agree within 4 standard errors of the one-lobe estimate.
+        let se = (var0 / n as f64).sqrt();
+        assert!(
+            (m0 - m2).abs() < 4.0 * se,
+            "{polarizer:?}: {m0} vs {m2} (se {se})"
+        );
+    }
+}
+
+/// Splitting is switched on only for smooth reflect/transmit interfaces without dispersion.
+#[test]
+fn effect_analysis_switches_fresnel_splitting() {
+    let glass = |n: Ior| {
+        base_scene(
+            vec![sphere(0)],
+            vec![BsdfDesc::Dielectric {
+                int_ior: n,
+                ext_ior: Ior::real(1.0),
+                alpha: 0.0,
+            }],
+            vec![white_env()],
+            4,
+            1,
+        )
+    };
+    let prepared = |s: &Scene| thinfilm::render::prepare(s, &RenderOptions::default()).unwrap();
+    let p = prepared(&glass(Ior::real(1.5)));
+    assert!(p.effects.fresnel_split);
+    assert_eq!(p.fresnel_splits, thinfilm::render::DEFAULT_FRESNEL_SPLITS);
+    let bk7: Ior = "material:BK7".parse().unwrap();
+    let p = prepared(&glass(bk7));
+    assert!(p.effects.dispersion && !p.effects.fresnel_split);
+    assert_eq!(p.fresnel_splits, 0);
+    let p = prepared(&film_scene(4, 1));
+    assert!(!p.effects.fresnel_split && p.fresnel_splits == 0);
+    assert!(p
+        .effects
+        .reasons
+        .iter()
+        .any(|r| r.starts_with("Fresnel splitting: off")));
+}

@@ -58,6 +58,10 @@ pub struct Args {
     /// `--scale 2` times the 256×256 teapot of issue 6 against the 128×128 references.
     #[arg(long, default_value_t = 1)]
     pub scale: u32,
+    /// Fresnel splits per path for our renderer (default: the renderer's; 0 = one lobe
+    /// chosen by Fresnel, as Mitsuba does).
+    #[arg(long)]
+    pub fresnel_splits: Option<u32>,
     #[command(flatten)]
     pub effects: super::bench_effects::Args,
 }
@@ -202,6 +206,7 @@ pub fn run(args: Args) -> Result<()> {
                     threads: args.threads,
                     resolution: Some((k as u32 * r.width as u32, k as u32 * r.height as u32)),
                     sampler: args.sampler,
+                    fresnel_splits: args.fresnel_splits,
                     ..Default::default()
                 },
             )?;

@@ -9,6 +9,9 @@
 //! - dispersion handling (terminating secondary wavelengths at refractions) only for dielectric
 //!   interfaces whose index depends on wavelength;
 //! - microfacet (GGX visible-normal) sampling only for BSDFs with α > 0;
+//! - Fresnel splitting (both lobes of smooth glass and bubbles followed at a path's first
+//!   such vertices, [`super::integrator`]) only where there are such interfaces and no
+//!   dispersion;
 //! - polarisation (Stokes vectors and Mueller matrices, [`super::integrator_polarized`]) only
 //!   if the scene asks for a polariser: a `polarizer` BSDF on a shape or a sensor polariser.
 
@@ -31,6 +34,10 @@ pub struct Effects {
     pub bubble: bool,
     /// Multilayer coatings: transfer-matrix reflectance per wavelength.
     pub stack: bool,
+    /// Smooth reflect/transmit interfaces whose two lobes can both be followed
+    /// ([`super::bsdf::Bsdf::is_fresnel_pair`]); off with dispersion, whose branches would
+    /// have to terminate wavelengths independently.
+    pub fresnel_split: bool,
     /// One line per decision, for the log.
     pub reasons: Vec<String>,
 }
@@ -78,7 +85,24 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     let mut polarizer_bsdfs = 0;
     let mut bubbles = Vec::new();
     let mut stacks = Vec::new();
+    let mut fresnel_pairs = Vec::new();
     for d in &all {
+        match d {
+            BsdfDesc::Dielectric {
+                int_ior, ext_ior, ..
+            } if !(int_ior.is_dispersive() || ext_ior.is_dispersive()) => {
+                fresnel_pairs.push(format!("dielectric {int_ior}/{ext_ior}"))
+            }
+            BsdfDesc::CoatedDielectric {
+                int_ior, ext_ior, ..
+            } if !(int_ior.is_dispersive() || ext_ior.is_dispersive()) => {
+                fresnel_pairs.push(format!("coated dielectric {int_ior}/{ext_ior}"))
+            }
+            BsdfDesc::Bubble { film_ior, .. } => {
+                fresnel_pairs.push(format!("thinfilm_bubble n={film_ior}"))
+            }
+            _ => {}
+        }
         match d {
             BsdfDesc::ThinFilm {
                 thickness_nm,
@@ -206,6 +230,20 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
         format!("dispersion: ON — wavelength-dependent refraction at {}; secondary wavelengths terminate there", dispersive.join(", "))
     } else {
         "dispersion: off — no refracting interface with a wavelength-dependent index (all 4 wavelengths share each path)".into()
+    });
+    fresnel_pairs.sort();
+    fresnel_pairs.dedup();
+    e.fresnel_split = !fresnel_pairs.is_empty() && !e.dispersion;
+    e.reasons.push(if e.fresnel_split {
+        format!(
+            "Fresnel splitting: ON — reflection and transmission both followed at the first \
+             smooth interfaces of each path ({})",
+            fresnel_pairs.join(", ")
+        )
+    } else if fresnel_pairs.is_empty() {
+        "Fresnel splitting: off — no smooth glass or bubble in use".into()
+    } else {
+        "Fresnel splitting: off — the scene has dispersion (split branches would share the path's wavelengths)".into()
     });
     e.rough = !rough.is_empty();
     e.reasons.push(if e.rough {

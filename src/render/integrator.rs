@@ -4,8 +4,15 @@
 //! semantics (conventions.md "Path integrator"):
 //! - `max_depth` counts path vertices: 1 = directly visible emitters only, −1 = unlimited;
 //! - from depth ≥ `rr_depth` a path survives with probability min(max β · η², 0.95).
+//!
+//! One departure, which changes the noise and not the expectation: at the first
+//! [`PreparedScene::fresnel_splits`] smooth reflect/transmit interfaces of a path (glass,
+//! coated glass, bubbles; [`Bsdf::is_fresnel_pair`]) *both* lobes are followed with their full
+//! Fresnel weights instead of one chosen with probability R (splitting; Arvo & Kirk 1990).
+//! Mitsuba picks one; at 4 % reflectance that leaves a glass surface's mirrored highlights to
+//! one sample in 25, the main source of noise in `scenes/lens.xml`.
 
-use super::bsdf::{Bsdf, Counters, ShadingCtx};
+use super::bsdf::{Bsdf, BsdfSample, Counters, ShadingCtx};
 use super::camera::Ray;
 use super::geometry::{mis_power, offset_ray_origin};
 use super::sampler::Sampler;
@@ -14,49 +21,88 @@ use super::PreparedScene;
 use crate::spectrum::SampledWavelengths;
 use glam::Vec3;
 
+/// The state of one path (or one branch of a split path) between vertices.
+#[derive(Clone, Copy)]
+struct Branch {
+    ray: Ray,
+    throughput: Spec,
+    eta: f32,
+    depth: u32,
+    /// Previous vertex and how its direction was sampled, for MIS on emitters hit.
+    prev_p: Vec3,
+    prev_bsdf_pdf: f32,
+    prev_bsdf_delta: bool,
+    /// Fresnel splits already made on the way here.
+    splits: u32,
+}
+
 /// Radiance along `ray` at the path's wavelengths. May terminate secondary wavelengths in
-/// `wl` (dispersion).
+/// `wl` (dispersion; never in a scene with Fresnel splitting on, whose branches share `wl`).
 pub fn li(
     scene: &PreparedScene,
-    mut ray: Ray,
+    ray: Ray,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spec {
+    let mut radiance = Spec::ZERO;
+    // Branches set aside at splits, depth first. A branch made by the k-th split can only
+    // add branches of split count > k, so at most `fresnel_splits` wait at a time.
+    let mut pending: Vec<Branch> = Vec::new();
+    let mut branch = Branch {
+        ray,
+        throughput: Spec::ONE,
+        eta: 1.0,
+        depth: 0,
+        prev_p: ray.origin,
+        prev_bsdf_pdf: 1.0,
+        prev_bsdf_delta: true,
+        splits: 0,
+    };
+    loop {
+        radiance += trace(scene, branch, wl, sampler, counters, &mut pending);
+        match pending.pop() {
+            Some(b) => branch = b,
+            None => return radiance,
+        }
+    }
+}
+
+/// Follows one branch to its end; returns what it collected, pushes split-off branches.
+fn trace(
+    scene: &PreparedScene,
+    mut b: Branch,
+    wl: &mut SampledWavelengths,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+    pending: &mut Vec<Branch>,
+) -> Spec {
     let max_depth = scene.settings.max_depth;
-    let rr_depth = scene.settings.rr_depth.max(0) as u32;
     let lights = &scene.lights;
     let sel_pdf = lights.selection_pdf();
-
     let mut radiance = Spec::ZERO;
-    let mut throughput = Spec::ONE;
-    let mut eta = 1.0f32;
-    let mut depth: u32 = 0;
-    // State of the previous vertex for MIS on emitters hit by BSDF sampling.
-    let mut prev_p = ray.origin;
-    let mut prev_bsdf_pdf = 1.0f32;
-    let mut prev_bsdf_delta = true;
 
     loop {
+        let ray = b.ray;
         counters.rays += 1;
         let hit = scene.accel.intersect(&ray);
 
         // ---- Emitter seen by this ray (environment on a miss, area light on a hit) ----
         let Some(hit) = hit else {
-            if !(depth == 0 && scene.settings.hide_emitters) {
+            if !(b.depth == 0 && scene.settings.hide_emitters) {
                 for &li in &lights.infinite {
                     let light = &lights.lights[li as usize];
                     let le = light.eval_env(ray.dir, wl);
-                    let w = if prev_bsdf_delta {
+                    let w = if b.prev_bsdf_delta {
                         1.0
                     } else {
                         mis_power(
-                            prev_bsdf_pdf,
+                            b.prev_bsdf_pdf,
                             sel_pdf
-                                * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
+                                * light.pdf_direction(b.prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
                         )
                     };
-                    radiance += throughput * le * w;
+                    radiance += b.throughput * le * w;
                 }
             }
             break;
@@ -64,24 +110,24 @@ pub fn li(
         let si = scene.accel.interaction(&ray, &hit);
         if let Some(li) = lights.shape_light[si.shape as usize] {
             // One-sided emission from the geometric front face.
-            if si.ng.dot(-ray.dir) > 0.0 && !(depth == 0 && scene.settings.hide_emitters) {
+            if si.ng.dot(-ray.dir) > 0.0 && !(b.depth == 0 && scene.settings.hide_emitters) {
                 let light = &lights.lights[li as usize];
                 if let super::lights::Light::Area { radiance: le, .. } = light {
-                    let w = if prev_bsdf_delta {
+                    let w = if b.prev_bsdf_delta {
                         1.0
                     } else {
                         mis_power(
-                            prev_bsdf_pdf,
-                            sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng),
+                            b.prev_bsdf_pdf,
+                            sel_pdf * light.pdf_direction(b.prev_p, ray.dir, si.t, si.ng),
                         )
                     };
-                    radiance += throughput * le.eval(wl) * w;
+                    radiance += b.throughput * le.eval(wl) * w;
                 }
             }
         }
 
         // ---- Continue? (Mitsuba: depth + 1 < max_depth) ----
-        if max_depth >= 0 && depth as i64 + 1 >= max_depth as i64 {
+        if max_depth >= 0 && b.depth as i64 + 1 >= max_depth as i64 {
             break;
         }
         let bsdf: &Bsdf = &scene.bsdfs[scene.shape_bsdf[si.shape as usize] as usize];
@@ -122,7 +168,7 @@ pub fn li(
                         } else {
                             mis_power(light_pdf, bsdf.pdf(wi, wo))
                         };
-                        radiance += throughput * f * ls.radiance * (w / light_pdf);
+                        radiance += b.throughput * f * ls.radiance * (w / light_pdf);
                     }
                 }
             }
@@ -131,55 +177,86 @@ pub fn li(
             sampler.skip(1, 1);
         }
 
-        // ---- BSDF sampling ----
+        // ---- BSDF sampling, or both lobes of a Fresnel pair ----
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
+        if b.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
+            let [reflected, transmitted] = bsdf.split(&ctx, wi, counters);
+            b.splits += 1;
+            if let Some(bs) = reflected {
+                let mut r = b;
+                if advance(scene, &mut r, &si, wi, &bs, wl, sampler) {
+                    pending.push(r);
+                }
+            }
+            match transmitted {
+                Some(bs) if advance(scene, &mut b, &si, wi, &bs, wl, sampler) => continue,
+                _ => break,
+            }
+        }
         let Some(bs) = bsdf.sample(&ctx, wi, u1, u2, counters) else {
             break;
         };
-        let wo_world = si.shading.to_world(bs.wo);
-        // Reject directions on the wrong side of the geometric surface for their lobe
-        // (shading-normal light leaks), like Mitsuba's one-sided handling.
-        let geo_cos_o = si.ng.dot(wo_world);
-        let geo_cos_i = si.ng.dot(-ray.dir);
-        let reflected = bs.wo.z * wi.z > 0.0;
-        if geo_cos_o == 0.0
-            || (reflected && geo_cos_o * geo_cos_i < 0.0)
-            || (!reflected && geo_cos_o * geo_cos_i > 0.0)
-        {
+        if !advance(scene, &mut b, &si, wi, &bs, wl, sampler) {
             break;
-        }
-        if bs.terminate_secondary && !wl.secondary_terminated() {
-            wl.terminate_secondary();
-        }
-        throughput *= bs.weight;
-        if wl.secondary_terminated() {
-            throughput = Spec::new(throughput.x, 0.0, 0.0, 0.0);
-        }
-        eta *= bs.eta;
-        prev_p = si.p;
-        prev_bsdf_pdf = bs.pdf;
-        prev_bsdf_delta = bs.delta;
-        ray = Ray {
-            origin: offset_ray_origin(si.p, si.ng, wo_world),
-            dir: wo_world,
-            tmin: 0.0,
-            tmax: f32::INFINITY,
-        };
-        depth += 1;
-
-        // ---- Russian roulette ----
-        let tmax_component = throughput.max_element();
-        if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
-            break;
-        }
-        if depth >= rr_depth {
-            let q = (tmax_component * eta * eta).min(0.95);
-            if sampler.next_1d() >= q {
-                break;
-            }
-            throughput /= q;
         }
     }
     radiance
+}
+
+/// Moves branch `b` across vertex `si` along the sampled `bs`, with Russian roulette; false
+/// if the path ends there.
+fn advance(
+    scene: &PreparedScene,
+    b: &mut Branch,
+    si: &super::geometry::SurfaceInteraction,
+    wi: Vec3,
+    bs: &BsdfSample,
+    wl: &mut SampledWavelengths,
+    sampler: &mut Sampler,
+) -> bool {
+    let wo_world = si.shading.to_world(bs.wo);
+    // Reject directions on the wrong side of the geometric surface for their lobe
+    // (shading-normal light leaks), like Mitsuba's one-sided handling.
+    let geo_cos_o = si.ng.dot(wo_world);
+    let geo_cos_i = si.ng.dot(-b.ray.dir);
+    let reflected = bs.wo.z * wi.z > 0.0;
+    if geo_cos_o == 0.0
+        || (reflected && geo_cos_o * geo_cos_i < 0.0)
+        || (!reflected && geo_cos_o * geo_cos_i > 0.0)
+    {
+        return false;
+    }
+    if bs.terminate_secondary && !wl.secondary_terminated() {
+        wl.terminate_secondary();
+    }
+    b.throughput *= bs.weight;
+    if wl.secondary_terminated() {
+        b.throughput = Spec::new(b.throughput.x, 0.0, 0.0, 0.0);
+    }
+    b.eta *= bs.eta;
+    b.prev_p = si.p;
+    b.prev_bsdf_pdf = bs.pdf;
+    b.prev_bsdf_delta = bs.delta;
+    b.ray = Ray {
+        origin: offset_ray_origin(si.p, si.ng, wo_world),
+        dir: wo_world,
+        tmin: 0.0,
+        tmax: f32::INFINITY,
+    };
+    b.depth += 1;
+
+    // ---- Russian roulette ----
+    let tmax_component = b.throughput.max_element();
+    if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
+        return false;
+    }
+    if b.depth >= scene.settings.rr_depth.max(0) as u32 {
+        let q = (tmax_component * b.eta * b.eta).min(0.95);
+        if sampler.next_1d() >= q {
+            return false;
+        }
+        b.throughput /= q;
+    }
+    true
 }

@@ -439,78 +439,121 @@ fn sensor_row(setup: &PolarizedSetup, dir: Vec3, first_normal: Option<Vec3>) -> 
     }
 }
 
+/// One path or split branch between vertices: the Stokes covectors (per wavelength) and
+/// their basis carry what the unpolarised integrator's throughput carries.
+#[derive(Clone, Copy)]
+struct Branch {
+    ray: Ray,
+    rows: [Stokes; 4],
+    basis: Vec3,
+    eta: f32,
+    depth: u32,
+    prev_p: Vec3,
+    prev_bsdf_pdf: f32,
+    prev_bsdf_delta: bool,
+    splits: u32,
+}
+
+#[inline]
+fn s0(rows: &[Stokes; 4]) -> Spec {
+    Spec::new(rows[0][0], rows[1][0], rows[2][0], rows[3][0])
+}
+
 /// Radiance (S0 at the sensor) along `ray` at the path's wavelengths, with polarisation.
-/// Mirrors [`super::integrator::li`] step by step.
+/// Mirrors [`super::integrator::li`] step by step, Fresnel splitting included.
 pub fn li(
     scene: &PreparedScene,
     setup: &PolarizedSetup,
-    mut ray: Ray,
+    ray: Ray,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spec {
+    let mut radiance = Spec::ZERO;
+    let mut pending: Vec<Branch> = Vec::new();
+    let mut branch = Branch {
+        ray,
+        rows: [[1.0, 0.0, 0.0, 0.0]; 4],
+        basis: stokes_basis(-ray.dir),
+        eta: 1.0,
+        depth: 0,
+        prev_p: ray.origin,
+        prev_bsdf_pdf: 1.0,
+        prev_bsdf_delta: true,
+        splits: 0,
+    };
+    loop {
+        radiance += trace(scene, setup, branch, wl, sampler, counters, &mut pending);
+        match pending.pop() {
+            Some(b) => branch = b,
+            None => return radiance,
+        }
+    }
+}
+
+/// Follows one branch to its end; returns what it collected, pushes split-off branches.
+fn trace(
+    scene: &PreparedScene,
+    setup: &PolarizedSetup,
+    mut b: Branch,
+    wl: &mut SampledWavelengths,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+    pending: &mut Vec<Branch>,
+) -> Spec {
     let max_depth = scene.settings.max_depth;
-    let rr_depth = scene.settings.rr_depth.max(0) as u32;
     let lights = &scene.lights;
     let sel_pdf = lights.selection_pdf();
-
     let mut radiance = Spec::ZERO;
-    let mut rows: [Stokes; 4] = [[1.0, 0.0, 0.0, 0.0]; 4];
-    let mut basis = stokes_basis(-ray.dir);
-    let mut eta = 1.0f32;
-    let mut depth: u32 = 0;
-    let mut prev_p = ray.origin;
-    let mut prev_bsdf_pdf = 1.0f32;
-    let mut prev_bsdf_delta = true;
-    let s0 = |rows: &[Stokes; 4]| Spec::new(rows[0][0], rows[1][0], rows[2][0], rows[3][0]);
 
     loop {
+        let ray = b.ray;
         counters.rays += 1;
         let hit = scene.accel.intersect(&ray);
         let si = hit.map(|h| scene.accel.interaction(&ray, &h));
-        if depth == 0 && setup.sensor.is_some() {
-            let (row, b) = sensor_row(setup, ray.dir, si.map(|s| s.shading.n));
-            rows = [row; 4];
-            basis = b;
+        if b.depth == 0 && setup.sensor.is_some() {
+            let (row, basis) = sensor_row(setup, ray.dir, si.map(|s| s.shading.n));
+            b.rows = [row; 4];
+            b.basis = basis;
         }
 
         let Some(si) = si else {
-            if !(depth == 0 && scene.settings.hide_emitters) {
+            if !(b.depth == 0 && scene.settings.hide_emitters) {
                 for &li in &lights.infinite {
                     let light = &lights.lights[li as usize];
                     let le = light.eval_env(ray.dir, wl);
-                    let w = if prev_bsdf_delta {
+                    let w = if b.prev_bsdf_delta {
                         1.0
                     } else {
                         mis_power(
-                            prev_bsdf_pdf,
+                            b.prev_bsdf_pdf,
                             sel_pdf
-                                * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
+                                * light.pdf_direction(b.prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
                         )
                     };
-                    radiance += s0(&rows) * le * w;
+                    radiance += s0(&b.rows) * le * w;
                 }
             }
             break;
         };
         if let Some(li) = lights.shape_light[si.shape as usize] {
-            if si.ng.dot(-ray.dir) > 0.0 && !(depth == 0 && scene.settings.hide_emitters) {
+            if si.ng.dot(-ray.dir) > 0.0 && !(b.depth == 0 && scene.settings.hide_emitters) {
                 let light = &lights.lights[li as usize];
                 if let super::lights::Light::Area { radiance: le, .. } = light {
-                    let w = if prev_bsdf_delta {
+                    let w = if b.prev_bsdf_delta {
                         1.0
                     } else {
                         mis_power(
-                            prev_bsdf_pdf,
-                            sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng),
+                            b.prev_bsdf_pdf,
+                            sel_pdf * light.pdf_direction(b.prev_p, ray.dir, si.t, si.ng),
                         )
                     };
-                    radiance += s0(&rows) * le.eval(wl) * w;
+                    radiance += s0(&b.rows) * le.eval(wl) * w;
                 }
             }
         }
 
-        if max_depth >= 0 && depth as i64 + 1 >= max_depth as i64 {
+        if max_depth >= 0 && b.depth as i64 + 1 >= max_depth as i64 {
             break;
         }
         let bsdf: &Bsdf = &scene.bsdfs[scene.shape_bsdf[si.shape as usize] as usize];
@@ -531,7 +574,7 @@ pub fn li(
             if let Some(ls) = light.sample(si.p, sampler.next_2d(), wl) {
                 let wo = si.shading.to_local(ls.wi);
                 let lobe = eval_lobe(bsdf, &ctx, &si.shading, wi, wo, false, counters);
-                let f = lobe.column0(&rows, basis, wi_world);
+                let f = lobe.column0(&b.rows, b.basis, wi_world);
                 if ls.pdf > 0.0 && f.max_element() > 0.0 && ls.radiance.max_element() > 0.0 {
                     let origin = offset_ray_origin(si.p, si.ng, ls.wi);
                     let tmax = if ls.dist.is_finite() {
@@ -561,9 +604,39 @@ pub fn li(
             sampler.skip(1, 1);
         }
 
-        // ---- BSDF sampling ----
+        // ---- BSDF sampling, or both lobes of a Fresnel pair ----
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
+        if b.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
+            b.splits += 1;
+            // The lobes of `sample_lobe` forced by u1 (0: reflection, 1: transmission), with
+            // the selection probability multiplied back in, as [`Bsdf::split`] does.
+            let mut forced = |u1: f32, reflection: bool| {
+                let (mut bs, lobe) =
+                    sample_lobe(bsdf, &ctx, &si.shading, wi, u1, u2, false, counters)?;
+                if (bs.wo.z * wi.z > 0.0) != reflection {
+                    return None;
+                }
+                let lobe = lobe.scaled(bs.pdf);
+                bs.weight *= bs.pdf;
+                bs.pdf = 1.0;
+                Some((bs, lobe))
+            };
+            let reflected = forced(0.0, true);
+            let transmitted = forced(1.0, false);
+            if let Some((bs, lobe)) = reflected {
+                let mut r = b;
+                if advance(scene, &mut r, &si, wi, &bs, &lobe, wl, sampler) {
+                    pending.push(r);
+                }
+            }
+            match transmitted {
+                Some((bs, lobe)) if advance(scene, &mut b, &si, wi, &bs, &lobe, wl, sampler) => {
+                    continue
+                }
+                _ => break,
+            }
+        }
         let (bs, lobe) = if let Bsdf::Polarizer(p) = bsdf {
             // Mitsuba `polarizer`: the beam travels along wi_world through the sheet.
             let (Some((u_axis, v_axis)), Some(bs)) =
@@ -571,11 +644,11 @@ pub fn li(
             else {
                 break;
             };
-            let (m, b) = p.mueller(wi_world, u_axis, v_axis);
+            let (m, basis) = p.mueller(wi_world, u_axis, v_axis);
             let t = p.transmittance.eval(si.uv, wl).to_array();
             let lobe = Lobe {
                 depol: Spec::ZERO,
-                pol: Some((std::array::from_fn(|k| m.scale(t[k])), b, b)),
+                pol: Some((std::array::from_fn(|k| m.scale(t[k])), basis, basis)),
             };
             (bs, lobe)
         } else {
@@ -584,53 +657,73 @@ pub fn li(
                 None => break,
             }
         };
-        let wo_world = si.shading.to_world(bs.wo);
-        let geo_cos_o = si.ng.dot(wo_world);
-        let geo_cos_i = si.ng.dot(-ray.dir);
-        let reflected = bs.wo.z * wi.z > 0.0;
-        if geo_cos_o == 0.0
-            || (reflected && geo_cos_o * geo_cos_i < 0.0)
-            || (!reflected && geo_cos_o * geo_cos_i > 0.0)
-        {
+        if !advance(scene, &mut b, &si, wi, &bs, &lobe, wl, sampler) {
             break;
-        }
-        if bs.terminate_secondary && !wl.secondary_terminated() {
-            wl.terminate_secondary();
-        }
-        lobe.propagate(&mut rows, &mut basis, wi_world, wo_world);
-        if wl.secondary_terminated() {
-            for r in rows.iter_mut().skip(1) {
-                *r = [0.0; 4];
-            }
-        }
-        eta *= bs.eta;
-        prev_p = si.p;
-        prev_bsdf_pdf = bs.pdf;
-        prev_bsdf_delta = bs.delta;
-        ray = Ray {
-            origin: offset_ray_origin(si.p, si.ng, wo_world),
-            dir: wo_world,
-            tmin: 0.0,
-            tmax: f32::INFINITY,
-        };
-        depth += 1;
-
-        // ---- Russian roulette on e₀ᵀ·throughput·e₀ (Mitsuba's unpolarized_spectrum) ----
-        let tmax_component = s0(&rows).max_element();
-        if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
-            break;
-        }
-        if depth >= rr_depth {
-            let q = (tmax_component * eta * eta).min(0.95);
-            if sampler.next_1d() >= q {
-                break;
-            }
-            for r in rows.iter_mut() {
-                for v in r.iter_mut() {
-                    *v /= q;
-                }
-            }
         }
     }
     radiance
+}
+
+/// Moves branch `b` across vertex `si` along the sampled `bs` with Mueller weight `lobe`,
+/// with Russian roulette; false if the path ends there.
+#[allow(clippy::too_many_arguments)]
+fn advance(
+    scene: &PreparedScene,
+    b: &mut Branch,
+    si: &super::geometry::SurfaceInteraction,
+    wi: Vec3,
+    bs: &BsdfSample,
+    lobe: &Lobe,
+    wl: &mut SampledWavelengths,
+    sampler: &mut Sampler,
+) -> bool {
+    let wi_world = -b.ray.dir;
+    let wo_world = si.shading.to_world(bs.wo);
+    let geo_cos_o = si.ng.dot(wo_world);
+    let geo_cos_i = si.ng.dot(wi_world);
+    let reflected = bs.wo.z * wi.z > 0.0;
+    if geo_cos_o == 0.0
+        || (reflected && geo_cos_o * geo_cos_i < 0.0)
+        || (!reflected && geo_cos_o * geo_cos_i > 0.0)
+    {
+        return false;
+    }
+    if bs.terminate_secondary && !wl.secondary_terminated() {
+        wl.terminate_secondary();
+    }
+    lobe.propagate(&mut b.rows, &mut b.basis, wi_world, wo_world);
+    if wl.secondary_terminated() {
+        for r in b.rows.iter_mut().skip(1) {
+            *r = [0.0; 4];
+        }
+    }
+    b.eta *= bs.eta;
+    b.prev_p = si.p;
+    b.prev_bsdf_pdf = bs.pdf;
+    b.prev_bsdf_delta = bs.delta;
+    b.ray = Ray {
+        origin: offset_ray_origin(si.p, si.ng, wo_world),
+        dir: wo_world,
+        tmin: 0.0,
+        tmax: f32::INFINITY,
+    };
+    b.depth += 1;
+
+    // ---- Russian roulette on e₀ᵀ·throughput·e₀ (Mitsuba's unpolarized_spectrum) ----
+    let tmax_component = s0(&b.rows).max_element();
+    if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
+        return false;
+    }
+    if b.depth >= scene.settings.rr_depth.max(0) as u32 {
+        let q = (tmax_component * b.eta * b.eta).min(0.95);
+        if sampler.next_1d() >= q {
+            return false;
+        }
+        for r in b.rows.iter_mut() {
+            for v in r.iter_mut() {
+                *v /= q;
+            }
+        }
+    }
+    true
 }

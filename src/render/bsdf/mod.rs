@@ -345,6 +345,39 @@ impl Bsdf {
         (s.pdf > 0.0 && s.weight.is_finite() && s.wo.is_finite()).then_some(s)
     }
 
+    /// Whether the BSDF is a pair of Dirac lobes, mirror reflection and transmission, chosen
+    /// by `u1` (Fresnel-weighted) and leaving in the same directions at all four wavelengths:
+    /// then both can be followed at once ([`Bsdf::split`]). Dispersive interfaces are not
+    /// (their refraction direction is the hero wavelength's).
+    pub fn is_fresnel_pair(&self) -> bool {
+        match self {
+            Bsdf::Dielectric(b) => !b.dispersive,
+            Bsdf::CoatedDielectric(b) => !b.dispersive,
+            Bsdf::Bubble(_) => true,
+            Bsdf::TwoSided(b) => b.is_fresnel_pair(),
+            _ => false,
+        }
+    }
+
+    /// Both lobes of a [`Bsdf::is_fresnel_pair`] BSDF — [reflection, transmission] — each with
+    /// its full value as weight (R, resp. T·η_ti²) and selection probability 1: "splitting"
+    /// instead of choosing one lobe at random. Sampling forced to each lobe (u1 = 0 picks the
+    /// reflection, u1 = 1 the transmission) and the selection probability multiplied back
+    /// in, so the lobes are exactly those of [`Bsdf::sample`]. A lobe that does not exist
+    /// (R = 0, or total internal reflection for T) is None.
+    pub fn split(&self, ctx: &ShadingCtx, wi: Vec3, c: &mut Counters) -> [Option<BsdfSample>; 2] {
+        let mut lobe = |u1: f32, reflection: bool| {
+            let mut s = self.sample(ctx, wi, u1, Vec2::ZERO, c)?;
+            if (s.wo.z * wi.z > 0.0) != reflection {
+                return None;
+            }
+            s.weight *= s.pdf;
+            s.pdf = 1.0;
+            Some(s)
+        };
+        [lobe(0.0, true), lobe(1.0, false)]
+    }
+
     /// Whether the BSDF has a non-delta component (worth light sampling).
     pub fn has_smooth_component(&self) -> bool {
         match self {

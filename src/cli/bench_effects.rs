@@ -144,22 +144,22 @@ fn variants() -> Vec<(String, &'static str, &'static str, String, String)> {
         ),
         teapot(
             "bubble 400 nm",
-            "free-standing film (R+T)",
+            "free-standing film (R+T), Fresnel splitting",
             r#"<bsdf type="thinfilm_bubble"><float name="film_ior" value="1.33"/><float name="thickness" value="400"/></bsdf>"#.into(),
         ),
         teapot(
             "bubble, thickness map",
-            "free-standing film + texture",
+            "free-standing film + texture, Fresnel splitting",
             format!(r#"<bsdf type="thinfilm_bubble"><float name="film_ior" value="1.33"/>{THICKNESS_MAP}</bsdf>"#),
         ),
         teapot(
             "glass n=1.5168",
-            "none (refraction)",
+            "Fresnel splitting (refraction)",
             r#"<bsdf type="dielectric"><float name="int_ior" value="1.5168"/></bsdf>"#.into(),
         ),
         teapot(
             "AR-coated glass n=1.5168",
-            "TMM stack on a refracting interface",
+            "TMM stack on a refracting interface, Fresnel splitting",
             r#"<bsdf type="coateddielectric"><float name="int_ior" value="1.5168"/><string name="coating" value="MgF2:99.6"/></bsdf>"#.into(),
         ),
         teapot(
@@ -169,7 +169,7 @@ fn variants() -> Vec<(String, &'static str, &'static str, String, String)> {
         ),
         (
             "prism SF11 n=1.7847".into(),
-            "none (refraction)",
+            "Fresnel splitting (refraction)",
             "prism.xml",
             prism_default.into(),
             glass_spheres("1.7847"),

@@ -41,7 +41,7 @@ pub struct Args {
     #[arg(short = 'D', value_parser = parse_define)]
     pub define: Vec<(String, String)>,
     /// Smooth glass and bubble interfaces at which a path follows both the reflection and
-    /// the transmission (default 2; 0 = pick one lobe by Fresnel, as Mitsuba does). Same
+    /// the transmission (default 3; 0 = pick one lobe by Fresnel, as Mitsuba does). Same
     /// expected image; splitting costs rays and removes the noise of rarely chosen lobes.
     #[arg(long)]
     pub fresnel_splits: Option<u32>,

@@ -116,4 +116,22 @@ impl BubbleBsdf {
         s.eta = 1.0;
         (s.pdf > 0.0).then_some(s)
     }
+
+    /// [reflection, transmission] with weights R and T (Fresnel splitting, see
+    /// [`super::Bsdf::split`]): one film evaluation for both lobes.
+    pub fn split(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        counters: &mut Counters,
+    ) -> [Option<BsdfSample>; 2] {
+        if wi.z == 0.0 || !wi.is_finite() {
+            return [None, None];
+        }
+        let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
+        [
+            (r.max_element() > 0.0).then(|| BsdfSample::delta(Vec3::new(-wi.x, -wi.y, wi.z), r)),
+            (t.max_element() > 0.0).then(|| BsdfSample::delta(-wi, t)),
+        ]
+    }
 }

@@ -366,16 +366,34 @@ impl Bsdf {
     /// in, so the lobes are exactly those of [`Bsdf::sample`]. A lobe that does not exist
     /// (R = 0, or total internal reflection for T) is None.
     pub fn split(&self, ctx: &ShadingCtx, wi: Vec3, c: &mut Counters) -> [Option<BsdfSample>; 2] {
-        let mut lobe = |u1: f32, reflection: bool| {
-            let mut s = self.sample(ctx, wi, u1, Vec2::ZERO, c)?;
-            if (s.wo.z * wi.z > 0.0) != reflection {
-                return None;
+        let lobes = match self {
+            // The film models evaluate R and T once for both lobes.
+            Bsdf::Bubble(b) => b.split(ctx, wi, c),
+            Bsdf::CoatedDielectric(b) => b.split(ctx, wi, c),
+            Bsdf::TwoSided(b) if wi.z < 0.0 => {
+                let flip = |v: Vec3| Vec3::new(v.x, v.y, -v.z);
+                b.split(ctx, flip(wi), c).map(|s| {
+                    s.map(|mut s| {
+                        s.wo = flip(s.wo);
+                        s
+                    })
+                })
             }
-            s.weight *= s.pdf;
-            s.pdf = 1.0;
-            Some(s)
+            Bsdf::TwoSided(b) => b.split(ctx, wi, c),
+            _ => {
+                let mut lobe = |u1: f32, reflection: bool| {
+                    let mut s = self.sample(ctx, wi, u1, Vec2::ZERO, c)?;
+                    if (s.wo.z * wi.z > 0.0) != reflection {
+                        return None;
+                    }
+                    s.weight *= s.pdf;
+                    s.pdf = 1.0;
+                    Some(s)
+                };
+                [lobe(0.0, true), lobe(1.0, false)]
+            }
         };
-        [lobe(0.0, true), lobe(1.0, false)]
+        lobes.map(|s| s.filter(|s| s.weight.is_finite() && s.wo.is_finite()))
     }
 
     /// Whether the BSDF has a non-delta component (worth light sampling).

@@ -166,20 +166,46 @@ impl CoatedDielectric {
             s.pdf = p_r;
             return Some(s);
         }
+        let p_t = 1.0 - p_r;
+        let mut s = self.refraction(ctx, wi, t / p_t)?;
+        s.pdf = p_t;
+        (s.pdf > 0.0).then_some(s)
+    }
+
+    /// The refracted lobe with `weight`·η_ti² (Snell's direction at the hero wavelength's
+    /// bulk index); None under total internal reflection at the hero wavelength, which the
+    /// stack can miss when only a secondary wavelength's index lets light through.
+    fn refraction(&self, ctx: &ShadingCtx, wi: Vec3, weight: Spec) -> Option<BsdfSample> {
         let lambda = ctx.wl.lambda[0] as f64;
         let eta = (self.int_ior.at(lambda).re / self.ext_ior.at(lambda).re) as f32;
         let (_, cos_t, eta_it, eta_ti) = super::fresnel::fresnel_dielectric(wi.z, eta);
         if cos_t == 0.0 {
-            // Total internal reflection at the hero wavelength although the stack let some
-            // light through (only possible at a secondary wavelength's index): no refraction.
             return None;
         }
-        let p_t = 1.0 - p_r;
         let wo = Vec3::new(-eta_ti * wi.x, -eta_ti * wi.y, cos_t);
-        let mut s = BsdfSample::delta(wo, t / p_t * (eta_ti * eta_ti));
-        s.pdf = p_t;
+        let mut s = BsdfSample::delta(wo, weight * (eta_ti * eta_ti));
         s.eta = eta_it;
         s.terminate_secondary = self.dispersive;
-        (s.pdf > 0.0 && s.wo.is_finite()).then_some(s)
+        s.wo.is_finite().then_some(s)
+    }
+
+    /// [reflection, transmission] with weights R and T·η_ti² (Fresnel splitting, see
+    /// [`super::Bsdf::split`]): one transfer-matrix evaluation for both lobes.
+    pub fn split(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        counters: &mut Counters,
+    ) -> [Option<BsdfSample>; 2] {
+        if wi.z == 0.0 || !wi.is_finite() {
+            return [None, None];
+        }
+        let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
+        [
+            (r.max_element() > 0.0).then(|| BsdfSample::delta(reflect_local(wi), r)),
+            (t.max_element() > 0.0)
+                .then(|| self.refraction(ctx, wi, t))
+                .flatten(),
+        ]
     }
 }

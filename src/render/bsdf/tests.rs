@@ -869,3 +869,73 @@ fn coated_dielectric_limits_and_energy() {
     assert!(refl.wo.z > 0.0 && !refl.terminate_secondary);
     assert!((refl.weight - r / p_r).abs().max_element() < 1e-5);
 }
+
+/// Fresnel splitting's lobes are exactly the lobes `sample` chooses between, each weighted by
+/// its full value (sampled weight × selection probability): for glass, coated glass and a
+/// bubble, from both sides, at normal, oblique, total-internal-reflection and grazing angles.
+#[test]
+fn split_lobes_are_the_sampled_lobes_at_full_weight() {
+    let glass = Bsdf::from_desc(&BsdfDesc::Dielectric {
+        int_ior: Ior::real(1.5),
+        ext_ior: Ior::real(1.0),
+        alpha: 0.0,
+    })
+    .unwrap();
+    let cases = [
+        ("glass", glass),
+        ("coated", coated("MgF2:99.6", "1.5168")),
+        ("bubble", bubble("1.33", 400.0)),
+    ];
+    let w = wl();
+    let ctx = ctx_of(&w);
+    let mut c = Counters::default();
+    for (name, b) in &cases {
+        assert!(b.is_fresnel_pair(), "{name}");
+        for theta in [0.0f32, 30.0, 60.0, 85.0, 89.9] {
+            for inside in [false, true] {
+                let mut wi = dir(theta, 20.0);
+                if inside {
+                    wi.z = -wi.z;
+                }
+                let [r, t] = b.split(&ctx, wi, &mut c);
+                // The lobes sample() picks with u1 = 0 (reflection) and u1 → 1 (transmission).
+                let forced = |u1: f32, reflection: bool, c: &mut Counters| {
+                    b.sample(&ctx, wi, u1, Vec2::ZERO, c)
+                        .filter(|s| (s.wo.z * wi.z > 0.0) == reflection)
+                };
+                for (what, got, want) in [
+                    ("R", r, forced(0.0, true, &mut c)),
+                    ("T", t, forced(1.0, false, &mut c)),
+                ] {
+                    let at = format!("{name} θ={theta} inside={inside} {what}");
+                    match (got, want) {
+                        (Some(g), Some(s)) => {
+                            assert!((g.wo - s.wo).abs().max_element() < 1e-6, "{at}");
+                            assert_eq!((g.pdf, g.eta, g.delta), (1.0, s.eta, true), "{at}");
+                            let full = s.weight * s.pdf;
+                            let err = (g.weight - full).abs().max_element();
+                            assert!(
+                                err <= 1e-5 * full.max_element().max(1e-3),
+                                "{at}: {g:?} vs {s:?}"
+                            );
+                        }
+                        // A lobe sampling cannot reach has zero weight in the split.
+                        (None, None) => {}
+                        (Some(g), None) => assert_eq!(g.weight.max_element(), 0.0, "{at}"),
+                        (None, Some(s)) => panic!("{at}: split lost lobe {s:?}"),
+                    }
+                }
+                // Lossless: R + T = 1 for glass and bubble (the transmitted weight is T·η_ti²,
+                // η_ti = 1/η_it, and the sample's eta is η_it).
+                if *name != "coated" {
+                    let rt = r.map_or(0.0, |s| s.weight.x)
+                        + t.map_or(0.0, |s| s.weight.x * s.eta * s.eta);
+                    assert!(
+                        (rt - 1.0).abs() < 1e-5,
+                        "{name} θ={theta} inside={inside}: R+T {rt}"
+                    );
+                }
+            }
+        }
+    }
+}

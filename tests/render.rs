@@ -535,6 +535,15 @@ fn bad_inputs_are_errors() {
         }
     )
     .is_err());
+    let err = render(
+        &scene,
+        &RenderOptions {
+            fresnel_splits: Some(17),
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
+    assert!(format!("{err:#}").contains("fresnel_splits"));
     let mut bad = film_scene(8, 4);
     bad.shapes[0].bsdf = 99;
     assert!(render(&bad, &RenderOptions::default()).is_err());

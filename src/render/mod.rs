@@ -63,6 +63,8 @@ pub struct RenderOptions {
 /// `polarizer_spheres` (0.75/1.11/1.14/1.11 s), 1.45/0.94/0.48/0.41 on `bubble`
 /// (0.48/0.59/0.79/0.95 s), 2.12/1.65/1.45/1.45 on `lens` (1.6/2.1/2.5/2.3 s).
 pub const DEFAULT_FRESNEL_SPLITS: u32 = 3;
+/// Upper bound on `fresnel_splits`: 2^16 branches per camera sample at worst.
+pub const MAX_FRESNEL_SPLITS: u32 = 16;
 
 /// Work done and time taken.
 #[derive(Debug, Clone, Default)]
@@ -131,6 +133,9 @@ pub struct PreparedScene {
 /// Validates the scene and options, runs effect analysis, builds the BVH and light tables.
 pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> {
     let mut effects = effects::analyze(scene)?;
+    if let Some(n) = options.fresnel_splits.filter(|&n| n > MAX_FRESNEL_SPLITS) {
+        bail!("fresnel_splits must be at most {MAX_FRESNEL_SPLITS} (each split can double a path's branches), got {n}");
+    }
     let fresnel_splits = if effects.fresnel_split {
         options.fresnel_splits.unwrap_or(DEFAULT_FRESNEL_SPLITS)
     } else {

@@ -14,26 +14,123 @@
 
 use super::bsdf::{Bsdf, BsdfSample, Counters, ShadingCtx};
 use super::camera::Ray;
-use super::geometry::{mis_power, offset_ray_origin};
+use super::geometry::{mis_power, offset_ray_origin, SurfaceInteraction};
 use super::sampler::Sampler;
 use super::texture::Spec;
 use super::PreparedScene;
 use crate::spectrum::SampledWavelengths;
 use glam::Vec3;
 
-/// The state of one path (or one branch of a split path) between vertices.
+/// What a path (or one branch of a split path) carries between vertices besides its
+/// throughput, which is a spectrum here and Stokes covectors in the polarised integrator.
 #[derive(Clone, Copy)]
-struct Branch {
-    ray: Ray,
-    throughput: Spec,
-    eta: f32,
-    depth: u32,
+pub(super) struct PathState {
+    pub ray: Ray,
+    pub eta: f32,
+    pub depth: u32,
     /// Previous vertex and how its direction was sampled, for MIS on emitters hit.
     prev_p: Vec3,
     prev_bsdf_pdf: f32,
     prev_bsdf_delta: bool,
     /// Fresnel splits already made on the way here.
-    splits: u32,
+    pub splits: u32,
+}
+
+impl PathState {
+    pub fn camera(ray: Ray) -> Self {
+        PathState {
+            ray,
+            eta: 1.0,
+            depth: 0,
+            prev_p: ray.origin,
+            prev_bsdf_pdf: 1.0,
+            prev_bsdf_delta: true,
+            splits: 0,
+        }
+    }
+
+    /// MIS weight of an emitter this ray hit, against light sampling from the previous
+    /// vertex; `light_pdf(prev_p)` is evaluated only if the ray was not a delta sample.
+    #[inline]
+    pub fn emitter_hit_weight(&self, light_pdf: impl FnOnce(Vec3) -> f32) -> f32 {
+        if self.prev_bsdf_delta {
+            1.0
+        } else {
+            mis_power(self.prev_bsdf_pdf, light_pdf(self.prev_p))
+        }
+    }
+
+    /// Moves the path across vertex `si` along the sampled `bs`, returning the new world
+    /// direction, or None if it leaves on the wrong side of the geometric surface for its
+    /// lobe (shading-normal light leaks), like Mitsuba's one-sided handling.
+    #[inline]
+    pub fn cross(&mut self, si: &SurfaceInteraction, wi: Vec3, bs: &BsdfSample) -> Option<Vec3> {
+        let wo_world = si.shading.to_world(bs.wo);
+        let geo_cos_o = si.ng.dot(wo_world);
+        let geo_cos_i = si.ng.dot(-self.ray.dir);
+        let reflected = bs.wo.z * wi.z > 0.0;
+        if geo_cos_o == 0.0
+            || (reflected && geo_cos_o * geo_cos_i < 0.0)
+            || (!reflected && geo_cos_o * geo_cos_i > 0.0)
+        {
+            return None;
+        }
+        self.eta *= bs.eta;
+        self.prev_p = si.p;
+        self.prev_bsdf_pdf = bs.pdf;
+        self.prev_bsdf_delta = bs.delta;
+        self.ray = Ray {
+            origin: offset_ray_origin(si.p, si.ng, wo_world),
+            dir: wo_world,
+            tmin: 0.0,
+            tmax: f32::INFINITY,
+        };
+        self.depth += 1;
+        Some(wo_world)
+    }
+
+    /// Russian roulette on the throughput's largest component (Mitsuba: from `rr_depth` on,
+    /// survive with q = min(max β · η², 0.95)). None: the path ends (also for a zero or
+    /// non-finite throughput); Some(q): divide the throughput by q (1 before `rr_depth`).
+    #[inline]
+    pub fn roulette(
+        &self,
+        rr_depth: i32,
+        max_component: f32,
+        sampler: &mut Sampler,
+    ) -> Option<f32> {
+        if max_component.is_nan() || max_component <= 0.0 || !max_component.is_finite() {
+            return None;
+        }
+        if self.depth < rr_depth.max(0) as u32 {
+            return Some(1.0);
+        }
+        let q = (max_component * self.eta * self.eta).min(0.95);
+        (sampler.next_1d() < q).then_some(q)
+    }
+}
+
+/// Runs `trace` on the camera path and then on every branch it or its descendants set aside
+/// at Fresnel splits (depth first), summing what they collect. A branch made by the k-th split
+/// can only add branches of split count > k, so at most `fresnel_splits` wait at a time.
+pub(super) fn run_branches<B>(first: B, mut trace: impl FnMut(B, &mut Vec<B>) -> Spec) -> Spec {
+    let mut radiance = Spec::ZERO;
+    let mut pending = Vec::new();
+    let mut branch = first;
+    loop {
+        radiance += trace(branch, &mut pending);
+        match pending.pop() {
+            Some(b) => branch = b,
+            None => return radiance,
+        }
+    }
+}
+
+/// A path branch of the unpolarised integrator.
+#[derive(Clone, Copy)]
+struct Branch {
+    path: PathState,
+    throughput: Spec,
 }
 
 /// Radiance along `ray` at the path's wavelengths. May terminate secondary wavelengths in
@@ -45,27 +142,13 @@ pub fn li(
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spec {
-    let mut radiance = Spec::ZERO;
-    // Branches set aside at splits, depth first. A branch made by the k-th split can only
-    // add branches of split count > k, so at most `fresnel_splits` wait at a time.
-    let mut pending: Vec<Branch> = Vec::new();
-    let mut branch = Branch {
-        ray,
+    let first = Branch {
+        path: PathState::camera(ray),
         throughput: Spec::ONE,
-        eta: 1.0,
-        depth: 0,
-        prev_p: ray.origin,
-        prev_bsdf_pdf: 1.0,
-        prev_bsdf_delta: true,
-        splits: 0,
     };
-    loop {
-        radiance += trace(scene, branch, wl, sampler, counters, &mut pending);
-        match pending.pop() {
-            Some(b) => branch = b,
-            None => return radiance,
-        }
-    }
+    run_branches(first, |b, pending| {
+        trace(scene, b, wl, sampler, counters, pending)
+    })
 }
 
 /// Follows one branch to its end; returns what it collected, pushes split-off branches.
@@ -83,25 +166,19 @@ fn trace(
     let mut radiance = Spec::ZERO;
 
     loop {
-        let ray = b.ray;
+        let ray = b.path.ray;
         counters.rays += 1;
         let hit = scene.accel.intersect(&ray);
 
         // ---- Emitter seen by this ray (environment on a miss, area light on a hit) ----
         let Some(hit) = hit else {
-            if !(b.depth == 0 && scene.settings.hide_emitters) {
+            if !(b.path.depth == 0 && scene.settings.hide_emitters) {
                 for &li in &lights.infinite {
                     let light = &lights.lights[li as usize];
                     let le = light.eval_env(ray.dir, wl);
-                    let w = if b.prev_bsdf_delta {
-                        1.0
-                    } else {
-                        mis_power(
-                            b.prev_bsdf_pdf,
-                            sel_pdf
-                                * light.pdf_direction(b.prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
-                        )
-                    };
+                    let w = b.path.emitter_hit_weight(|prev_p| {
+                        sel_pdf * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO)
+                    });
                     radiance += b.throughput * le * w;
                 }
             }
@@ -110,24 +187,19 @@ fn trace(
         let si = scene.accel.interaction(&ray, &hit);
         if let Some(li) = lights.shape_light[si.shape as usize] {
             // One-sided emission from the geometric front face.
-            if si.ng.dot(-ray.dir) > 0.0 && !(b.depth == 0 && scene.settings.hide_emitters) {
+            if si.ng.dot(-ray.dir) > 0.0 && !(b.path.depth == 0 && scene.settings.hide_emitters) {
                 let light = &lights.lights[li as usize];
                 if let super::lights::Light::Area { radiance: le, .. } = light {
-                    let w = if b.prev_bsdf_delta {
-                        1.0
-                    } else {
-                        mis_power(
-                            b.prev_bsdf_pdf,
-                            sel_pdf * light.pdf_direction(b.prev_p, ray.dir, si.t, si.ng),
-                        )
-                    };
+                    let w = b.path.emitter_hit_weight(|prev_p| {
+                        sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng)
+                    });
                     radiance += b.throughput * le.eval(wl) * w;
                 }
             }
         }
 
         // ---- Continue? (Mitsuba: depth + 1 < max_depth) ----
-        if max_depth >= 0 && b.depth as i64 + 1 >= max_depth as i64 {
+        if max_depth >= 0 && b.path.depth as i64 + 1 >= max_depth as i64 {
             break;
         }
         let bsdf: &Bsdf = &scene.bsdfs[scene.shape_bsdf[si.shape as usize] as usize];
@@ -180,9 +252,9 @@ fn trace(
         // ---- BSDF sampling, or both lobes of a Fresnel pair ----
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
-        if b.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
+        if b.path.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
             let [reflected, transmitted] = bsdf.split(&ctx, wi, counters);
-            b.splits += 1;
+            b.path.splits += 1;
             if let Some(bs) = reflected {
                 let mut r = b;
                 if advance(scene, &mut r, &si, wi, &bs, wl, sampler) {
@@ -209,22 +281,13 @@ fn trace(
 fn advance(
     scene: &PreparedScene,
     b: &mut Branch,
-    si: &super::geometry::SurfaceInteraction,
+    si: &SurfaceInteraction,
     wi: Vec3,
     bs: &BsdfSample,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
 ) -> bool {
-    let wo_world = si.shading.to_world(bs.wo);
-    // Reject directions on the wrong side of the geometric surface for their lobe
-    // (shading-normal light leaks), like Mitsuba's one-sided handling.
-    let geo_cos_o = si.ng.dot(wo_world);
-    let geo_cos_i = si.ng.dot(-b.ray.dir);
-    let reflected = bs.wo.z * wi.z > 0.0;
-    if geo_cos_o == 0.0
-        || (reflected && geo_cos_o * geo_cos_i < 0.0)
-        || (!reflected && geo_cos_o * geo_cos_i > 0.0)
-    {
+    if b.path.cross(si, wi, bs).is_none() {
         return false;
     }
     if bs.terminate_secondary && !wl.secondary_terminated() {
@@ -234,29 +297,14 @@ fn advance(
     if wl.secondary_terminated() {
         b.throughput = Spec::new(b.throughput.x, 0.0, 0.0, 0.0);
     }
-    b.eta *= bs.eta;
-    b.prev_p = si.p;
-    b.prev_bsdf_pdf = bs.pdf;
-    b.prev_bsdf_delta = bs.delta;
-    b.ray = Ray {
-        origin: offset_ray_origin(si.p, si.ng, wo_world),
-        dir: wo_world,
-        tmin: 0.0,
-        tmax: f32::INFINITY,
-    };
-    b.depth += 1;
-
-    // ---- Russian roulette ----
-    let tmax_component = b.throughput.max_element();
-    if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
-        return false;
-    }
-    if b.depth >= scene.settings.rr_depth.max(0) as u32 {
-        let q = (tmax_component * b.eta * b.eta).min(0.95);
-        if sampler.next_1d() >= q {
-            return false;
+    let max = b.throughput.max_element();
+    match b.path.roulette(scene.settings.rr_depth, max, sampler) {
+        None => false,
+        Some(q) => {
+            if q != 1.0 {
+                b.throughput /= q;
+            }
+            true
         }
-        b.throughput /= q;
     }
-    true
 }

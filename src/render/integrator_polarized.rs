@@ -26,7 +26,8 @@
 
 use super::bsdf::{Bsdf, BsdfSample, Counters, ShadingCtx};
 use super::camera::Ray;
-use super::geometry::{mis_power, offset_ray_origin, Frame};
+use super::geometry::{mis_power, offset_ray_origin, Frame, SurfaceInteraction};
+use super::integrator::{run_branches, PathState};
 use super::polarization::{
     film_reflection, row_times_rotation, specular_reflection, specular_reflection_conductor,
     specular_transmission, stokes_basis, Mueller, Stokes,
@@ -443,15 +444,9 @@ fn sensor_row(setup: &PolarizedSetup, dir: Vec3, first_normal: Option<Vec3>) -> 
 /// their basis carry what the unpolarised integrator's throughput carries.
 #[derive(Clone, Copy)]
 struct Branch {
-    ray: Ray,
+    path: PathState,
     rows: [Stokes; 4],
     basis: Vec3,
-    eta: f32,
-    depth: u32,
-    prev_p: Vec3,
-    prev_bsdf_pdf: f32,
-    prev_bsdf_delta: bool,
-    splits: u32,
 }
 
 #[inline]
@@ -469,26 +464,14 @@ pub fn li(
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spec {
-    let mut radiance = Spec::ZERO;
-    let mut pending: Vec<Branch> = Vec::new();
-    let mut branch = Branch {
-        ray,
+    let first = Branch {
+        path: PathState::camera(ray),
         rows: [[1.0, 0.0, 0.0, 0.0]; 4],
         basis: stokes_basis(-ray.dir),
-        eta: 1.0,
-        depth: 0,
-        prev_p: ray.origin,
-        prev_bsdf_pdf: 1.0,
-        prev_bsdf_delta: true,
-        splits: 0,
     };
-    loop {
-        radiance += trace(scene, setup, branch, wl, sampler, counters, &mut pending);
-        match pending.pop() {
-            Some(b) => branch = b,
-            None => return radiance,
-        }
-    }
+    run_branches(first, |b, pending| {
+        trace(scene, setup, b, wl, sampler, counters, pending)
+    })
 }
 
 /// Follows one branch to its end; returns what it collected, pushes split-off branches.
@@ -507,53 +490,42 @@ fn trace(
     let mut radiance = Spec::ZERO;
 
     loop {
-        let ray = b.ray;
+        let ray = b.path.ray;
         counters.rays += 1;
         let hit = scene.accel.intersect(&ray);
         let si = hit.map(|h| scene.accel.interaction(&ray, &h));
-        if b.depth == 0 && setup.sensor.is_some() {
+        if b.path.depth == 0 && setup.sensor.is_some() {
             let (row, basis) = sensor_row(setup, ray.dir, si.map(|s| s.shading.n));
             b.rows = [row; 4];
             b.basis = basis;
         }
 
         let Some(si) = si else {
-            if !(b.depth == 0 && scene.settings.hide_emitters) {
+            if !(b.path.depth == 0 && scene.settings.hide_emitters) {
                 for &li in &lights.infinite {
                     let light = &lights.lights[li as usize];
                     let le = light.eval_env(ray.dir, wl);
-                    let w = if b.prev_bsdf_delta {
-                        1.0
-                    } else {
-                        mis_power(
-                            b.prev_bsdf_pdf,
-                            sel_pdf
-                                * light.pdf_direction(b.prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
-                        )
-                    };
+                    let w = b.path.emitter_hit_weight(|prev_p| {
+                        sel_pdf * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO)
+                    });
                     radiance += s0(&b.rows) * le * w;
                 }
             }
             break;
         };
         if let Some(li) = lights.shape_light[si.shape as usize] {
-            if si.ng.dot(-ray.dir) > 0.0 && !(b.depth == 0 && scene.settings.hide_emitters) {
+            if si.ng.dot(-ray.dir) > 0.0 && !(b.path.depth == 0 && scene.settings.hide_emitters) {
                 let light = &lights.lights[li as usize];
                 if let super::lights::Light::Area { radiance: le, .. } = light {
-                    let w = if b.prev_bsdf_delta {
-                        1.0
-                    } else {
-                        mis_power(
-                            b.prev_bsdf_pdf,
-                            sel_pdf * light.pdf_direction(b.prev_p, ray.dir, si.t, si.ng),
-                        )
-                    };
+                    let w = b.path.emitter_hit_weight(|prev_p| {
+                        sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng)
+                    });
                     radiance += s0(&b.rows) * le.eval(wl) * w;
                 }
             }
         }
 
-        if max_depth >= 0 && b.depth as i64 + 1 >= max_depth as i64 {
+        if max_depth >= 0 && b.path.depth as i64 + 1 >= max_depth as i64 {
             break;
         }
         let bsdf: &Bsdf = &scene.bsdfs[scene.shape_bsdf[si.shape as usize] as usize];
@@ -607,8 +579,8 @@ fn trace(
         // ---- BSDF sampling, or both lobes of a Fresnel pair ----
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
-        if b.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
-            b.splits += 1;
+        if b.path.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
+            b.path.splits += 1;
             // The lobes of `sample_lobe` forced by u1 (0: reflection, 1: transmission), with
             // the selection probability multiplied back in, as [`Bsdf::split`] does.
             let mut forced = |u1: f32, reflection: bool| {
@@ -665,29 +637,23 @@ fn trace(
 }
 
 /// Moves branch `b` across vertex `si` along the sampled `bs` with Mueller weight `lobe`,
-/// with Russian roulette; false if the path ends there.
+/// with Russian roulette on e₀ᵀ·throughput·e₀ (Mitsuba's unpolarized_spectrum); false if the
+/// path ends there.
 #[allow(clippy::too_many_arguments)]
 fn advance(
     scene: &PreparedScene,
     b: &mut Branch,
-    si: &super::geometry::SurfaceInteraction,
+    si: &SurfaceInteraction,
     wi: Vec3,
     bs: &BsdfSample,
     lobe: &Lobe,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
 ) -> bool {
-    let wi_world = -b.ray.dir;
-    let wo_world = si.shading.to_world(bs.wo);
-    let geo_cos_o = si.ng.dot(wo_world);
-    let geo_cos_i = si.ng.dot(wi_world);
-    let reflected = bs.wo.z * wi.z > 0.0;
-    if geo_cos_o == 0.0
-        || (reflected && geo_cos_o * geo_cos_i < 0.0)
-        || (!reflected && geo_cos_o * geo_cos_i > 0.0)
-    {
+    let wi_world = -b.path.ray.dir;
+    let Some(wo_world) = b.path.cross(si, wi, bs) else {
         return false;
-    }
+    };
     if bs.terminate_secondary && !wl.secondary_terminated() {
         wl.terminate_secondary();
     }
@@ -697,33 +663,18 @@ fn advance(
             *r = [0.0; 4];
         }
     }
-    b.eta *= bs.eta;
-    b.prev_p = si.p;
-    b.prev_bsdf_pdf = bs.pdf;
-    b.prev_bsdf_delta = bs.delta;
-    b.ray = Ray {
-        origin: offset_ray_origin(si.p, si.ng, wo_world),
-        dir: wo_world,
-        tmin: 0.0,
-        tmax: f32::INFINITY,
-    };
-    b.depth += 1;
-
-    // ---- Russian roulette on e₀ᵀ·throughput·e₀ (Mitsuba's unpolarized_spectrum) ----
-    let tmax_component = s0(&b.rows).max_element();
-    if tmax_component.is_nan() || tmax_component <= 0.0 || !tmax_component.is_finite() {
-        return false;
-    }
-    if b.depth >= scene.settings.rr_depth.max(0) as u32 {
-        let q = (tmax_component * b.eta * b.eta).min(0.95);
-        if sampler.next_1d() >= q {
-            return false;
-        }
-        for r in b.rows.iter_mut() {
-            for v in r.iter_mut() {
-                *v /= q;
+    let max = s0(&b.rows).max_element();
+    match b.path.roulette(scene.settings.rr_depth, max, sampler) {
+        None => false,
+        Some(q) => {
+            if q != 1.0 {
+                for r in b.rows.iter_mut() {
+                    for v in r.iter_mut() {
+                        *v /= q;
+                    }
+                }
             }
+            true
         }
     }
-    true
 }

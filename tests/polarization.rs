@@ -69,6 +69,7 @@ fn li_pol(scene: &Scene, ray: Ray, force: bool) -> [f32; 4] {
         &prepared,
         setup,
         ray,
+        None,
         &mut wl,
         &mut sampler,
         &mut Counters::default(),
@@ -171,6 +172,7 @@ fn without_a_polariser_the_polarised_transport_equals_the_unpolarised_one() {
         let plain = integrator::li(
             &prepared,
             ray,
+            None,
             &mut wl,
             &mut sampler,
             &mut Counters::default(),

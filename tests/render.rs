@@ -130,7 +130,7 @@ fn furnace_deviation(scene: &Scene, uvs: &[Vec2], n: u32, expect: f32) -> f32 {
                 pdf: [1.0; 4],
             };
             let ray = prepared.camera.generate_ray(*uv);
-            let l = integrator::li(&prepared, ray, &mut wl, &mut sampler, &mut counters);
+            let l = integrator::li(&prepared, ray, None, &mut wl, &mut sampler, &mut counters);
             for (s, v) in sum.iter_mut().zip(l.to_array()) {
                 *s += v as f64;
             }
@@ -697,11 +697,12 @@ fn path_estimates(scene: &Scene, uv: Vec2, n: u32, splits: u32) -> Vec<f64> {
             };
             let ray = prepared.camera.generate_ray(uv);
             let l = match &prepared.polarized {
-                None => integrator::li(&prepared, ray, &mut wl, &mut sampler, &mut counters),
+                None => integrator::li(&prepared, ray, None, &mut wl, &mut sampler, &mut counters),
                 Some(setup) => integrator_polarized::li(
                     &prepared,
                     setup,
                     ray,
+                    None,
                     &mut wl,
                     &mut sampler,
                     &mut counters,

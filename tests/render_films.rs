@@ -53,7 +53,7 @@ fn furnace_deviation(scene: &Scene, n: u32) -> (f32, Counters) {
             let mut sampler = Sampler::for_sample(k, 0, s, 1);
             let mut wl = SampledWavelengths::new([410.0, 495.0, 580.0, 665.0], [1.0; 4]);
             let ray = prepared.camera.generate_ray(uv);
-            let l = integrator::li(&prepared, ray, &mut wl, &mut sampler, &mut counters);
+            let l = integrator::li(&prepared, ray, None, &mut wl, &mut sampler, &mut counters);
             for (s, v) in sum.iter_mut().zip(l.to_array()) {
                 *s += v as f64;
             }
@@ -125,7 +125,7 @@ fn dispersion_only_when_declared() {
                 let mut wl = SampledWavelengths::new([420.0, 500.0, 580.0, 660.0], [1.0; 4]);
                 let uv = glam::Vec2::new((x as f32 + 0.5) / 24.0, (y as f32 + 0.5) / 24.0);
                 let ray = out.camera.generate_ray(uv);
-                integrator::li(&out, ray, &mut wl, &mut sampler, &mut c);
+                integrator::li(&out, ray, None, &mut wl, &mut sampler, &mut c);
             }
         }
         (c.secondary_terminations, out.effects.dispersion)

@@ -260,7 +260,7 @@ fn count_terminations(scene: &thinfilm::render::PreparedScene) -> u64 {
             let mut wl = SampledWavelengths::sample_visible(sampler.next_1d());
             let uv = glam::Vec2::new((x as f32 + 0.5) / 32.0, (y as f32 + 0.5) / 32.0);
             let ray = scene.camera.generate_ray(uv);
-            integrator::li(scene, ray, &mut wl, &mut sampler, &mut c);
+            integrator::li(scene, ray, None, &mut wl, &mut sampler, &mut c);
         }
     }
     c.secondary_terminations

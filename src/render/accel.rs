@@ -193,6 +193,17 @@ impl Accel {
                 });
             }
         }
+        self.closest_sphere(ray, tmax, best)
+    }
+
+    /// `best` (closest hit so far, at `tmax`) improved by the analytic spheres.
+    #[inline]
+    pub(super) fn closest_sphere(
+        &self,
+        ray: &Ray,
+        mut tmax: f32,
+        mut best: Option<Hit>,
+    ) -> Option<Hit> {
         for (i, s) in self.spheres.iter().enumerate() {
             let t = sphere_intersect(s, ray.origin, ray.dir, ray.tmin, tmax);
             if t < tmax {
@@ -204,6 +215,18 @@ impl Accel {
             }
         }
         best
+    }
+
+    /// Triangles in BVH order: `Prim::Triangle(i)` is `triangles()[i]`.
+    pub(super) fn triangles(&self) -> &[Triangle] {
+        &self.tris
+    }
+
+    /// Distance along `ray` to triangle `id` (BVH order) in [tmin, tmax], or +inf: the exact
+    /// test the BVH traversal runs on its leaves, so a hit found here is the BVH's hit.
+    #[inline(always)]
+    pub(super) fn triangle_distance(&self, id: u32, ray: &obvhs::ray::Ray) -> f32 {
+        intersect_triangle(&self.rt_tris[id as usize], ray)
     }
 
     /// True if anything blocks the segment (tmin, tmax) (shadow rays; early exit).

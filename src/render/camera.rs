@@ -3,7 +3,7 @@
 //! (left, up, dir)); `fov` measured along `fov_axis`.
 
 use crate::scene::{Camera as CameraDesc, FovAxis};
-use glam::{Vec2, Vec3};
+use glam::{DMat3, DVec2, DVec3, Vec2, Vec3};
 
 /// A ray with origin, unit direction and a valid interval.
 #[derive(Debug, Clone, Copy)]
@@ -27,6 +27,9 @@ pub struct PerspectiveCamera {
     tan_half_y: f32,
     near_clip: f32,
     far_clip: f32,
+    /// Inverse of the matrix with columns (axis_x, axis_y, axis_z), in f64: maps a world
+    /// offset from the pinhole to camera-local coordinates (for [`Self::camera_local`]).
+    to_local: DMat3,
 }
 
 /// Horizontal field of view in degrees, converted like Mitsuba's `parse_fov`.
@@ -91,7 +94,39 @@ impl PerspectiveCamera {
             } else {
                 f32::INFINITY
             },
+            to_local: DMat3::from_cols(axis_x.as_dvec3(), axis_y.as_dvec3(), axis_z.as_dvec3())
+                .inverse(),
         })
+    }
+
+    /// The pinhole: every primary ray starts here.
+    pub fn origin(&self) -> Vec3 {
+        self.origin
+    }
+
+    /// Camera-local coordinates q of world point `p`: `p = origin + M q` with M's columns the
+    /// camera axes. A primary ray's points are `q = t·k·(lx, ly, 1)`, so q.z ≥ 0 on every ray
+    /// and q.z grows linearly along it ([`Self::local_depth_rate`]).
+    pub fn camera_local(&self, p: Vec3) -> DVec3 {
+        self.to_local * (p.as_dvec3() - self.origin.as_dvec3())
+    }
+
+    /// k = dq.z/dt along a unit direction `dir` (1/|unnormalised direction| for a primary ray).
+    #[inline]
+    pub fn local_depth_rate(&self, dir: Vec3) -> f32 {
+        let r = self.to_local.row(2);
+        (r.x * dir.x as f64 + r.y * dir.y as f64 + r.z * dir.z as f64) as f32
+    }
+
+    /// Raster position (pixels, x right, y down) at which the primary ray through
+    /// camera-local point `q` (q.z > 0) crosses the film: the inverse of [`Self::generate_ray`].
+    pub fn raster_of(&self, q: DVec3, width: u32, height: u32) -> DVec2 {
+        let lx = q.x / (q.z * self.tan_half_x as f64);
+        let ly = q.y / (q.z * self.tan_half_y as f64);
+        DVec2::new(
+            0.5 * (1.0 - lx) * width as f64,
+            0.5 * (1.0 - ly) * height as f64,
+        )
     }
 
     /// The primary ray through film position `film_uv` ∈ [0,1]² (x right, y down).

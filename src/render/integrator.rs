@@ -12,6 +12,7 @@
 //! Mitsuba picks one; at 4 % reflectance that leaves a glass surface's mirrored highlights to
 //! one sample in 25, the main source of noise in `scenes/lens.xml`.
 
+use super::accel::Hit;
 use super::bsdf::{Bsdf, BsdfSample, Counters, ShadingCtx};
 use super::camera::Ray;
 use super::geometry::{mis_power, offset_ray_origin, SurfaceInteraction};
@@ -34,11 +35,15 @@ pub(super) struct PathState {
     prev_bsdf_delta: bool,
     /// Fresnel splits already made on the way here.
     pub splits: u32,
+    /// The pixel a camera ray was generated in (None after the first vertex): lets
+    /// [`PreparedScene::intersect`] use the screen bins.
+    pub pixel: Option<[u32; 2]>,
 }
 
 impl PathState {
-    pub fn camera(ray: Ray) -> Self {
+    pub fn camera(ray: Ray, pixel: Option<[u32; 2]>) -> Self {
         PathState {
+            pixel,
             ray,
             eta: 1.0,
             depth: 0,
@@ -86,6 +91,7 @@ impl PathState {
             tmax: f32::INFINITY,
         };
         self.depth += 1;
+        self.pixel = None;
         Some(wo_world)
     }
 
@@ -135,26 +141,67 @@ struct Branch {
 
 /// Radiance along `ray` at the path's wavelengths. May terminate secondary wavelengths in
 /// `wl` (dispersion; never in a scene with Fresnel splitting on, whose branches share `wl`).
+///
+/// `pixel`: the pixel a camera ray was generated in (its first hit may then come from the
+/// screen bins); None for any other ray.
 pub fn li(
     scene: &PreparedScene,
     ray: Ray,
+    pixel: Option<[u32; 2]>,
+    wl: &mut SampledWavelengths,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> Spec {
+    let hit = scene.intersect(&ray, pixel);
+    counters.rays += 1;
+    li_from_first_hit(scene, ray, hit, wl, sampler, counters)
+}
+
+/// [`li`] for a camera ray whose first intersection `hit` the caller has already found (and
+/// counted): the batched camera stage of the renderer.
+pub fn li_from_first_hit(
+    scene: &PreparedScene,
+    ray: Ray,
+    hit: Option<Hit>,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spec {
     let first = Branch {
-        path: PathState::camera(ray),
+        path: PathState::camera(ray, None),
         throughput: Spec::ONE,
     };
+    let mut first_hit = Some(hit);
     run_branches(first, |b, pending| {
-        trace(scene, b, wl, sampler, counters, pending)
+        trace(scene, b, first_hit.take(), wl, sampler, counters, pending)
     })
 }
 
+/// What camera rays that hit nothing see: the infinite lights, unless `hide_emitters`. Equal
+/// to [`li_from_first_hit`] with `hit` None, computed a stage at a time over a batch so the
+/// long dependency chains of several lookups overlap (directions first, then texels).
+pub fn escaped_camera_radiance(
+    scene: &PreparedScene,
+    dirs: &[Vec3],
+    wls: &[SampledWavelengths],
+    out: &mut [Spec],
+) {
+    out.fill(Spec::ZERO);
+    if scene.settings.hide_emitters {
+        return;
+    }
+    for &li in &scene.lights.infinite {
+        scene.lights.lights[li as usize].add_env_batch(dirs, wls, out);
+    }
+}
+
 /// Follows one branch to its end; returns what it collected, pushes split-off branches.
+///
+/// `known_hit`: the intersection of the branch's first ray if already found (and counted).
 fn trace(
     scene: &PreparedScene,
     mut b: Branch,
+    mut known_hit: Option<Option<Hit>>,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
     counters: &mut Counters,
@@ -167,8 +214,13 @@ fn trace(
 
     loop {
         let ray = b.path.ray;
-        counters.rays += 1;
-        let hit = scene.accel.intersect(&ray);
+        let hit = match known_hit.take() {
+            Some(hit) => hit,
+            None => {
+                counters.rays += 1;
+                scene.intersect(&ray, b.path.pixel)
+            }
+        };
 
         // ---- Emitter seen by this ray (environment on a miss, area light on a hit) ----
         let Some(hit) = hit else {

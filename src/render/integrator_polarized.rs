@@ -460,12 +460,13 @@ pub fn li(
     scene: &PreparedScene,
     setup: &PolarizedSetup,
     ray: Ray,
+    pixel: Option<[u32; 2]>,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spec {
     let first = Branch {
-        path: PathState::camera(ray),
+        path: PathState::camera(ray, pixel),
         rows: [[1.0, 0.0, 0.0, 0.0]; 4],
         basis: stokes_basis(-ray.dir),
     };
@@ -492,7 +493,7 @@ fn trace(
     loop {
         let ray = b.path.ray;
         counters.rays += 1;
-        let hit = scene.accel.intersect(&ray);
+        let hit = scene.intersect(&ray, b.path.pixel);
         let si = hit.map(|h| scene.accel.interaction(&ray, &h));
         if b.path.depth == 0 && setup.sensor.is_some() {
             let (row, basis) = sensor_row(setup, ray.dir, si.map(|s| s.shading.n));

@@ -21,6 +21,7 @@ pub mod integrator;
 pub mod integrator_polarized;
 pub mod lights;
 pub mod polarization;
+pub mod primary;
 pub mod sampler;
 pub mod texture;
 
@@ -33,6 +34,7 @@ use film::{sample_to_rgb, tree_sum_in_place, Filter};
 use glam::{Vec2, Vec4};
 use rayon::prelude::*;
 use std::time::Instant;
+use texture::Spec;
 
 pub use effects::Effects;
 
@@ -128,6 +130,20 @@ pub struct PreparedScene {
     pub degenerate_triangles: usize,
     /// Set when effect analysis switched polarisation on.
     pub polarized: Option<Box<integrator_polarized::PolarizedSetup>>,
+    /// Candidate triangles per pixel for camera rays (None: camera rays use the BVH).
+    pub primary_bins: Option<primary::PrimaryBins>,
+}
+
+impl PreparedScene {
+    /// Closest hit of `ray`; camera rays (`pixel` = the pixel they were generated in) use
+    /// the screen bins when there are some.
+    #[inline]
+    pub fn intersect(&self, ray: &camera::Ray, pixel: Option<[u32; 2]>) -> Option<accel::Hit> {
+        match (pixel, &self.primary_bins) {
+            (Some([x, y]), Some(bins)) => bins.intersect(&self.accel, x, y, ray),
+            _ => self.accel.intersect(ray),
+        }
+    }
 }
 
 /// Validates the scene and options, runs effect analysis, builds the BVH and light tables.
@@ -192,6 +208,17 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     }
     let camera = camera::PerspectiveCamera::new(&scene.camera, width, height)?;
     let (accel, degenerate_triangles) = accel::Accel::build(scene)?;
+    let primary_bins = primary::PrimaryBins::build(&accel, &camera, width, height);
+    effects.reasons.push(match &primary_bins {
+        Some(b) => {
+            let s = b.stats();
+            format!(
+                "Camera rays: screen bins ({} candidates, {} pixels via the BVH, {} triangles crossing the camera plane)",
+                s.candidates, s.bvh_pixels, s.crossing
+            )
+        }
+        None => "Camera rays: BVH (screen bins would not pay here)".to_string(),
+    });
     let lights = lights::LightSet::build(scene, &accel)?;
     let shape_bsdf = scene.shapes.iter().map(|s| s.bsdf as u32).collect();
     let polarized = if effects.polarization {
@@ -218,7 +245,33 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         effects,
         degenerate_triangles,
         polarized,
+        primary_bins,
     })
+}
+
+/// The camera half of a sample: its random numbers (positioned after the camera dimensions),
+/// wavelengths, film position in pixels, and primary ray.
+struct CameraSample {
+    sampler: sampler::Sampler,
+    wl: SampledWavelengths,
+    pos: Vec2,
+    ray: camera::Ray,
+}
+
+#[inline]
+fn camera_sample(scene: &PreparedScene, x: u32, y: u32, s: u32) -> CameraSample {
+    let mut sampler = sampler::Sampler::new(scene.sampler, x, y, s, scene.seed);
+    let (lambda_bits, jitter) = sampler.camera_sample(!scene.effects.dispersion);
+    let wl = sample_visible_wavelengths(hero_wavelength_u(lambda_bits));
+    let pos = Vec2::new(x as f32 + jitter.x, y as f32 + jitter.y);
+    let film_uv = pos / Vec2::new(scene.width as f32, scene.height as f32);
+    let ray = scene.camera.generate_ray(film_uv);
+    CameraSample {
+        sampler,
+        wl,
+        pos,
+        ray,
+    }
 }
 
 /// One camera sample: wavelengths, film position, path. Returns (film position in pixels,
@@ -231,17 +284,125 @@ fn trace_sample(
     s: u32,
     counters: &mut Counters,
 ) -> (Vec2, SampledSpectrum, SampledWavelengths) {
-    let mut sampler = sampler::Sampler::new(scene.sampler, x, y, s, scene.seed);
-    let (lambda_bits, jitter) = sampler.camera_sample(!scene.effects.dispersion);
-    let mut wl = sample_visible_wavelengths(hero_wavelength_u(lambda_bits));
-    let pos = Vec2::new(x as f32 + jitter.x, y as f32 + jitter.y);
-    let film_uv = pos / Vec2::new(scene.width as f32, scene.height as f32);
-    let ray = scene.camera.generate_ray(film_uv);
+    let CameraSample {
+        mut sampler,
+        mut wl,
+        pos,
+        ray,
+    } = camera_sample(scene, x, y, s);
     let l = match &scene.polarized {
-        None => integrator::li(scene, ray, &mut wl, &mut sampler, counters),
-        Some(setup) => integrator_polarized::li(scene, setup, ray, &mut wl, &mut sampler, counters),
+        None => integrator::li(scene, ray, Some([x, y]), &mut wl, &mut sampler, counters),
+        Some(setup) => integrator_polarized::li(
+            scene,
+            setup,
+            ray,
+            Some([x, y]),
+            &mut wl,
+            &mut sampler,
+            counters,
+        ),
     };
     (pos, SampledSpectrum(l.to_array()), wl)
+}
+
+/// Samples per batch of [`trace_batch`].
+const BATCH: usize = 8;
+
+/// Samples `first..first + out.len()` (at most [`BATCH`]) of pixel (`x`, `y`) with the
+/// unpolarised integrator, stage by stage: camera samples, first hits, escaped rays (the
+/// environment lookups as one batch), paths of the rays that hit, film values. Per sample the
+/// same operations as [`trace_sample`] (bit-identical results); grouping them lets the CPU
+/// overlap independent samples' long arithmetic chains, which one sample at a time could not.
+/// Writes (film position, finite linear sRGB) per sample.
+fn trace_batch(
+    scene: &PreparedScene,
+    x: u32,
+    y: u32,
+    first: u32,
+    out: &mut [(Vec2, [f32; 3])],
+    counters: &mut Counters,
+) {
+    let m = out.len();
+    debug_assert!(m <= BATCH);
+    // Camera samples in stages (numbers, wavelengths, rays), over all BATCH lanes for fixed
+    // trip counts: lanes past `m` repeat the last sample and are ignored. Plain loops over
+    // arrays of Copy values (building them with `array::from_fn` cost store-forwarding
+    // stalls on every element).
+    let mut samplers = [sampler::Sampler::new(scene.sampler, x, y, first, scene.seed); BATCH];
+    for (i, sampler) in samplers.iter_mut().enumerate().skip(1) {
+        let s = first + i.min(m - 1) as u32;
+        *sampler = sampler::Sampler::new(scene.sampler, x, y, s, scene.seed);
+    }
+    let mut numbers = [(0u32, Vec2::ZERO); BATCH];
+    for (n, sampler) in numbers.iter_mut().zip(&mut samplers) {
+        *n = sampler.camera_sample(!scene.effects.dispersion);
+    }
+    let mut wls = [SampledWavelengths::new([0.0; 4], [0.0; 4]); BATCH];
+    for (wl, n) in wls.iter_mut().zip(&numbers) {
+        *wl = sample_visible_wavelengths(hero_wavelength_u(n.0));
+    }
+    let size = Vec2::new(scene.width as f32, scene.height as f32);
+    let mut pos = [Vec2::ZERO; BATCH];
+    for (p, n) in pos.iter_mut().zip(&numbers) {
+        *p = Vec2::new(x as f32 + n.1.x, y as f32 + n.1.y);
+    }
+    let mut rays = [camera::Ray {
+        origin: glam::Vec3::ZERO,
+        dir: glam::Vec3::Z,
+        tmin: 0.0,
+        tmax: 0.0,
+    }; BATCH];
+    for (ray, p) in rays.iter_mut().zip(&pos) {
+        *ray = scene.camera.generate_ray(*p / size);
+    }
+    let mut hits = [None; BATCH];
+    for (hit, ray) in hits.iter_mut().zip(&rays[..m]) {
+        *hit = scene.intersect(ray, Some([x, y]));
+    }
+    counters.rays += m as u64;
+    let mut radiance = [Spec::ZERO; BATCH];
+    // Escaped rays, gathered so their environment lookups run as one batch.
+    let mut miss_dirs = [glam::Vec3::ZERO; BATCH];
+    let mut miss_wls = [SampledWavelengths::new([0.0; 4], [0.0; 4]); BATCH];
+    let mut miss_index = [0usize; BATCH];
+    let mut n_miss = 0;
+    for i in 0..m {
+        if hits[i].is_none() {
+            miss_dirs[n_miss] = rays[i].dir;
+            miss_wls[n_miss] = wls[i];
+            miss_index[n_miss] = i;
+            n_miss += 1;
+        }
+    }
+    let mut miss_radiance = [Spec::ZERO; BATCH];
+    integrator::escaped_camera_radiance(
+        scene,
+        &miss_dirs[..n_miss],
+        &miss_wls[..n_miss],
+        &mut miss_radiance[..n_miss],
+    );
+    for (&i, &l) in miss_index[..n_miss].iter().zip(&miss_radiance) {
+        radiance[i] = l;
+    }
+    for i in 0..m {
+        if let Some(hit) = hits[i] {
+            radiance[i] = integrator::li_from_first_hit(
+                scene,
+                rays[i],
+                Some(hit),
+                &mut wls[i],
+                &mut samplers[i],
+                counters,
+            );
+        }
+    }
+    for (i, o) in out.iter_mut().enumerate() {
+        let rgb = finite_rgb(
+            sample_to_rgb(SampledSpectrum(radiance[i].to_array()), &wls[i]),
+            counters,
+        );
+        *o = (pos[i], rgb);
+    }
 }
 
 /// The number u ∈ [0, 1) whose hero set {u + k/4 mod 1} are a sample's four wavelengths,
@@ -379,10 +540,21 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         let mut samples = vec![[0.0f32; 3]; n];
         let rows = (2 * reach + 1) as usize;
         let mut buf = vec![[0.0f32; 4]; if reach == 0 { w } else { rows * w }];
+        let mut batch = [(Vec2::ZERO, [0.0f32; 3]); BATCH];
         for x in 0..w {
             for (i, s) in (s0..s1).enumerate() {
-                let (pos, l, wl) = trace_sample(scene, x as u32, y as u32, s, &mut counters);
-                let rgb = finite_rgb(sample_to_rgb(l, &wl), &mut counters);
+                // The unpolarised integrator runs BATCH samples at a time (same values).
+                let k = i % BATCH;
+                if scene.polarized.is_none() {
+                    if k == 0 {
+                        let m = BATCH.min(n - i);
+                        trace_batch(scene, x as u32, y as u32, s, &mut batch[..m], &mut counters);
+                    }
+                } else {
+                    let (pos, l, wl) = trace_sample(scene, x as u32, y as u32, s, &mut counters);
+                    batch[k] = (pos, finite_rgb(sample_to_rgb(l, &wl), &mut counters));
+                }
+                let (pos, rgb) = batch[k];
                 if reach == 0 {
                     samples[i] = rgb;
                 } else {
@@ -507,6 +679,45 @@ pub fn render(scene: &Scene, options: &RenderOptions) -> Result<RenderOutput> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The batched camera stage gives every sample exactly what the one-sample path gives
+    /// (film position and RGB, bit for bit), for full and partial batches, on pixels that
+    /// see the teapot, its reflections and the bare environment.
+    #[test]
+    fn batched_samples_equal_single_samples() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/teapot_mgf2_400.xml");
+        let scene = crate::scene::load(&path, &[]).unwrap();
+        let options = RenderOptions {
+            resolution: Some((32, 32)),
+            spp: Some(16),
+            ..Default::default()
+        };
+        let p = prepare(&scene, &options).unwrap();
+        assert!(p.polarized.is_none());
+        let mut seen_hit = false;
+        for (x, y) in [(16, 16), (3, 2), (20, 12), (10, 22), (31, 31)] {
+            for len in [BATCH, 3, 1] {
+                let mut batch = vec![(Vec2::ZERO, [0.0f32; 3]); len];
+                let mut c_batch = Counters::default();
+                trace_batch(&p, x, y, 5, &mut batch, &mut c_batch);
+                let mut c_single = Counters::default();
+                for (i, &(pos, rgb)) in batch.iter().enumerate() {
+                    let (want_pos, l, wl) = trace_sample(&p, x, y, 5 + i as u32, &mut c_single);
+                    let want = finite_rgb(sample_to_rgb(l, &wl), &mut c_single);
+                    assert_eq!(pos, want_pos);
+                    assert_eq!(
+                        rgb.map(f32::to_bits),
+                        want.map(f32::to_bits),
+                        "pixel ({x}, {y})"
+                    );
+                }
+                assert_eq!(c_batch, c_single);
+                seen_hit |= c_single.film_evals > 0;
+            }
+        }
+        assert!(seen_hit, "no pixel saw the teapot");
+    }
 
     #[test]
     fn ln_fast_matches_std() {

@@ -24,7 +24,7 @@ use glam::Vec2;
 pub use crate::scene::SamplerKind;
 
 /// PCG32 (XSH-RR output, 64-bit LCG state) random number generator.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 struct Pcg32 {
     state: u64,
     inc: u64,
@@ -63,7 +63,7 @@ impl Pcg32 {
 }
 
 /// The numbers of one camera sample and its path.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 pub struct Sampler {
     kind: SamplerKind,
     pcg: Pcg32,

@@ -1,0 +1,284 @@
+//! Primary visibility from screen bins: every camera ray starts at the pinhole and crosses
+//! the film inside its own pixel, so the only triangles it can hit are those whose projection
+//! overlaps that pixel. Binning each triangle's projected bounding box (plus a margin far
+//! above f32 rounding) into the pixels it covers gives a short, complete candidate list per
+//! pixel; a camera ray then runs the BVH's own triangle test on that list only. The hit is
+//! the BVH's hit (same test, same closest-t rule; only exact ties between two triangles may
+//! resolve to the other one), found without a traversal: an empty pixel (background) costs a
+//! bounds check, a covered one a few triangle tests, front to back with early exit.
+//!
+//! This is the screen-space "first-hit" shortcut of hybrid renderers (a visibility buffer
+//! made by binning instead of rasterising, so it is exact for any sample position inside the
+//! pixel). It applies to the pinhole camera only, and falls back to the BVH where it would
+//! not pay: pixels with more than [`MAX_PER_PIXEL`] candidates, scenes with many triangles
+//! crossing the camera plane, or a total footprint beyond [`MAX_ENTRIES_PER_PIXEL`] per pixel.
+
+use super::accel::{Accel, Hit, Prim};
+use super::camera::{PerspectiveCamera, Ray};
+use glam::Vec3A;
+
+/// Candidates beyond which a pixel is left to the BVH (deep depth complexity).
+pub const MAX_PER_PIXEL: usize = 64;
+/// Triangles crossing the camera plane are candidates of every pixel; beyond this many the
+/// bins are not built (the camera is inside dense geometry).
+pub const MAX_CROSSING: usize = 32;
+/// Budget of the binned footprint (sum of bounding-box pixel counts), per pixel.
+pub const MAX_ENTRIES_PER_PIXEL: usize = 64;
+
+/// One candidate: a triangle (BVH order) and the smallest camera depth of its vertices.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    /// min over the vertices of camera-local q.z: no point of the triangle is nearer.
+    depth: f32,
+    tri: u32,
+}
+
+/// Per-pixel candidate lists for the camera rays of one image.
+#[derive(Debug, Clone)]
+pub struct PrimaryBins {
+    width: u32,
+    height: u32,
+    /// Pixel p's candidates are `candidates[offsets[p]..offsets[p + 1]]`, nearest first.
+    offsets: Vec<u32>,
+    candidates: Vec<Candidate>,
+    /// Pixels left to the BVH.
+    bvh_pixel: Vec<bool>,
+    /// Triangles crossing the camera plane (q.z ≤ 0 at some vertex): tested for every pixel.
+    crossing: Vec<u32>,
+    /// The camera the bins were made for (q.z = t·k along its rays).
+    camera: PerspectiveCamera,
+}
+
+/// Statistics of a build, for the log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BinStats {
+    pub candidates: usize,
+    pub bvh_pixels: usize,
+    pub crossing: usize,
+}
+
+impl PrimaryBins {
+    /// Bins the scene's triangles for a `width`×`height` image seen by `camera`; None when
+    /// the bins would not pay (see the module doc) and every camera ray should use the BVH.
+    pub fn build(
+        accel: &Accel,
+        camera: &PerspectiveCamera,
+        width: u32,
+        height: u32,
+    ) -> Option<Self> {
+        let tris = accel.triangles();
+        let (w, h) = (width as usize, height as usize);
+        if tris.is_empty() || w == 0 || h == 0 {
+            return None;
+        }
+        // Conservative margin in pixels: f32 ray directions and triangle tests are accurate
+        // to ~1e-6 relative, i.e. far below 1e-3 px even at 8K.
+        let margin = 0.05 + 1e-5 * w.max(h) as f64;
+        let mut crossing = Vec::new();
+        let mut footprints = Vec::with_capacity(tris.len());
+        let mut bbox_pixels = 0usize;
+        for (id, tri) in tris.iter().enumerate() {
+            let q = [tri.v0, tri.v1, tri.v2].map(|v| camera.camera_local(v.into()));
+            let zmin = q[0].z.min(q[1].z).min(q[2].z);
+            let zmax = q[0].z.max(q[1].z).max(q[2].z);
+            if zmax.is_nan() || zmax < 0.0 {
+                // Wholly behind the pinhole (q.z ≥ 0 on every camera ray), or NaN.
+                continue;
+            }
+            if zmin <= 0.0 {
+                crossing.push(id as u32);
+                if crossing.len() > MAX_CROSSING {
+                    return None;
+                }
+                continue;
+            }
+            // In front of the camera a triangle projects to the triangle of its projected
+            // vertices: a ray can hit it only if that 2-D triangle meets the ray's pixel.
+            let r = q.map(|qi| camera.raster_of(qi, width, height));
+            let Some(f) = Footprint::new(id as u32, zmin as f32, r, margin, w, h) else {
+                continue; // off screen
+            };
+            bbox_pixels += (f.x1 - f.x0 + 1) * (f.y1 - f.y0 + 1);
+            if bbox_pixels > MAX_ENTRIES_PER_PIXEL * w * h {
+                return None;
+            }
+            footprints.push(f);
+        }
+
+        let mut counts = vec![0u32; w * h];
+        for f in &footprints {
+            f.for_each_pixel(|x, y| counts[y * w + x] += 1);
+        }
+        let bvh_pixel: Vec<bool> = counts.iter().map(|&c| c as usize > MAX_PER_PIXEL).collect();
+        let mut offsets = Vec::with_capacity(w * h + 1);
+        let mut total = 0u32;
+        offsets.push(0);
+        for (c, &bvh) in counts.iter().zip(&bvh_pixel) {
+            if !bvh {
+                total += c;
+            }
+            offsets.push(total);
+        }
+        let mut fill: Vec<u32> = offsets[..w * h].to_vec();
+        let mut candidates = vec![Candidate { depth: 0.0, tri: 0 }; total as usize];
+        for f in &footprints {
+            f.for_each_pixel(|x, y| {
+                let p = y * w + x;
+                if !bvh_pixel[p] {
+                    candidates[fill[p] as usize] = Candidate {
+                        depth: f.depth,
+                        tri: f.tri,
+                    };
+                    fill[p] += 1;
+                }
+            });
+        }
+        for p in 0..w * h {
+            candidates[offsets[p] as usize..offsets[p + 1] as usize]
+                .sort_unstable_by(|a, b| a.depth.total_cmp(&b.depth).then(a.tri.cmp(&b.tri)));
+        }
+        Some(PrimaryBins {
+            width,
+            height,
+            offsets,
+            candidates,
+            bvh_pixel,
+            crossing,
+            camera: camera.clone(),
+        })
+    }
+
+    pub fn stats(&self) -> BinStats {
+        BinStats {
+            candidates: self.candidates.len(),
+            bvh_pixels: self.bvh_pixel.iter().filter(|&&b| b).count(),
+            crossing: self.crossing.len(),
+        }
+    }
+
+    /// Closest hit of camera ray `ray` generated inside pixel (`x`, `y`): the same hit as
+    /// [`Accel::intersect`] (spheres included).
+    #[inline]
+    pub fn intersect(&self, accel: &Accel, x: u32, y: u32, ray: &Ray) -> Option<Hit> {
+        let k = self.camera.local_depth_rate(ray.dir);
+        let p = y as usize * self.width as usize + x as usize;
+        if x >= self.width || y >= self.height || self.bvh_pixel[p] || k.is_nan() || k <= 0.0 {
+            return accel.intersect(ray);
+        }
+        let r = obvhs::ray::Ray {
+            origin: Vec3A::from(ray.origin),
+            direction: Vec3A::from(ray.dir),
+            // Unused by the triangle test.
+            inv_direction: Vec3A::ZERO,
+            tmin: ray.tmin,
+            tmax: ray.tmax,
+        };
+        let mut best_t = ray.tmax;
+        let mut best = None;
+        let mut test = |tri: u32, best_t: &mut f32| {
+            let t = accel.triangle_distance(tri, &obvhs::ray::Ray { tmax: *best_t, ..r });
+            if t < *best_t {
+                *best_t = t;
+                best = Some(Hit {
+                    t,
+                    prim: Prim::Triangle(tri),
+                });
+            }
+        };
+        for &tri in &self.crossing {
+            test(tri, &mut best_t);
+        }
+        let list = &self.candidates[self.offsets[p] as usize..self.offsets[p + 1] as usize];
+        for c in list {
+            // A hit at t has q.z = t·k; a triangle whose nearest vertex is deeper than the
+            // best hit cannot be nearer (with slack for rounding in k and the depths).
+            if c.depth > best_t * k * (1.0 + 1e-4) {
+                break;
+            }
+            test(c.tri, &mut best_t);
+        }
+        accel.closest_sphere(ray, best_t, best)
+    }
+}
+
+/// A triangle's projection: its pixel bounding box and edge functions.
+struct Footprint {
+    tri: u32,
+    depth: f32,
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+    /// Edge functions a·x + b·y + c, ≥ 0 inside; None for a (near-)degenerate projection,
+    /// which keeps the whole bounding box.
+    edges: Option<[[f64; 3]; 3]>,
+    margin: f64,
+}
+
+impl Footprint {
+    /// None if the (margin-grown) projection misses the image.
+    fn new(
+        tri: u32,
+        depth: f32,
+        r: [glam::DVec2; 3],
+        margin: f64,
+        w: usize,
+        h: usize,
+    ) -> Option<Self> {
+        let (xmin, xmax) = (
+            r[0].x.min(r[1].x).min(r[2].x),
+            r[0].x.max(r[1].x).max(r[2].x),
+        );
+        let (ymin, ymax) = (
+            r[0].y.min(r[1].y).min(r[2].y),
+            r[0].y.max(r[1].y).max(r[2].y),
+        );
+        let x0 = (xmin - margin).floor().max(0.0);
+        let x1 = (xmax + margin).floor().min(w as f64 - 1.0);
+        let y0 = (ymin - margin).floor().max(0.0);
+        let y1 = (ymax + margin).floor().min(h as f64 - 1.0);
+        if !(x0 <= x1 && y0 <= y1) {
+            return None;
+        }
+        let area2 = (r[1] - r[0]).perp_dot(r[2] - r[0]);
+        let extent = (xmax - xmin).max(ymax - ymin);
+        let edges = (area2.abs() > 1e-9 * extent * extent).then(|| {
+            let s = area2.signum();
+            [0, 1, 2].map(|i| {
+                let (a, b) = (r[i], r[(i + 1) % 3]);
+                // Inside (for either winding) where s·((b − a) × (p − a)) ≥ 0.
+                let (ea, eb) = (-s * (b.y - a.y), s * (b.x - a.x));
+                [ea, eb, -(ea * a.x + eb * a.y)]
+            })
+        });
+        Some(Footprint {
+            tri,
+            depth,
+            x0: x0 as usize,
+            x1: x1 as usize,
+            y0: y0 as usize,
+            y1: y1 as usize,
+            edges,
+            margin,
+        })
+    }
+
+    /// Calls `f(x, y)` for every pixel whose square, grown by the margin, meets the
+    /// projected triangle (separating-axis test on the three edges; the box is the rest).
+    fn for_each_pixel(&self, mut f: impl FnMut(usize, usize)) {
+        let half = 0.5 + self.margin;
+        for y in self.y0..=self.y1 {
+            for x in self.x0..=self.x1 {
+                let inside = self.edges.is_none_or(|edges| {
+                    let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
+                    edges
+                        .iter()
+                        .all(|&[a, b, c]| a * cx + b * cy + c + (a.abs() + b.abs()) * half >= 0.0)
+                });
+                if inside {
+                    f(x, y);
+                }
+            }
+        }
+    }
+}

@@ -62,10 +62,11 @@ pub struct Args {
     /// chosen by Fresnel, as Mitsuba does).
     #[arg(long)]
     pub fresnel_splits: Option<u32>,
-    /// Timed runs per spp, for both renderers; each row reports the fastest (the shared
-    /// machine's noise only ever adds time; for Mitsuba the repeats also keep JIT
-    /// compilation out of the timing). The images of the runs are identical.
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    /// Timed runs per spp, for both renderers; each row reports the fastest. Mitsuba's first
+    /// render at a new spp can include JIT compilation of its kernels (seen: 0.42 s instead
+    /// of 0.14 s for a 64-spp teapot on a cold kernel cache), and the shared machine's noise
+    /// only ever adds time. The images of the runs are identical.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..))]
     pub repeats: u32,
     #[command(flatten)]
     pub effects: super::bench_effects::Args,

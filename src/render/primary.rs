@@ -11,7 +11,8 @@
 //! made by binning instead of rasterising, so it is exact for any sample position inside the
 //! pixel). It applies to the pinhole camera only, and falls back to the BVH where it would
 //! not pay: pixels with more than [`MAX_PER_PIXEL`] candidates, scenes with many triangles
-//! crossing the camera plane, or a total footprint beyond [`MAX_ENTRIES_PER_PIXEL`] per pixel.
+//! crossing the camera plane, a total footprint beyond [`MAX_ENTRIES_PER_PIXEL`] per pixel, or
+//! images beyond [`MAX_PIXELS`].
 
 use super::accel::{Accel, Hit, Prim};
 use super::camera::{PerspectiveCamera, Ray};
@@ -24,6 +25,8 @@ pub const MAX_PER_PIXEL: usize = 64;
 pub const MAX_CROSSING: usize = 32;
 /// Budget of the binned footprint (sum of bounding-box pixel counts), per pixel.
 pub const MAX_ENTRIES_PER_PIXEL: usize = 64;
+/// Images larger than this (4096², 64 MB of offsets) use the BVH for camera rays.
+pub const MAX_PIXELS: usize = 1 << 24;
 
 /// One candidate: a triangle (BVH order) and the smallest camera depth of its vertices.
 #[derive(Debug, Clone, Copy)]
@@ -68,7 +71,7 @@ impl PrimaryBins {
     ) -> Option<Self> {
         let tris = accel.triangles();
         let (w, h) = (width as usize, height as usize);
-        if tris.is_empty() || w == 0 || h == 0 {
+        if tris.is_empty() || w == 0 || h == 0 || w * h > MAX_PIXELS {
             return None;
         }
         // Conservative margin in pixels: f32 ray directions and triangle tests are accurate

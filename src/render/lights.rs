@@ -141,22 +141,35 @@ fn sigmoid_poly4(poly: &crate::spectrum::RgbSigmoidPolynomial, lambda: Spec) -> 
     Spec::splat(0.5) + x / (Spec::splat(2.0) * (Spec::ONE + x * x).sqrt())
 }
 
+/// Coefficients of the odd polynomial z·P(z²) ≈ atan z on [0, 1] used by [`atan2_fast`].
+const ATAN_C: [f32; 8] = [
+    0.999_999_34,
+    -0.333_298_6,
+    0.199_465_66,
+    -0.139_086_34,
+    0.096_422_08,
+    -0.055_912_48,
+    0.021_863_066,
+    -0.004_054_597,
+];
+
+/// atan z for z ∈ [0, 1] (Horner on z², the operations every atan2 variant here shares).
+#[inline(always)]
+fn atan_unit(z: f32) -> f32 {
+    let z2 = z * z;
+    let mut p = ATAN_C[7];
+    for &c in ATAN_C[..7].iter().rev() {
+        p = p * z2 + c;
+    }
+    z * p
+}
+
 /// atan2(y, x) from a degree-15 odd minimax-style polynomial for atan on [0, 1] (fitted by
 /// iteratively reweighted least squares; max error 1.3e-7 rad in f32, tested in
 /// `tests::atan2_fast_matches_std`) plus octant reduction. The envmap direction→texel map
 /// was ~10 % of a teapot render with libm's `atan2f`/`acosf`; a texel spans ≥ 1e-3 rad.
 #[inline]
 pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
-    const C: [f32; 8] = [
-        0.999_999_34,
-        -0.333_298_6,
-        0.199_465_66,
-        -0.139_086_34,
-        0.096_422_08,
-        -0.055_912_48,
-        0.021_863_066,
-        -0.004_054_597,
-    ];
     if x.is_nan() || y.is_nan() {
         return f32::NAN;
     }
@@ -171,13 +184,7 @@ pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
             y
         };
     }
-    let z = mn / mx;
-    let z2 = z * z;
-    let mut p = C[7];
-    for &c in C[..7].iter().rev() {
-        p = p * z2 + c;
-    }
-    let mut r = z * p;
+    let mut r = atan_unit(mn / mx);
     if ay > ax {
         r = std::f32::consts::FRAC_PI_2 - r;
     }
@@ -193,16 +200,6 @@ pub(crate) fn atan2_fast(y: f32, x: f32) -> f32 {
 /// angles of every escaped ray. NaN or (0, 0) inputs take the scalar path.
 #[inline]
 fn atan2_fast2(y0: f32, x0: f32, y1: f32, x1: f32) -> (f32, f32) {
-    const C: [f32; 8] = [
-        0.999_999_34,
-        -0.333_298_6,
-        0.199_465_66,
-        -0.139_086_34,
-        0.096_422_08,
-        -0.055_912_48,
-        0.021_863_066,
-        -0.004_054_597,
-    ];
     let y = Vec4::new(y0, y1, y0, y1);
     let x = Vec4::new(x0, x1, x0, x1);
     let (ax, ay) = (x.abs(), y.abs());
@@ -215,8 +212,8 @@ fn atan2_fast2(y0: f32, x0: f32, y1: f32, x1: f32) -> (f32, f32) {
     let mn = Vec4::select(x_ge_y, ay, ax);
     let z = mn / mx;
     let z2 = z * z;
-    let mut p = Vec4::splat(C[7]);
-    for &c in C[..7].iter().rev() {
+    let mut p = Vec4::splat(ATAN_C[7]);
+    for &c in ATAN_C[..7].iter().rev() {
         p = p * z2 + Vec4::splat(c);
     }
     let mut r = z * p;
@@ -238,16 +235,6 @@ pub(crate) const LANES: usize = 8;
 /// arguments zero) whose value here is not atan2_fast's and must be recomputed.
 #[inline]
 fn atan2_lanes<const N: usize>(y: &[f32; N], x: &[f32; N]) -> ([f32; N], [bool; N]) {
-    const C: [f32; 8] = [
-        0.999_999_34,
-        -0.333_298_6,
-        0.199_465_66,
-        -0.139_086_34,
-        0.096_422_08,
-        -0.055_912_48,
-        0.021_863_066,
-        -0.004_054_597,
-    ];
     let mut r = [0.0f32; N];
     let mut special = [false; N];
     for i in 0..N {
@@ -256,13 +243,7 @@ fn atan2_lanes<const N: usize>(y: &[f32; N], x: &[f32; N]) -> ([f32; N], [bool; 
         let mx = if x_ge_y { ax } else { ay };
         let mn = if x_ge_y { ay } else { ax };
         special[i] = x[i].is_nan() || y[i].is_nan() || mx == 0.0;
-        let z = mn / mx;
-        let z2 = z * z;
-        let mut p = C[7];
-        for &c in C[..7].iter().rev() {
-            p = p * z2 + c;
-        }
-        let mut a = z * p;
+        let mut a = atan_unit(mn / mx);
         a = if ay > ax {
             std::f32::consts::FRAC_PI_2 - a
         } else {
@@ -454,39 +435,16 @@ impl EnvMap {
         uv: &[[f32; LANES]; 2],
         lambda: &[[f32; LANES]; 4],
     ) -> ([[f32; LANES]; 4], [bool; LANES]) {
-        let (w, h) = (self.width, self.height);
         // Corner texels and bilinear weights per lane (gathers: scalar).
         let mut coef = [[[0.0f32; LANES]; 3]; 4];
         let mut weight = [[0.0f32; LANES]; 4];
         for i in 0..LANES {
-            let x = uv[0][i] * w as f32 - 0.5;
-            let y = (uv[1][i] * (h - 1) as f32).clamp(0.0, (h - 1) as f32);
-            let mut xi = x as i64;
-            if (xi as f32) > x {
-                xi -= 1;
-            }
-            let fx = x - xi as f32;
-            let wi = w as i64;
-            let c0 = if (0..wi).contains(&xi) {
-                xi as usize
-            } else if xi == -1 {
-                w - 1
-            } else {
-                xi.rem_euclid(wi) as usize
-            };
-            let c1 = if c0 + 1 == w { 0 } else { c0 + 1 };
-            let r0 = (y as i32 as usize).min(h - 2);
-            let fy = y - r0 as f32;
-            for (t, (r, c, wgt)) in [
-                (r0, c0, (1.0 - fx) * (1.0 - fy)),
-                (r0, c1, fx * (1.0 - fy)),
-                (r0 + 1, c0, (1.0 - fx) * fy),
-                (r0 + 1, c1, fx * fy),
-            ]
-            .into_iter()
-            .enumerate()
+            for (t, (index, wgt)) in self
+                .bilinear_texels(uv[0][i], uv[1][i])
+                .into_iter()
+                .enumerate()
             {
-                let texel = &self.texels[r * w + c];
+                let texel = &self.texels[index];
                 let used = wgt > 0.0 && texel.scale > 0.0;
                 for (c, &v) in coef[t].iter_mut().zip(&texel.poly.c) {
                     c[i] = if used { v } else { 0.0 };
@@ -521,12 +479,13 @@ impl EnvMap {
         (out, bad)
     }
 
-    /// Radiance at texture coordinates `uv` ([`Self::uv_of`]).
-    #[inline]
-    fn eval_uv(&self, uv: Vec2, wl: &SampledWavelengths) -> Spec {
+    /// The four texels (indices) under texture coordinates (u, v) and their bilinear
+    /// weights: texel centres at half-integers, columns wrapping, rows clamped.
+    #[inline(always)]
+    fn bilinear_texels(&self, u: f32, v: f32) -> [(usize, f32); 4] {
         let (w, h) = (self.width, self.height);
-        let x = uv.x * w as f32 - 0.5;
-        let y = (uv.y * (h - 1) as f32).clamp(0.0, (h - 1) as f32);
+        let x = u * w as f32 - 0.5;
+        let y = (v * (h - 1) as f32).clamp(0.0, (h - 1) as f32);
         // floor without the libm call: x ≥ −½ (NaN casts to 0 like before), y ≥ 0.
         let mut xi = x as i64;
         if (xi as f32) > x {
@@ -548,6 +507,17 @@ impl EnvMap {
         // and cheaper than f32 → usize.
         let r0 = (y as i32 as usize).min(h - 2);
         let fy = y - r0 as f32;
+        [
+            (r0 * w + c0, (1.0 - fx) * (1.0 - fy)),
+            (r0 * w + c1, fx * (1.0 - fy)),
+            ((r0 + 1) * w + c0, (1.0 - fx) * fy),
+            ((r0 + 1) * w + c1, fx * fy),
+        ]
+    }
+
+    /// Radiance at texture coordinates `uv` ([`Self::uv_of`]).
+    #[inline]
+    fn eval_uv(&self, uv: Vec2, wl: &SampledWavelengths) -> Spec {
         // The four texels share the D65 factor: evaluate it once per wavelength.
         let d65 = Spec::from_array(
             wl.lambda
@@ -555,13 +525,8 @@ impl EnvMap {
         );
         let lambda = Spec::from_array(wl.lambda);
         let mut out = Spec::ZERO;
-        for (r, c, wgt) in [
-            (r0, c0, (1.0 - fx) * (1.0 - fy)),
-            (r0, c1, fx * (1.0 - fy)),
-            (r0 + 1, c0, (1.0 - fx) * fy),
-            (r0 + 1, c1, fx * fy),
-        ] {
-            let t = &self.texels[r * w + c];
+        for (index, wgt) in self.bilinear_texels(uv.x, uv.y) {
+            let t = &self.texels[index];
             if wgt > 0.0 && t.scale > 0.0 {
                 out += sigmoid_poly4(&t.poly, lambda) * (wgt * t.scale);
             }

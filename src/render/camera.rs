@@ -99,11 +99,6 @@ impl PerspectiveCamera {
         })
     }
 
-    /// The pinhole: every primary ray starts here.
-    pub fn origin(&self) -> Vec3 {
-        self.origin
-    }
-
     /// Camera-local coordinates q of world point `p`: `p = origin + M q` with M's columns the
     /// camera axes. A primary ray's points are `q = t·k·(lx, ly, 1)`, so q.z ≥ 0 on every ray
     /// and q.z grows linearly along it ([`Self::local_depth_rate`]).

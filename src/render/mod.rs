@@ -250,7 +250,8 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
 }
 
 /// The camera half of a sample: its random numbers (positioned after the camera dimensions),
-/// wavelengths, film position in pixels, and primary ray.
+/// wavelengths, film position in pixels, and primary ray. [`trace_batch`] runs the same steps
+/// stage by stage over its lanes (one lane at a time through this function was 3 % slower).
 struct CameraSample {
     sampler: sampler::Sampler,
     wl: SampledWavelengths,

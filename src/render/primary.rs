@@ -1,8 +1,8 @@
 //! Primary visibility from screen bins: every camera ray starts at the pinhole and crosses
 //! the film inside its own pixel, so the only triangles it can hit are those whose projection
-//! overlaps that pixel. Binning each triangle's projected bounding box (plus a margin far
-//! above f32 rounding) into the pixels it covers gives a short, complete candidate list per
-//! pixel; a camera ray then runs the BVH's own triangle test on that list only. The hit is
+//! overlaps that pixel. Binning each projected triangle (edge-function test against the
+//! pixel square grown by a margin far above f32 rounding) into the pixels it covers gives a
+//! short, complete candidate list per pixel; a camera ray then runs the BVH's own triangle test on that list only. The hit is
 //! the BVH's hit (same test, same closest-t rule; only exact ties between two triangles may
 //! resolve to the other one), found without a traversal: an empty pixel (background) costs a
 //! bounds check, a covered one a few triangle tests, front to back with early exit.

@@ -19,6 +19,11 @@ pub struct SphereGeom {
     pub shape: u32,
 }
 
+/// Rays per packet traversal ([`Accel::intersect_batch`]).
+pub const PACKET: usize = 16;
+/// Packets are formed of rays whose directions are within this cosine of the first's.
+pub const PACKET_MIN_COS: f32 = 0.9;
+
 /// What a closest-hit query found.
 #[derive(Debug, Clone, Copy)]
 pub struct Hit {
@@ -196,6 +201,58 @@ impl Accel {
         self.closest_sphere(ray, tmax, best)
     }
 
+    /// Closest hits of a batch of rays (`hits[i]` for `rays[i]`, exactly [`Self::intersect`]'s
+    /// answers). Runs of up to [`PACKET`] coherent rays — directions within
+    /// [`PACKET_MIN_COS`] of the run's first — share one packet traversal; others are traced
+    /// one by one.
+    pub fn intersect_batch(&self, rays: &[Ray], hits: &mut Vec<Option<Hit>>) {
+        hits.clear();
+        #[cfg(target_arch = "x86_64")]
+        if let (Some(bvh), true) = (&self.bvh, self.avx2) {
+            let mut start = 0;
+            while start < rays.len() {
+                let d0 = rays[start].dir;
+                let mut end = start + 1;
+                while end < rays.len()
+                    && end - start < PACKET
+                    && rays[end].dir.dot(d0) >= PACKET_MIN_COS
+                {
+                    end += 1;
+                }
+                if end - start == 1 {
+                    hits.push(self.intersect(&rays[start]));
+                } else {
+                    let mut packet =
+                        [obvhs::ray::Ray::new_inf(Vec3::Z.into(), Vec3::Z.into()); PACKET];
+                    let m = end - start;
+                    for (p, r) in packet.iter_mut().zip(&rays[start..end]) {
+                        *p = obvhs::ray::Ray::new(r.origin.into(), r.dir.into(), r.tmin, r.tmax);
+                    }
+                    let mut best = [u32::MAX; PACKET];
+                    // SAFETY: the CPU supports AVX2 (checked at build time).
+                    let t = unsafe {
+                        x86::closest_hit_packet_avx2(bvh, &self.rt_tris, &packet[..m], &mut best)
+                    };
+                    for (i, r) in rays[start..end].iter().enumerate() {
+                        let (tri_hit, tmax) = if best[i] != u32::MAX {
+                            let hit = Hit {
+                                t: t[i],
+                                prim: Prim::Triangle(best[i]),
+                            };
+                            (Some(hit), t[i])
+                        } else {
+                            (None, r.tmax)
+                        };
+                        hits.push(self.closest_sphere(r, tmax, tri_hit));
+                    }
+                }
+                start = end;
+            }
+            return;
+        }
+        hits.extend(rays.iter().map(|r| self.intersect(r)));
+    }
+
     /// `best` (closest hit so far, at `tmax`) improved by the analytic spheres.
     #[inline]
     pub(super) fn closest_sphere(
@@ -222,11 +279,17 @@ impl Accel {
         &self.tris
     }
 
-    /// Distance along `ray` to triangle `id` (BVH order) in [tmin, tmax], or +inf: the exact
-    /// test the BVH traversal runs on its leaves, so a hit found here is the BVH's hit.
+    /// Tests triangle `id` (BVH order) against every lane, keeping each lane's closest hit
+    /// (`best`: triangle ids, u32::MAX before a hit; distances in the lanes' tmax): the exact
+    /// test and tie rule of the BVH traversal, so a hit found here is the BVH's hit.
     #[inline(always)]
-    pub(super) fn triangle_distance(&self, id: u32, ray: &obvhs::ray::Ray) -> f32 {
-        intersect_triangle(&self.rt_tris[id as usize], ray)
+    pub(super) fn test_triangle_lanes(
+        &self,
+        lanes: &mut RayLanes,
+        id: u32,
+        best: &mut [u32; PACKET],
+    ) {
+        lanes.test_triangle(&TriScalars::of(&self.rt_tris[id as usize]), id, best);
     }
 
     /// True if anything blocks the segment (tmin, tmax) (shadow rays; early exit).
@@ -364,7 +427,7 @@ fn closest_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> Option
         node.intersect_ray(&traverse_ray, state.oct_inv4),
         {
             let t = intersect_triangle(&tris[state.primitive_id as usize], &traverse_ray);
-            if t < traverse_ray.tmax {
+            if closer(t, state.primitive_id, traverse_ray.tmax, best_id) {
                 best_id = state.primitive_id;
                 traverse_ray.tmax = t;
             }
@@ -373,25 +436,155 @@ fn closest_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> Option
     (best_id != u32::MAX).then_some((traverse_ray.tmax, best_id))
 }
 
+/// Whether a triangle hit at `t` with id `id` replaces the closest hit so far (`best_t`,
+/// `best_id`; `u32::MAX` before the first). Equal distances go to the smaller id, so the
+/// closest hit does not depend on the order triangles are tested in: a packet traversal
+/// ([`Accel::intersect_batch`]) and the single-ray one agree even on a ray through an edge
+/// two triangles share.
+#[inline(always)]
+fn closer(t: f32, id: u32, best_t: f32, best_id: u32) -> bool {
+    t < best_t || (t == best_t && best_id != u32::MAX && id < best_id)
+}
+
 /// Ray–triangle distance, or +inf: obvhs's `RtTriangle::intersect` (Möller–Trumbore on
 /// precomputed edges) except that the barycentric test is `≥ 0` instead of a sign-bit test.
 /// The sign-bit test rejects −0.0, so a ray exactly on the edge two triangles share (the
 /// centre of a two-triangle rectangle seen straight on) missed both; here it hits one.
 #[inline(always)]
 fn intersect_triangle(tri: &RtTriangle, ray: &obvhs::ray::Ray) -> f32 {
-    let c = tri.v0 - ray.origin;
-    let r = ray.direction.cross(c);
-    let inv_det = 1.0 / tri.ng.dot(ray.direction);
-    let u = r.dot(tri.e2) * inv_det;
-    let v = r.dot(tri.e1) * inv_det;
-    let w = 1.0 - u - v;
-    if inv_det != 0.0 && u >= 0.0 && v >= 0.0 && w >= 0.0 {
-        let t = tri.ng.dot(c) * inv_det;
-        if t >= ray.tmin && t <= ray.tmax {
-            return t;
+    triangle_distance(
+        &TriScalars::of(tri),
+        [ray.origin.x, ray.origin.y, ray.origin.z],
+        [ray.direction.x, ray.direction.y, ray.direction.z],
+        ray.tmin,
+        ray.tmax,
+    )
+}
+
+/// A triangle's precomputed vectors as plain scalars (for [`triangle_distance`]).
+#[derive(Clone, Copy)]
+struct TriScalars {
+    v0: [f32; 3],
+    e1: [f32; 3],
+    e2: [f32; 3],
+    ng: [f32; 3],
+}
+
+impl TriScalars {
+    #[inline(always)]
+    fn of(t: &RtTriangle) -> Self {
+        let a = |v: glam::Vec3A| [v.x, v.y, v.z];
+        TriScalars {
+            v0: a(t.v0),
+            e1: a(t.e1),
+            e2: a(t.e2),
+            ng: a(t.ng),
         }
     }
-    f32::INFINITY
+}
+
+/// The ray–triangle test written out in scalar operations, branch-free, so that the single-ray
+/// test and the packet test ([`TriScalars`] against [`PACKET`] rays in SIMD lanes) are the
+/// same IEEE operations in the same order: a ray's distance is bit-identical either way.
+#[inline(always)]
+fn triangle_distance(tri: &TriScalars, o: [f32; 3], d: [f32; 3], tmin: f32, tmax: f32) -> f32 {
+    let c = [tri.v0[0] - o[0], tri.v0[1] - o[1], tri.v0[2] - o[2]];
+    // r = d × c
+    let r = [
+        d[1] * c[2] - d[2] * c[1],
+        d[2] * c[0] - d[0] * c[2],
+        d[0] * c[1] - d[1] * c[0],
+    ];
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let inv_det = 1.0 / dot(tri.ng, d);
+    let u = dot(r, tri.e2) * inv_det;
+    let v = dot(r, tri.e1) * inv_det;
+    let w = 1.0 - u - v;
+    let t = dot(tri.ng, c) * inv_det;
+    let hit = inv_det != 0.0 && u >= 0.0 && v >= 0.0 && w >= 0.0 && t >= tmin && t <= tmax;
+    if hit {
+        t
+    } else {
+        f32::INFINITY
+    }
+}
+
+/// Up to [`PACKET`] rays in struct-of-arrays form (lane i: ray i; unused lanes repeat ray 0).
+#[derive(Clone, Copy)]
+pub(super) struct RayLanes {
+    o: [[f32; PACKET]; 3],
+    d: [[f32; PACKET]; 3],
+    tmin: [f32; PACKET],
+    tmax: [f32; PACKET],
+}
+
+impl RayLanes {
+    /// Lanes of `rays` (at most [`PACKET`]; must not be empty).
+    pub(super) fn from_rays(rays: &[Ray]) -> Self {
+        let mut l = RayLanes {
+            o: [[0.0; PACKET]; 3],
+            d: [[0.0; PACKET]; 3],
+            tmin: [0.0; PACKET],
+            tmax: [0.0; PACKET],
+        };
+        for i in 0..PACKET {
+            let r = rays.get(i).unwrap_or(&rays[0]);
+            for k in 0..3 {
+                l.o[k][i] = r.origin[k];
+                l.d[k][i] = r.dir[k];
+            }
+            l.tmin[i] = r.tmin;
+            l.tmax[i] = r.tmax;
+        }
+        l
+    }
+
+    /// Lane i's closest distance so far (its ray's tmax until a hit).
+    #[inline(always)]
+    pub(super) fn tmax(&self, i: usize) -> f32 {
+        self.tmax[i]
+    }
+
+    fn new(rays: &[obvhs::ray::Ray]) -> Self {
+        let mut l = RayLanes {
+            o: [[0.0; PACKET]; 3],
+            d: [[0.0; PACKET]; 3],
+            tmin: [0.0; PACKET],
+            tmax: [0.0; PACKET],
+        };
+        for i in 0..PACKET {
+            let r = rays.get(i).unwrap_or(&rays[0]);
+            for k in 0..3 {
+                l.o[k][i] = r.origin[k];
+                l.d[k][i] = r.direction[k];
+            }
+            l.tmin[i] = r.tmin;
+            l.tmax[i] = r.tmax;
+        }
+        l
+    }
+
+    /// [`triangle_distance`] of every lane, then the [`closer`] update of each lane's
+    /// closest hit (`best`: triangle ids, distances in `tmax`); plain loops over the lanes
+    /// that compile to SIMD.
+    #[inline(always)]
+    fn test_triangle(&mut self, tri: &TriScalars, id: u32, best: &mut [u32; PACKET]) {
+        let mut t = [0.0f32; PACKET];
+        for (i, ti) in t.iter_mut().enumerate() {
+            *ti = triangle_distance(
+                tri,
+                [self.o[0][i], self.o[1][i], self.o[2][i]],
+                [self.d[0][i], self.d[1][i], self.d[2][i]],
+                self.tmin[i],
+                self.tmax[i],
+            );
+        }
+        for i in 0..PACKET {
+            let c = closer(t[i], id, self.tmax[i], best[i]);
+            best[i] = if c { id } else { best[i] };
+            self.tmax[i] = if c { t[i] } else { self.tmax[i] };
+        }
+    }
 }
 
 /// True if any triangle is hit (shadow rays: stops at the first hit).
@@ -440,7 +633,7 @@ fn cpu_has_avx2() -> bool {
 /// (`tests::avx2_traversal_matches_baseline`).
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::{intersect_triangle, RtTriangle};
+    use super::{closer, intersect_triangle, RayLanes, RtTriangle, TriScalars, PACKET};
     use glam::Vec3A;
     use obvhs::cwbvh::node::CwBvhNode;
     use obvhs::cwbvh::CwBvh;
@@ -470,12 +663,17 @@ mod x86 {
         }
     }
 
+    /// A node's quantised child planes widened to f32, once per node (shared by the rays of
+    /// a packet).
+    #[derive(Clone, Copy)]
+    struct NodePlanes {
+        lo: [__m256; 3],
+        hi: [__m256; 3],
+    }
+
     #[inline]
-    #[target_feature(enable = "avx2,popcnt,lzcnt")]
-    fn node_hits(node: &CwBvhNode, ray: &Ray, signs: &RaySigns, oct_inv4: u32) -> u32 {
-        let adj_dir_inv = node.compute_extent() * ray.inv_direction;
-        let adj_orig = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
-        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+    #[target_feature(enable = "avx2")]
+    fn node_planes(node: &CwBvhNode) -> NodePlanes {
         #[inline]
         #[target_feature(enable = "avx2")]
         fn widen(v: &[u8; 8]) -> __m256 {
@@ -486,9 +684,35 @@ mod x86 {
                 )))
             }
         }
+        NodePlanes {
+            lo: [
+                widen(&node.child_min_x),
+                widen(&node.child_min_y),
+                widen(&node.child_min_z),
+            ],
+            hi: [
+                widen(&node.child_max_x),
+                widen(&node.child_max_y),
+                widen(&node.child_max_z),
+            ],
+        }
+    }
+
+    /// Which of the node's eight child slots the ray's slab test hits (bit j: slot j).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn child_slots(
+        node: &CwBvhNode,
+        planes: &NodePlanes,
+        ray: &Ray,
+        signs: &RaySigns,
+        ray_tmax: f32,
+    ) -> u32 {
+        let adj_dir_inv = node.compute_extent() * ray.inv_direction;
+        let adj_orig = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
         // Near/far planes picked per ray with a blend instead of a branch per axis and node.
-        let slab = |lo: &[u8; 8], hi: &[u8; 8], neg: __m256, dinv: f32, orig: f32| {
-            let (q_lo, q_hi) = (widen(lo), widen(hi));
+        let slab = |axis: usize, dinv: f32, orig: f32| {
+            let (q_lo, q_hi, neg) = (planes.lo[axis], planes.hi[axis], signs.neg[axis]);
             let near = _mm256_blendv_ps(q_lo, q_hi, neg);
             let far = _mm256_blendv_ps(q_hi, q_lo, neg);
             let (d, o) = (_mm256_set1_ps(dinv), _mm256_set1_ps(orig));
@@ -497,41 +721,38 @@ mod x86 {
                 _mm256_add_ps(_mm256_mul_ps(far, d), o),
             )
         };
-        let (tmin_x, tmax_x) = slab(
-            &node.child_min_x,
-            &node.child_max_x,
-            signs.neg[0],
-            adj_dir_inv.x,
-            adj_orig.x,
-        );
-        let (tmin_y, tmax_y) = slab(
-            &node.child_min_y,
-            &node.child_max_y,
-            signs.neg[1],
-            adj_dir_inv.y,
-            adj_orig.y,
-        );
-        let (tmin_z, tmax_z) = slab(
-            &node.child_min_z,
-            &node.child_max_z,
-            signs.neg[2],
-            adj_dir_inv.z,
-            adj_orig.z,
-        );
+        let (tmin_x, tmax_x) = slab(0, adj_dir_inv.x, adj_orig.x);
+        let (tmin_y, tmax_y) = slab(1, adj_dir_inv.y, adj_orig.y);
+        let (tmin_z, tmax_z) = slab(2, adj_dir_inv.z, adj_orig.z);
         let tmin = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
         let tmax = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
         let tmin = _mm256_max_ps(tmin, _mm256_set1_ps(NODE_EPSILON));
-        let tmax = _mm256_min_ps(tmax, _mm256_set1_ps(ray.tmax));
-        let mut mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32;
+        let tmax = _mm256_min_ps(tmax, _mm256_set1_ps(ray_tmax));
+        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32
+    }
+
+    /// obvhs' node hit mask (child node bits in the high byte in traversal order, leaf
+    /// primitive bits below) from the hit slots.
+    #[inline]
+    #[target_feature(enable = "avx2,popcnt,lzcnt")]
+    fn slot_hit_bits(node: &CwBvhNode, mut slots: u32, oct_inv4: u32) -> u32 {
+        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
         let mut hit_mask = 0u32;
-        while mask != 0 {
-            let j = mask.trailing_zeros();
-            mask &= mask - 1;
+        while slots != 0 {
+            let j = slots.trailing_zeros();
+            slots &= slots - 1;
             let child_bits = ((child_bits8 >> (j * 8)) as u32) & 0xff;
             let bit_index = ((bit_index8 >> (j * 8)) as u32) & 0xff;
             hit_mask |= child_bits << bit_index;
         }
         hit_mask
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2,popcnt,lzcnt")]
+    fn node_hits(node: &CwBvhNode, ray: &Ray, signs: &RaySigns, oct_inv4: u32) -> u32 {
+        let slots = child_slots(node, &node_planes(node), ray, signs, ray.tmax);
+        slot_hit_bits(node, slots, oct_inv4)
     }
 
     /// CWBVH traversal with the AVX2 node test: obvhs' `traverse!` macro step for step (same
@@ -542,33 +763,22 @@ mod x86 {
     /// `popcnt`/`lzcnt` instructions (enabled together with AVX2: every AVX2 CPU has them,
     /// and [`super::cpu_has_avx2`] checks all of them).
     ///
-    /// `on_prim(id, ray)` tests primitive `id`, may shorten `ray.tmax`, and returns true to
-    /// stop the traversal (any-hit queries).
+    /// `node_mask(state, node)` is the node test (obvhs' hit mask for octant `oct_inv4`);
+    /// `on_prim(state, id)` tests primitive `id`, may shorten the ray(s) in `state`, and
+    /// returns true to stop the traversal (any-hit queries).
     #[inline(always)]
-    unsafe fn traverse_avx2(
+    unsafe fn traverse_avx2<S>(
         bvh: &CwBvh,
-        ray: &mut Ray,
-        mut on_prim: impl FnMut(u32, &mut Ray) -> bool,
+        oct_inv4: u32,
+        state: &mut S,
+        node_mask: impl Fn(&S, &CwBvhNode) -> u32,
+        mut on_prim: impl FnMut(&mut S, u32) -> bool,
     ) {
         const STACK_SIZE: usize = 32;
         if bvh.nodes.is_empty() {
             return;
         }
         let nodes = &bvh.nodes[..];
-        let oct_inv4 = (if ray.direction.x < 0.0 {
-            0
-        } else {
-            0x0404_0404u32
-        }) | if ray.direction.y < 0.0 {
-            0
-        } else {
-            0x0202_0202
-        } | if ray.direction.z < 0.0 {
-            0
-        } else {
-            0x0101_0101
-        };
-        let signs = ray_signs(ray);
         // Not zeroed per ray: every entry is written by a push before a pop reads it.
         let mut stack = [std::mem::MaybeUninit::<(u32, u32)>::uninit(); STACK_SIZE];
         let mut sp = 0usize;
@@ -580,7 +790,7 @@ mod x86 {
             while prim_bits != 0 {
                 let local = 31 - prim_bits.leading_zeros();
                 prim_bits &= !(1u32 << local);
-                if on_prim(prim_base + local, ray) {
+                if on_prim(state, prim_base + local) {
                     return;
                 }
             }
@@ -596,7 +806,7 @@ mod x86 {
                 let slot_index = (child_index_offset - 24) ^ (oct_inv4 & 0xff);
                 let relative_index = (hits_imask & !(0xffff_ffffu32 << slot_index)).count_ones();
                 let node = &nodes[(cur_base + relative_index) as usize];
-                let hitmask = node_hits(node, ray, &signs, oct_inv4);
+                let hitmask = node_mask(state, node);
                 cur_base = node.child_base_idx;
                 cur_bits = (hitmask & 0xff00_0000) | node.imask as u32;
                 prim_base = node.primitive_base_idx;
@@ -624,17 +834,70 @@ mod x86 {
         tris: &[RtTriangle],
         ray: Ray,
     ) -> Option<(f32, u32)> {
-        let mut traverse_ray = ray;
-        let mut best_id = u32::MAX;
-        traverse_avx2(bvh, &mut traverse_ray, |id, r| {
-            let t = intersect_triangle(&tris[id as usize], r);
-            if t < r.tmax {
-                best_id = id;
-                r.tmax = t;
-            }
-            false
-        });
-        (best_id != u32::MAX).then_some((traverse_ray.tmax, best_id))
+        let signs = ray_signs(&ray);
+        let oct_inv4 = octant_inv4(&ray);
+        let mut state = (ray, u32::MAX);
+        traverse_avx2(
+            bvh,
+            oct_inv4,
+            &mut state,
+            |(r, _), node| node_hits(node, r, &signs, oct_inv4),
+            |(r, best_id), id| {
+                let t = intersect_triangle(&tris[id as usize], r);
+                if closer(t, id, r.tmax, *best_id) {
+                    *best_id = id;
+                    r.tmax = t;
+                }
+                false
+            },
+        );
+        let (r, best_id) = state;
+        (best_id != u32::MAX).then_some((r.tmax, best_id))
+    }
+
+    /// Closest hits of up to [`PACKET`] rays in one traversal: a node's children are visited
+    /// if any ray of the packet hits them (each ray's own AVX2 node test, OR-ed), and each
+    /// leaf triangle is tested against every ray. Every ray thus tests a superset of the
+    /// triangles its own traversal would, with the same arithmetic and the [`closer`] rule,
+    /// so its hit is exactly the single-ray hit. Pays where the rays are coherent (one
+    /// pixel's reflections off a smooth surface: the node loads, decoding and branches are
+    /// shared, and the rays' tests overlap); `best[i]` returns ray i's triangle (u32::MAX: no
+    /// hit) and `rays[i].tmax` its distance.
+    ///
+    /// # Safety
+    /// As [`closest_hit_avx2`].
+    #[target_feature(enable = "avx2,popcnt,lzcnt")]
+    pub(super) unsafe fn closest_hit_packet_avx2(
+        bvh: &CwBvh,
+        tris: &[RtTriangle],
+        rays: &[Ray],
+        best: &mut [u32; PACKET],
+    ) -> [f32; PACKET] {
+        let n = rays.len().min(PACKET);
+        let mut signs = [ray_signs(&rays[0]); PACKET];
+        for (s, r) in signs.iter_mut().zip(&rays[..n]).skip(1) {
+            *s = ray_signs(r);
+        }
+        let oct_inv4 = octant_inv4(&rays[0]);
+        let mut lanes = RayLanes::new(&rays[..n]);
+        traverse_avx2(
+            bvh,
+            oct_inv4,
+            &mut (&mut lanes, &mut *best),
+            |(lanes, _), node| {
+                let planes = node_planes(node);
+                let mut slots = 0;
+                for (i, (r, s)) in rays[..n].iter().zip(&signs).enumerate() {
+                    slots |= child_slots(node, &planes, r, s, lanes.tmax[i]);
+                }
+                slot_hit_bits(node, slots, oct_inv4)
+            },
+            |(lanes, best), id| {
+                lanes.test_triangle(&TriScalars::of(&tris[id as usize]), id, best);
+                false
+            },
+        );
+        lanes.tmax
     }
 
     /// [`super::any_hit`] with the AVX2 node test.
@@ -643,13 +906,38 @@ mod x86 {
     /// As [`closest_hit_avx2`].
     #[target_feature(enable = "avx2,popcnt,lzcnt")]
     pub(super) unsafe fn any_hit_avx2(bvh: &CwBvh, tris: &[RtTriangle], ray: Ray) -> bool {
+        let signs = ray_signs(&ray);
+        let oct_inv4 = octant_inv4(&ray);
         let mut hit = false;
-        let mut r = ray;
-        traverse_avx2(bvh, &mut r, |id, r| {
-            hit = intersect_triangle(&tris[id as usize], r) < r.tmax;
-            hit
-        });
+        traverse_avx2(
+            bvh,
+            oct_inv4,
+            &mut hit,
+            |_, node| node_hits(node, &ray, &signs, oct_inv4),
+            |hit, id| {
+                *hit = intersect_triangle(&tris[id as usize], &ray) < ray.tmax;
+                *hit
+            },
+        );
         hit
+    }
+
+    /// obvhs' `oct_inv4`: per byte, the octant bits of the ray direction, inverted.
+    #[inline(always)]
+    fn octant_inv4(ray: &Ray) -> u32 {
+        (if ray.direction.x < 0.0 {
+            0
+        } else {
+            0x0404_0404u32
+        }) | if ray.direction.y < 0.0 {
+            0
+        } else {
+            0x0202_0202
+        } | if ray.direction.z < 0.0 {
+            0
+        } else {
+            0x0101_0101
+        }
     }
 }
 

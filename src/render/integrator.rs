@@ -134,16 +134,97 @@ pub(super) fn run_branches<B>(first: B, mut trace: impl FnMut(B, &mut Vec<B>) ->
 
 /// A path branch of the unpolarised integrator.
 #[derive(Clone, Copy)]
-struct Branch {
+pub(super) struct Branch {
     path: PathState,
     throughput: Spec,
+}
+
+/// One camera sample's path in a batch ([`trace_lanes`]): the branch being followed, what
+/// the path has collected so far, its random numbers and its wavelengths.
+#[derive(Clone, Copy)]
+pub(super) struct Lane {
+    branch: Branch,
+    radiance: Spec,
+    pub sampler: Sampler,
+    pub wl: SampledWavelengths,
+    /// D65 factor at the path's wavelengths (for the environment lookups).
+    d65: Spec,
+    /// The branch's ray awaits its closest hit.
+    active: bool,
+}
+
+impl Lane {
+    /// A path starting with camera ray `ray`; `d65`: the D65 factor at `wl`
+    /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]).
+    #[inline]
+    pub fn camera(ray: Ray, wl: SampledWavelengths, d65: Spec, sampler: Sampler) -> Self {
+        Lane {
+            branch: Branch {
+                path: PathState::camera(ray, None),
+                throughput: Spec::ONE,
+            },
+            radiance: Spec::ZERO,
+            sampler,
+            wl,
+            d65,
+            active: false,
+        }
+    }
+
+    /// Spectral radiance the path collected (complete after [`trace_lanes`]).
+    #[inline]
+    pub fn radiance(&self) -> Spec {
+        self.radiance
+    }
+}
+
+/// An infinite light seen by an escaped ray: `factor` · Le(`dir`) joins lane `lane`'s
+/// radiance once all lookups of the batch are made together.
+#[derive(Clone, Copy)]
+struct EnvRequest {
+    lane: u32,
+    light: u32,
+    dir: Vec3,
+    factor: Spec,
+}
+
+/// A light sample's contribution, added to lane `lane` if its shadow ray is unoccluded.
+#[derive(Clone, Copy)]
+struct ShadowRequest {
+    lane: u32,
+    ray: Ray,
+    contribution: Spec,
+}
+
+/// The paths of a batch and the reusable buffers of [`trace_lanes`] (one set per worker
+/// row, not per sample).
+#[derive(Default)]
+pub struct PathScratch {
+    /// The batch's paths, filled by the caller with [`Lane::camera`].
+    pub(super) lanes: Vec<Lane>,
+    /// Closest hit of each lane's camera ray.
+    pub(super) first_hits: Vec<Option<Hit>>,
+    /// Branches set aside at Fresnel splits, per lane.
+    pending: Vec<Vec<Branch>>,
+    env: Vec<EnvRequest>,
+    shadow: Vec<ShadowRequest>,
+    rays: Vec<Ray>,
+    lane_of: Vec<u32>,
+    hits: Vec<Option<Hit>>,
+    dirs: Vec<Vec3>,
+    lambdas: Vec<Spec>,
+    d65s: Vec<Spec>,
+    le: Vec<Spec>,
+    gathered: Vec<u32>,
+    le_gathered: Vec<Spec>,
 }
 
 /// Radiance along `ray` at the path's wavelengths. May terminate secondary wavelengths in
 /// `wl` (dispersion; never in a scene with Fresnel splitting on, whose branches share `wl`).
 ///
 /// `pixel`: the pixel a camera ray was generated in (its first hit may then come from the
-/// screen bins); None for any other ray.
+/// screen bins); None for any other ray. One path through [`trace_lanes`]: the same values
+/// as that path in any batch.
 pub fn li(
     scene: &PreparedScene,
     ray: Ray,
@@ -154,36 +235,28 @@ pub fn li(
 ) -> Spec {
     let hit = scene.intersect(&ray, pixel);
     counters.rays += 1;
-    li_from_first_hit(scene, ray, hit, wl, sampler, counters)
+    let mut scratch = PathScratch::default();
+    let d65 = Spec::from_array(
+        wl.lambda
+            .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
+    );
+    scratch.lanes.push(Lane::camera(ray, *wl, d65, *sampler));
+    scratch.first_hits.push(hit);
+    trace_lanes(scene, &mut scratch, counters);
+    let lane = &scratch.lanes[0];
+    *wl = lane.wl;
+    *sampler = lane.sampler;
+    lane.radiance
 }
 
-/// [`li`] for a camera ray whose first intersection `hit` the caller has already found (and
-/// counted): the batched camera stage of the renderer.
-pub fn li_from_first_hit(
-    scene: &PreparedScene,
-    ray: Ray,
-    hit: Option<Hit>,
-    wl: &mut SampledWavelengths,
-    sampler: &mut Sampler,
-    counters: &mut Counters,
-) -> Spec {
-    let first = Branch {
-        path: PathState::camera(ray, None),
-        throughput: Spec::ONE,
-    };
-    let mut first_hit = Some(hit);
-    run_branches(first, |b, pending| {
-        trace(scene, b, first_hit.take(), wl, sampler, counters, pending)
-    })
-}
-
-/// What camera rays that hit nothing see: the infinite lights, unless `hide_emitters`. Equal
-/// to [`li_from_first_hit`] with `hit` None, computed a stage at a time over a batch so the
-/// long dependency chains of several lookups overlap (directions first, then texels).
+/// What camera rays that hit nothing see: the infinite lights, unless `hide_emitters`; the
+/// value [`trace_lanes`] gives such a lane (factor 1), computed a stage at a time over a batch
+/// so the long dependency chains of several lookups overlap.
 pub fn escaped_camera_radiance(
     scene: &PreparedScene,
     dirs: &[Vec3],
-    wls: &[SampledWavelengths],
+    lambda: &[Spec],
+    d65: &[Spec],
     out: &mut [Spec],
 ) {
     out.fill(Spec::ZERO);
@@ -191,141 +264,295 @@ pub fn escaped_camera_radiance(
         return;
     }
     for &li in &scene.lights.infinite {
-        scene.lights.lights[li as usize].add_env_batch(dirs, wls, out);
+        scene.lights.lights[li as usize].add_env_batch(dirs, lambda, d65, out);
     }
 }
 
-/// Follows one branch to its end; returns what it collected, pushes split-off branches.
+/// Follows the paths of `scratch.lanes` to their ends; `scratch.first_hits[i]` is the
+/// closest hit of lane i's camera ray, already found (and counted) by the caller.
 ///
-/// `known_hit`: the intersection of the branch's first ray if already found (and counted).
-fn trace(
+/// A wavefront over the batch: in each round every lane still going processes the vertex its
+/// last ray found and asks for its next ray, and the round's rays are traced together
+/// ([`super::accel::Accel::intersect_batch`]: one packet traversal where they are coherent,
+/// as the reflections of one pixel's samples off a smooth surface are). Emitters seen by
+/// escaped rays and shadow rays are collected and resolved at the end, the environment
+/// lookups in SIMD lanes. A lane's result depends only on its own numbers: each lane adds its
+/// terms in its own order (vertex emission, then shadow-ray terms, then environment terms), so
+/// a batch of one ([`li`]) gives bit-identical values.
+pub(super) fn trace_lanes(
     scene: &PreparedScene,
-    mut b: Branch,
-    mut known_hit: Option<Option<Hit>>,
-    wl: &mut SampledWavelengths,
-    sampler: &mut Sampler,
+    scratch: &mut PathScratch,
     counters: &mut Counters,
+) {
+    let PathScratch {
+        lanes,
+        first_hits,
+        pending,
+        env,
+        shadow,
+        rays,
+        lane_of,
+        hits,
+        ..
+    } = scratch;
+    let n = lanes.len();
+    if pending.len() < n {
+        pending.resize_with(n, Vec::new);
+    }
+    env.clear();
+    shadow.clear();
+    for (i, (lane, &hit)) in lanes.iter_mut().zip(first_hits.iter()).enumerate() {
+        pending[i].clear();
+        lane.active = step(
+            scene,
+            i as u32,
+            lane,
+            hit,
+            &mut pending[i],
+            env,
+            shadow,
+            counters,
+        );
+    }
+    loop {
+        rays.clear();
+        lane_of.clear();
+        for (i, lane) in lanes.iter().enumerate() {
+            if lane.active {
+                rays.push(lane.branch.path.ray);
+                lane_of.push(i as u32);
+            }
+        }
+        if rays.is_empty() {
+            break;
+        }
+        counters.rays += rays.len() as u64;
+        scene.accel.intersect_batch(rays, hits);
+        for (&i, &hit) in lane_of.iter().zip(hits.iter()) {
+            let i = i as usize;
+            lanes[i].active = step(
+                scene,
+                i as u32,
+                &mut lanes[i],
+                hit,
+                &mut pending[i],
+                env,
+                shadow,
+                counters,
+            );
+        }
+    }
+    for r in shadow.iter() {
+        if !scene.accel.occluded(&r.ray) {
+            lanes[r.lane as usize].radiance += r.contribution;
+        }
+    }
+    resolve_env(scene, scratch);
+}
+
+/// Adds the environment terms of [`trace_lanes`]: every lookup of the batch at once per
+/// infinite light ([`super::lights::Light::add_env_batch`]), then each lane's terms in the
+/// order they arose.
+fn resolve_env(scene: &PreparedScene, scratch: &mut PathScratch) {
+    let PathScratch {
+        lanes,
+        env,
+        dirs,
+        lambdas,
+        d65s,
+        le,
+        gathered,
+        le_gathered,
+        ..
+    } = scratch;
+    if env.is_empty() {
+        return;
+    }
+    le.clear();
+    le.resize(env.len(), Spec::ZERO);
+    for &li in &scene.lights.infinite {
+        gathered.clear();
+        dirs.clear();
+        lambdas.clear();
+        d65s.clear();
+        for (k, r) in env.iter().enumerate() {
+            if r.light == li {
+                let lane = &lanes[r.lane as usize];
+                gathered.push(k as u32);
+                dirs.push(r.dir);
+                lambdas.push(Spec::from_array(lane.wl.lambda));
+                d65s.push(lane.d65);
+            }
+        }
+        le_gathered.clear();
+        le_gathered.resize(gathered.len(), Spec::ZERO);
+        scene.lights.lights[li as usize].add_env_batch(dirs, lambdas, d65s, le_gathered);
+        for (&k, &l) in gathered.iter().zip(le_gathered.iter()) {
+            le[k as usize] = l;
+        }
+    }
+    for (r, &l) in env.iter().zip(le.iter()) {
+        lanes[r.lane as usize].radiance += r.factor * l;
+    }
+}
+
+/// Processes the vertex that lane `index`'s ray found (`hit`: its closest hit) and moves the
+/// lane on: true if it has a new ray to trace, false once its path (every branch) has ended.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn step(
+    scene: &PreparedScene,
+    index: u32,
+    lane: &mut Lane,
+    hit: Option<Hit>,
     pending: &mut Vec<Branch>,
-) -> Spec {
+    env: &mut Vec<EnvRequest>,
+    shadow: &mut Vec<ShadowRequest>,
+    counters: &mut Counters,
+) -> bool {
+    if vertex(scene, index, lane, hit, pending, env, shadow, counters) {
+        return true;
+    }
+    match pending.pop() {
+        Some(b) => {
+            lane.branch = b;
+            true
+        }
+        None => false,
+    }
+}
+
+/// One vertex of the lane's current branch: emission seen, light sampling, BSDF sampling (or
+/// both lobes of a Fresnel pair). True if the branch goes on (its ray is the next one).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn vertex(
+    scene: &PreparedScene,
+    index: u32,
+    lane: &mut Lane,
+    hit: Option<Hit>,
+    pending: &mut Vec<Branch>,
+    env: &mut Vec<EnvRequest>,
+    shadow: &mut Vec<ShadowRequest>,
+    counters: &mut Counters,
+) -> bool {
+    let Lane {
+        branch: b,
+        radiance,
+        sampler,
+        wl,
+        ..
+    } = lane;
     let max_depth = scene.settings.max_depth;
     let lights = &scene.lights;
     let sel_pdf = lights.selection_pdf();
-    let mut radiance = Spec::ZERO;
+    let ray = b.path.ray;
 
-    loop {
-        let ray = b.path.ray;
-        let hit = match known_hit.take() {
-            Some(hit) => hit,
-            None => {
-                counters.rays += 1;
-                scene.intersect(&ray, b.path.pixel)
-            }
-        };
-
-        // ---- Emitter seen by this ray (environment on a miss, area light on a hit) ----
-        let Some(hit) = hit else {
-            if !(b.path.depth == 0 && scene.settings.hide_emitters) {
-                for &li in &lights.infinite {
-                    let light = &lights.lights[li as usize];
-                    let le = light.eval_env(ray.dir, wl);
-                    let w = b.path.emitter_hit_weight(|prev_p| {
-                        sel_pdf * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO)
-                    });
-                    radiance += b.throughput * le * w;
-                }
-            }
-            break;
-        };
-        let si = scene.accel.interaction(&ray, &hit);
-        if let Some(li) = lights.shape_light[si.shape as usize] {
-            // One-sided emission from the geometric front face.
-            if si.ng.dot(-ray.dir) > 0.0 && !(b.path.depth == 0 && scene.settings.hide_emitters) {
+    // ---- Emitter seen by this ray (environment on a miss, area light on a hit) ----
+    let Some(hit) = hit else {
+        if !(b.path.depth == 0 && scene.settings.hide_emitters) {
+            for &li in &lights.infinite {
                 let light = &lights.lights[li as usize];
-                if let super::lights::Light::Area { radiance: le, .. } = light {
-                    let w = b.path.emitter_hit_weight(|prev_p| {
-                        sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng)
-                    });
-                    radiance += b.throughput * le.eval(wl) * w;
-                }
+                let w = b.path.emitter_hit_weight(|prev_p| {
+                    sel_pdf * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO)
+                });
+                env.push(EnvRequest {
+                    lane: index,
+                    light: li,
+                    dir: ray.dir,
+                    factor: b.throughput * w,
+                });
             }
         }
-
-        // ---- Continue? (Mitsuba: depth + 1 < max_depth) ----
-        if max_depth >= 0 && b.path.depth as i64 + 1 >= max_depth as i64 {
-            break;
+        return false;
+    };
+    let si = scene.accel.interaction(&ray, &hit);
+    if let Some(li) = lights.shape_light[si.shape as usize] {
+        // One-sided emission from the geometric front face.
+        if si.ng.dot(-ray.dir) > 0.0 && !(b.path.depth == 0 && scene.settings.hide_emitters) {
+            let light = &lights.lights[li as usize];
+            if let super::lights::Light::Area { radiance: le, .. } = light {
+                let w = b.path.emitter_hit_weight(|prev_p| {
+                    sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng)
+                });
+                *radiance += b.throughput * le.eval(wl) * w;
+            }
         }
-        let bsdf: &Bsdf = &scene.bsdfs[scene.shape_bsdf[si.shape as usize] as usize];
-        let wi = si.shading.to_local(-ray.dir);
-        let ctx = ShadingCtx { wl, uv: si.uv };
+    }
 
-        // ---- Emitter sampling ----
-        if bsdf.has_smooth_component() && !lights.lights.is_empty() {
-            let n = lights.lights.len();
-            let pick = if n == 1 {
-                sampler.skip(1, 0);
-                0
-            } else {
-                ((sampler.next_1d() * n as f32) as usize).min(n - 1)
-            };
-            let light = &lights.lights[pick];
-            if let Some(ls) = light.sample(si.p, sampler.next_2d(), wl) {
-                let wo = si.shading.to_local(ls.wi);
-                let f = bsdf.eval(&ctx, wi, wo, counters);
-                if ls.pdf > 0.0 && f.max_element() > 0.0 && ls.radiance.max_element() > 0.0 {
-                    let origin = offset_ray_origin(si.p, si.ng, ls.wi);
-                    let tmax = if ls.dist.is_finite() {
-                        (ls.dist * (1.0 - 1e-4)).max(0.0)
-                    } else {
-                        f32::INFINITY
-                    };
-                    let shadow = Ray {
+    // ---- Continue? (Mitsuba: depth + 1 < max_depth) ----
+    if max_depth >= 0 && b.path.depth as i64 + 1 >= max_depth as i64 {
+        return false;
+    }
+    let bsdf: &Bsdf = &scene.bsdfs[scene.shape_bsdf[si.shape as usize] as usize];
+    let wi = si.shading.to_local(-ray.dir);
+    let ctx = ShadingCtx { wl, uv: si.uv };
+
+    // ---- Emitter sampling (the shadow ray is traced with the batch's others) ----
+    if bsdf.has_smooth_component() && !lights.lights.is_empty() {
+        let n = lights.lights.len();
+        let pick = if n == 1 {
+            sampler.skip(1, 0);
+            0
+        } else {
+            ((sampler.next_1d() * n as f32) as usize).min(n - 1)
+        };
+        let light = &lights.lights[pick];
+        if let Some(ls) = light.sample(si.p, sampler.next_2d(), wl) {
+            let wo = si.shading.to_local(ls.wi);
+            let f = bsdf.eval(&ctx, wi, wo, counters);
+            if ls.pdf > 0.0 && f.max_element() > 0.0 && ls.radiance.max_element() > 0.0 {
+                let origin = offset_ray_origin(si.p, si.ng, ls.wi);
+                let tmax = if ls.dist.is_finite() {
+                    (ls.dist * (1.0 - 1e-4)).max(0.0)
+                } else {
+                    f32::INFINITY
+                };
+                let light_pdf = sel_pdf * ls.pdf;
+                let w = if ls.delta {
+                    1.0
+                } else {
+                    mis_power(light_pdf, bsdf.pdf(wi, wo))
+                };
+                counters.shadow_rays += 1;
+                shadow.push(ShadowRequest {
+                    lane: index,
+                    ray: Ray {
                         origin,
                         dir: ls.wi,
                         tmin: 0.0,
                         tmax,
-                    };
-                    counters.shadow_rays += 1;
-                    if !scene.accel.occluded(&shadow) {
-                        let light_pdf = sel_pdf * ls.pdf;
-                        let w = if ls.delta {
-                            1.0
-                        } else {
-                            mis_power(light_pdf, bsdf.pdf(wi, wo))
-                        };
-                        radiance += b.throughput * f * ls.radiance * (w / light_pdf);
-                    }
-                }
-            }
-        } else {
-            // Keep the random stream layout fixed regardless of the branch.
-            sampler.skip(1, 1);
-        }
-
-        // ---- BSDF sampling, or both lobes of a Fresnel pair ----
-        let u1 = sampler.next_1d();
-        let u2 = sampler.next_2d();
-        if b.path.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
-            let [reflected, transmitted] = bsdf.split(&ctx, wi, counters);
-            b.path.splits += 1;
-            if let Some(bs) = reflected {
-                let mut r = b;
-                if advance(scene, &mut r, &si, wi, &bs, wl, sampler) {
-                    pending.push(r);
-                }
-            }
-            match transmitted {
-                Some(bs) if advance(scene, &mut b, &si, wi, &bs, wl, sampler) => continue,
-                _ => break,
+                    },
+                    contribution: b.throughput * f * ls.radiance * (w / light_pdf),
+                });
             }
         }
-        let Some(bs) = bsdf.sample(&ctx, wi, u1, u2, counters) else {
-            break;
-        };
-        if !advance(scene, &mut b, &si, wi, &bs, wl, sampler) {
-            break;
-        }
+    } else {
+        // Keep the random stream layout fixed regardless of the branch.
+        sampler.skip(1, 1);
     }
-    radiance
+
+    // ---- BSDF sampling, or both lobes of a Fresnel pair ----
+    let u1 = sampler.next_1d();
+    let u2 = sampler.next_2d();
+    if b.path.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
+        let [reflected, transmitted] = bsdf.split(&ctx, wi, counters);
+        b.path.splits += 1;
+        if let Some(bs) = reflected {
+            let mut r = *b;
+            if advance(scene, &mut r, &si, wi, &bs, wl, sampler) {
+                pending.push(r);
+            }
+        }
+        return match transmitted {
+            Some(bs) => advance(scene, b, &si, wi, &bs, wl, sampler),
+            None => false,
+        };
+    }
+    let Some(bs) = bsdf.sample(&ctx, wi, u1, u2, counters) else {
+        return false;
+    };
+    advance(scene, b, &si, wi, &bs, wl, sampler)
 }
 
 /// Moves branch `b` across vertex `si` along the sampled `bs`, with Russian roulette; false

@@ -228,7 +228,7 @@ fn atan2_fast2(y0: f32, x0: f32, y1: f32, x1: f32) -> (f32, f32) {
 }
 
 /// Lanes of the batched environment lookup ([`EnvMap::add_batch`]).
-pub(crate) const LANES: usize = 8;
+pub(crate) const LANES: usize = 16;
 
 /// [`atan2_fast`] lane by lane, branch-free: the same operations per lane, so the results
 /// are bit-identical where `special` is false; `special` marks lanes (NaN, or both
@@ -358,29 +358,33 @@ impl EnvMap {
     /// the operations are those of [`Self::eval`], so the values are bit-identical
     /// (`tests::batched_lookup_is_bit_identical`); lanes needing a special case (NaN, a
     /// pole, a non-finite sigmoid argument) take the scalar path.
-    pub fn add_batch(&self, dirs: &[Vec3], wls: &[SampledWavelengths], out: &mut [Spec]) {
-        for ((dirs, wls), out) in dirs
+    pub fn add_batch(&self, dirs: &[Vec3], lambda: &[Spec], d65: &[Spec], out: &mut [Spec]) {
+        for (((dirs, lambdas), d65s), out) in dirs
             .chunks(LANES)
-            .zip(wls.chunks(LANES))
+            .zip(lambda.chunks(LANES))
+            .zip(d65.chunks(LANES))
             .zip(out.chunks_mut(LANES))
         {
             let n = dirs.len();
             let mut d = [Vec3::X; LANES];
             d[..n].copy_from_slice(dirs);
-            let mut lambda = [[500.0f32; LANES]; 4];
-            for (i, wl) in wls.iter().enumerate() {
-                for (row, &l) in lambda.iter_mut().zip(&wl.lambda) {
-                    row[i] = l;
+            let mut l = [[500.0f32; LANES]; 4];
+            let mut w = [[0.0f32; LANES]; 4];
+            for i in 0..n {
+                for k in 0..4 {
+                    l[k][i] = lambdas[i][k];
+                    w[k][i] = d65s[i][k];
                 }
             }
             let (uv, mut scalar) = self.uv_lanes(&d);
-            let (spec, bad) = self.eval_lanes(&uv, &lambda);
+            let (spec, bad) = self.eval_lanes(&uv, &l, &w);
             for i in 0..n {
                 scalar[i] |= bad[i];
             }
             for i in 0..n {
                 out[i] += if scalar[i] {
-                    self.eval(dirs[i], &wls[i])
+                    let wl = SampledWavelengths::new(lambdas[i].to_array(), [1.0; 4]);
+                    self.eval(dirs[i], &wl)
                 } else {
                     Spec::new(spec[0][i], spec[1][i], spec[2][i], spec[3][i])
                 };
@@ -434,6 +438,7 @@ impl EnvMap {
         &self,
         uv: &[[f32; LANES]; 2],
         lambda: &[[f32; LANES]; 4],
+        d65: &[[f32; LANES]; 4],
     ) -> ([[f32; LANES]; 4], [bool; LANES]) {
         // Corner texels and bilinear weights per lane (gathers: scalar).
         let mut coef = [[[0.0f32; LANES]; 3]; 4];
@@ -456,10 +461,7 @@ impl EnvMap {
         let mut bad = [false; LANES];
         for k in 0..4 {
             let l = &lambda[k];
-            let mut d65 = [0.0f32; LANES];
-            for i in 0..LANES {
-                d65[i] = crate::spectrum::sampled::cmf_d65_f32(l[i])[3];
-            }
+            let d65 = &d65[k];
             let mut acc = [0.0f32; LANES];
             for t in 0..4 {
                 let [c0, c1, c2] = &coef[t];
@@ -521,7 +523,7 @@ impl EnvMap {
         // The four texels share the D65 factor: evaluate it once per wavelength.
         let d65 = Spec::from_array(
             wl.lambda
-                .map(|l| crate::spectrum::sampled::cmf_d65_f32(l)[3]),
+                .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
         );
         let lambda = Spec::from_array(wl.lambda);
         let mut out = Spec::ZERO;
@@ -621,13 +623,15 @@ impl Light {
         }
     }
 
-    /// `out[i] +=` [`Self::eval_env`]`(dirs[i], wls[i])` (batched for environment maps).
-    pub fn add_env_batch(&self, dirs: &[Vec3], wls: &[SampledWavelengths], out: &mut [Spec]) {
+    /// `out[i] +=` [`Self::eval_env`]`(dirs[i], λ = lambda[i])`, batched for environment
+    /// maps; `d65[i]`: the D65 factor at those wavelengths
+    /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]), which the caller has already looked up.
+    pub fn add_env_batch(&self, dirs: &[Vec3], lambda: &[Spec], d65: &[Spec], out: &mut [Spec]) {
         match self {
-            Light::Env(e) => e.add_batch(dirs, wls, out),
+            Light::Env(e) => e.add_batch(dirs, lambda, d65, out),
             Light::Constant(s) => {
-                for (o, wl) in out.iter_mut().zip(wls) {
-                    *o += s.eval(wl);
+                for (o, l) in out.iter_mut().zip(lambda) {
+                    *o += s.eval(&SampledWavelengths::new(l.to_array(), [1.0; 4]));
                 }
             }
             _ => {}
@@ -1010,12 +1014,27 @@ mod tests {
         let wls: Vec<SampledWavelengths> = (0..dirs.len())
             .map(|i| SampledWavelengths::sample_visible((i as f32 * 0.618_034).fract()))
             .collect();
+        let lambda: Vec<Spec> = wls.iter().map(|w| Spec::from_array(w.lambda)).collect();
+        let d65: Vec<Spec> = wls
+            .iter()
+            .map(|w| {
+                Spec::from_array(
+                    w.lambda
+                        .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
+                )
+            })
+            .collect();
         for env in &envs {
             for len in [1, 3, LANES, LANES + 1, dirs.len()] {
                 for start in (0..dirs.len()).step_by(len.max(97)) {
                     let end = (start + len).min(dirs.len());
                     let mut out = vec![Spec::splat(0.25); end - start];
-                    env.add_batch(&dirs[start..end], &wls[start..end], &mut out);
+                    env.add_batch(
+                        &dirs[start..end],
+                        &lambda[start..end],
+                        &d65[start..end],
+                        &mut out,
+                    );
                     for (i, o) in out.iter().enumerate() {
                         let d = dirs[start + i];
                         let want = Spec::splat(0.25) + env.eval(d, &wls[start + i]);

@@ -12,6 +12,7 @@
 //! the number of threads, and `sample_range` splits merge exactly (see [`film`]).
 
 pub mod accel;
+pub mod batch;
 pub mod bsdf;
 pub mod camera;
 pub mod effects;
@@ -142,6 +143,28 @@ impl PreparedScene {
         match (pixel, &self.primary_bins) {
             (Some([x, y]), Some(bins)) => bins.intersect(&self.accel, x, y, ray),
             _ => self.accel.intersect(ray),
+        }
+    }
+}
+
+impl PreparedScene {
+    /// Closest hits of camera rays generated in pixel (`x`, `y`), through the screen bins
+    /// when there are some (all rays of the pixel tested at once).
+    #[inline]
+    pub fn intersect_camera_batch(
+        &self,
+        rays: &[camera::Ray],
+        x: u32,
+        y: u32,
+        hits: &mut [Option<accel::Hit>],
+    ) {
+        match &self.primary_bins {
+            Some(bins) => bins.intersect_batch(&self.accel, x, y, rays, hits),
+            None => {
+                for (h, r) in hits.iter_mut().zip(rays) {
+                    *h = self.accel.intersect(r);
+                }
+            }
         }
     }
 }
@@ -306,103 +329,106 @@ fn trace_sample(
     (pos, SampledSpectrum(l.to_array()), wl)
 }
 
-/// Samples per batch of [`trace_batch`].
-const BATCH: usize = 8;
+use batch::BATCH;
 
 /// Samples `first..first + out.len()` (at most [`BATCH`]) of pixel (`x`, `y`) with the
-/// unpolarised integrator, stage by stage: camera samples, first hits, escaped rays (the
-/// environment lookups as one batch), paths of the rays that hit, film values. Per sample the
-/// same operations as [`trace_sample`] (bit-identical results); grouping them lets the CPU
-/// overlap independent samples' long arithmetic chains, which one sample at a time could not.
-/// Writes (film position, finite linear sRGB) per sample.
+/// unpolarised integrator, stage by stage: camera samples ([`batch::CameraBatch`]), first hits
+/// (all rays of the pixel against its screen bin at once), the environment seen by rays that
+/// escape (one batch of lookups), the paths of the rays that hit (one wavefront,
+/// [`integrator::trace_lanes`]), film values. Per sample the values of [`trace_sample`], bit
+/// for bit. Writes (film position, finite linear sRGB) per sample.
+#[allow(clippy::too_many_arguments)]
 fn trace_batch(
     scene: &PreparedScene,
+    pixel: &sampler::PixelSampler,
     x: u32,
     y: u32,
     first: u32,
     out: &mut [(Vec2, [f32; 3])],
+    scratch: &mut integrator::PathScratch,
     counters: &mut Counters,
 ) {
     let m = out.len();
     debug_assert!(m <= BATCH);
-    // Camera samples in stages (numbers, wavelengths, rays), over all BATCH lanes for fixed
-    // trip counts: lanes past `m` repeat the last sample and are ignored. Plain loops over
-    // arrays of Copy values (building them with `array::from_fn` cost store-forwarding
-    // stalls on every element).
-    let mut samplers = [sampler::Sampler::new(scene.sampler, x, y, first, scene.seed); BATCH];
-    for (i, sampler) in samplers.iter_mut().enumerate().skip(1) {
-        let s = first + i.min(m - 1) as u32;
-        *sampler = sampler::Sampler::new(scene.sampler, x, y, s, scene.seed);
-    }
-    let mut numbers = [(0u32, Vec2::ZERO); BATCH];
-    for (n, sampler) in numbers.iter_mut().zip(&mut samplers) {
-        *n = sampler.camera_sample(!scene.effects.dispersion);
-    }
-    let mut wls = [SampledWavelengths::new([0.0; 4], [0.0; 4]); BATCH];
-    for (wl, n) in wls.iter_mut().zip(&numbers) {
-        *wl = sample_visible_wavelengths(hero_wavelength_u(n.0));
-    }
-    let size = Vec2::new(scene.width as f32, scene.height as f32);
-    let mut pos = [Vec2::ZERO; BATCH];
-    for (p, n) in pos.iter_mut().zip(&numbers) {
-        *p = Vec2::new(x as f32 + n.1.x, y as f32 + n.1.y);
-    }
-    let mut rays = [camera::Ray {
-        origin: glam::Vec3::ZERO,
-        dir: glam::Vec3::Z,
-        tmin: 0.0,
-        tmax: 0.0,
-    }; BATCH];
-    for (ray, p) in rays.iter_mut().zip(&pos) {
-        *ray = scene.camera.generate_ray(*p / size);
+    let cam = batch::CameraBatch::generate(
+        &scene.camera,
+        pixel,
+        x,
+        y,
+        scene.width,
+        scene.height,
+        first,
+        m,
+        !scene.effects.dispersion,
+    );
+    let mut rays = [cam.ray(0); BATCH];
+    for (i, r) in rays.iter_mut().enumerate().take(m).skip(1) {
+        *r = cam.ray(i);
     }
     let mut hits = [None; BATCH];
-    for (hit, ray) in hits.iter_mut().zip(&rays[..m]) {
-        *hit = scene.intersect(ray, Some([x, y]));
-    }
+    scene.intersect_camera_batch(&rays[..m], x, y, &mut hits[..m]);
     counters.rays += m as u64;
+
+    // Rays that escape see the infinite lights (one batch of lookups); the others start paths.
     let mut radiance = [Spec::ZERO; BATCH];
-    // Escaped rays, gathered so their environment lookups run as one batch.
+    let mut pdf = [[0.0f32; 4]; BATCH];
     let mut miss_dirs = [glam::Vec3::ZERO; BATCH];
-    let mut miss_wls = [SampledWavelengths::new([0.0; 4], [0.0; 4]); BATCH];
+    let mut miss_lambda = [Spec::ZERO; BATCH];
+    let mut miss_d65 = [Spec::ZERO; BATCH];
     let mut miss_index = [0usize; BATCH];
     let mut n_miss = 0;
+    let mut hit_index = [0usize; BATCH];
+    scratch.lanes.clear();
+    scratch.first_hits.clear();
     for i in 0..m {
-        if hits[i].is_none() {
-            miss_dirs[n_miss] = rays[i].dir;
-            miss_wls[n_miss] = wls[i];
-            miss_index[n_miss] = i;
-            n_miss += 1;
+        pdf[i] = [0, 1, 2, 3].map(|k| cam.pdf[k][i]);
+        match hits[i] {
+            None => {
+                miss_dirs[n_miss] = cam.direction(i);
+                miss_lambda[n_miss] = Spec::new(
+                    cam.lambda[0][i],
+                    cam.lambda[1][i],
+                    cam.lambda[2][i],
+                    cam.lambda[3][i],
+                );
+                miss_d65[n_miss] = cam.d65(i);
+                miss_index[n_miss] = i;
+                n_miss += 1;
+            }
+            hit => {
+                hit_index[scratch.lanes.len()] = i;
+                scratch.lanes.push(integrator::Lane::camera(
+                    rays[i],
+                    cam.wavelengths(i),
+                    cam.d65(i),
+                    cam.samplers[i],
+                ));
+                scratch.first_hits.push(hit);
+            }
         }
     }
     let mut miss_radiance = [Spec::ZERO; BATCH];
     integrator::escaped_camera_radiance(
         scene,
         &miss_dirs[..n_miss],
-        &miss_wls[..n_miss],
+        &miss_lambda[..n_miss],
+        &miss_d65[..n_miss],
         &mut miss_radiance[..n_miss],
     );
     for (&i, &l) in miss_index[..n_miss].iter().zip(&miss_radiance) {
         radiance[i] = l;
     }
-    for i in 0..m {
-        if let Some(hit) = hits[i] {
-            radiance[i] = integrator::li_from_first_hit(
-                scene,
-                rays[i],
-                Some(hit),
-                &mut wls[i],
-                &mut samplers[i],
-                counters,
-            );
+    if !scratch.lanes.is_empty() {
+        integrator::trace_lanes(scene, scratch, counters);
+        for (&i, lane) in hit_index.iter().zip(&scratch.lanes) {
+            radiance[i] = lane.radiance();
+            // A dispersive refraction may have terminated secondary wavelengths.
+            pdf[i] = lane.wl.pdf;
         }
     }
     for (i, o) in out.iter_mut().enumerate() {
-        let rgb = finite_rgb(
-            sample_to_rgb(SampledSpectrum(radiance[i].to_array()), &wls[i]),
-            counters,
-        );
-        *o = (pos[i], rgb);
+        let rgb = finite_rgb(cam.to_rgb(i, radiance[i], pdf[i]), counters);
+        *o = (Vec2::new(cam.pos[0][i], cam.pos[1][i]), rgb);
     }
 }
 
@@ -542,14 +568,25 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         let rows = (2 * reach + 1) as usize;
         let mut buf = vec![[0.0f32; 4]; if reach == 0 { w } else { rows * w }];
         let mut batch = [(Vec2::ZERO, [0.0f32; 3]); BATCH];
+        let mut scratch = integrator::PathScratch::default();
         for x in 0..w {
+            let pixel = sampler::PixelSampler::new(scene.sampler, x as u32, y as u32, scene.seed);
             for (i, s) in (s0..s1).enumerate() {
                 // The unpolarised integrator runs BATCH samples at a time (same values).
                 let k = i % BATCH;
                 if scene.polarized.is_none() {
                     if k == 0 {
                         let m = BATCH.min(n - i);
-                        trace_batch(scene, x as u32, y as u32, s, &mut batch[..m], &mut counters);
+                        trace_batch(
+                            scene,
+                            &pixel,
+                            x as u32,
+                            y as u32,
+                            s,
+                            &mut batch[..m],
+                            &mut scratch,
+                            &mut counters,
+                        );
                     }
                 } else {
                     let (pos, l, wl) = trace_sample(scene, x as u32, y as u32, s, &mut counters);
@@ -701,7 +738,16 @@ mod tests {
             for len in [BATCH, 3, 1] {
                 let mut batch = vec![(Vec2::ZERO, [0.0f32; 3]); len];
                 let mut c_batch = Counters::default();
-                trace_batch(&p, x, y, 5, &mut batch, &mut c_batch);
+                trace_batch(
+                    &p,
+                    &sampler::PixelSampler::new(p.sampler, x, y, p.seed),
+                    x,
+                    y,
+                    5,
+                    &mut batch,
+                    &mut integrator::PathScratch::default(),
+                    &mut c_batch,
+                );
                 let mut c_single = Counters::default();
                 for (i, &(pos, rgb)) in batch.iter().enumerate() {
                     let (want_pos, l, wl) = trace_sample(&p, x, y, 5 + i as u32, &mut c_single);

@@ -2,10 +2,11 @@
 //! the film inside its own pixel, so the only triangles it can hit are those whose projection
 //! overlaps that pixel. Binning each projected triangle (edge-function test against the
 //! pixel square grown by a margin far above f32 rounding) into the pixels it covers gives a
-//! short, complete candidate list per pixel; a camera ray then runs the BVH's own triangle test on that list only. The hit is
-//! the BVH's hit (same test, same closest-t rule; only exact ties between two triangles may
-//! resolve to the other one), found without a traversal: an empty pixel (background) costs a
-//! bounds check, a covered one a few triangle tests, front to back with early exit.
+//! short, complete candidate list per pixel; a camera ray then runs the BVH's own triangle
+//! test on that list only. The hit is the BVH's hit (same test, same closest-t rule with
+//! exact ties going to the smaller triangle id), found without a traversal: an empty pixel
+//! (background) costs a bounds check, a covered one a few triangle tests per ray, all rays of
+//! the pixel's batch tested together against each candidate.
 //!
 //! This is the screen-space "first-hit" shortcut of hybrid renderers (a visibility buffer
 //! made by binning instead of rasterising, so it is exact for any sample position inside the
@@ -14,9 +15,8 @@
 //! crossing the camera plane, a total footprint beyond [`MAX_ENTRIES_PER_PIXEL`] per pixel, or
 //! images beyond [`MAX_PIXELS`].
 
-use super::accel::{Accel, Hit, Prim};
+use super::accel::{Accel, Hit, Prim, RayLanes, PACKET};
 use super::camera::{PerspectiveCamera, Ray};
-use glam::Vec3A;
 
 /// Candidates beyond which a pixel is left to the BVH (deep depth complexity).
 pub const MAX_PER_PIXEL: usize = 64;
@@ -163,44 +163,79 @@ impl PrimaryBins {
     /// [`Accel::intersect`] (spheres included).
     #[inline]
     pub fn intersect(&self, accel: &Accel, x: u32, y: u32, ray: &Ray) -> Option<Hit> {
-        let k = self.camera.local_depth_rate(ray.dir);
+        let mut hit = [None];
+        self.intersect_batch(accel, x, y, std::slice::from_ref(ray), &mut hit);
+        hit[0]
+    }
+
+    /// Closest hits of camera rays generated inside pixel (`x`, `y`), `hits[i]` for
+    /// `rays[i]`, each the same hit as [`Accel::intersect`]'s. The pixel's candidates are
+    /// tested against all rays at once (SIMD lanes, [`PACKET`] rays at a time), nearest
+    /// first, until every ray's hit is nearer than the next candidate can be. (Out of line:
+    /// a batch-level stage, so profiles attribute it.)
+    #[inline(never)]
+    pub fn intersect_batch(
+        &self,
+        accel: &Accel,
+        x: u32,
+        y: u32,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) {
         let p = y as usize * self.width as usize + x as usize;
-        if x >= self.width || y >= self.height || self.bvh_pixel[p] || k.is_nan() || k <= 0.0 {
-            return accel.intersect(ray);
-        }
-        let r = obvhs::ray::Ray {
-            origin: Vec3A::from(ray.origin),
-            direction: Vec3A::from(ray.dir),
-            // Unused by the triangle test.
-            inv_direction: Vec3A::ZERO,
-            tmin: ray.tmin,
-            tmax: ray.tmax,
-        };
-        let mut best_t = ray.tmax;
-        let mut best = None;
-        let mut test = |tri: u32, best_t: &mut f32| {
-            let t = accel.triangle_distance(tri, &obvhs::ray::Ray { tmax: *best_t, ..r });
-            if t < *best_t {
-                *best_t = t;
-                best = Some(Hit {
-                    t,
-                    prim: Prim::Triangle(tri),
-                });
+        if x >= self.width || y >= self.height || self.bvh_pixel[p] {
+            for (h, r) in hits.iter_mut().zip(rays) {
+                *h = accel.intersect(r);
             }
-        };
-        for &tri in &self.crossing {
-            test(tri, &mut best_t);
+            return;
         }
         let list = &self.candidates[self.offsets[p] as usize..self.offsets[p + 1] as usize];
-        for c in list {
+        for (rays, hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
             // A hit at t has q.z = t·k; a triangle whose nearest vertex is deeper than the
-            // best hit cannot be nearer (with slack for rounding in k and the depths).
-            if c.depth > best_t * k * (1.0 + 1e-4) {
-                break;
+            // best hit cannot be nearer (with slack for rounding in k and the depths). Rays
+            // without a positive depth rate (never for a camera ray) use the BVH.
+            let mut k = [0.0f32; PACKET];
+            let mut binned = [false; PACKET];
+            for i in 0..rays.len() {
+                k[i] = self.camera.local_depth_rate(rays[i].dir) * (1.0 + 1e-4);
+                binned[i] = k[i] > 0.0;
             }
-            test(c.tri, &mut best_t);
+            if list.is_empty() && self.crossing.is_empty() {
+                for i in 0..rays.len() {
+                    hits[i] = if binned[i] {
+                        accel.closest_sphere(&rays[i], rays[i].tmax, None)
+                    } else {
+                        accel.intersect(&rays[i])
+                    };
+                }
+                continue;
+            }
+            let mut lanes = RayLanes::from_rays(rays);
+            let mut best = [u32::MAX; PACKET];
+            for &tri in &self.crossing {
+                accel.test_triangle_lanes(&mut lanes, tri, &mut best);
+            }
+            for c in list {
+                if (0..rays.len()).all(|i| !binned[i] || c.depth > lanes.tmax(i) * k[i]) {
+                    break;
+                }
+                accel.test_triangle_lanes(&mut lanes, c.tri, &mut best);
+            }
+            for i in 0..rays.len() {
+                hits[i] = if !binned[i] {
+                    accel.intersect(&rays[i])
+                } else if best[i] == u32::MAX {
+                    accel.closest_sphere(&rays[i], rays[i].tmax, None)
+                } else {
+                    let t = lanes.tmax(i);
+                    let hit = Hit {
+                        t,
+                        prim: Prim::Triangle(best[i]),
+                    };
+                    accel.closest_sphere(&rays[i], t, Some(hit))
+                };
+            }
         }
-        accel.closest_sphere(ray, best_t, best)
     }
 }
 

@@ -205,6 +205,102 @@ impl Sampler {
     }
 }
 
+/// The per-pixel part of [`Sampler::new`] and of the camera sample's scrambles, computed
+/// once per pixel: a pixel's samples differ only in their index. [`Self::sampler`] and
+/// [`Self::camera_samples`] give exactly what [`Sampler::new`] and
+/// [`Sampler::camera_sample`] give, sample by sample (`tests::pixel_sampler_matches_sampler`).
+#[derive(Debug, Clone, Copy)]
+pub struct PixelSampler {
+    kind: SamplerKind,
+    x: u32,
+    y: u32,
+    seed: u64,
+    pixel_seed: u32,
+    /// Sobol' camera sample: scramble seeds of film x, film y, the Owen-scrambled wavelength
+    /// number, and the digital shift of the wavelength grid.
+    camera_seeds: [u32; 4],
+}
+
+impl PixelSampler {
+    pub fn new(kind: SamplerKind, x: u32, y: u32, seed: u64) -> Self {
+        let base = Sampler::new(SamplerKind::Sobol, x, y, 0, seed);
+        // Dimension 0's seed (`Sampler::next_dim` at dim 0).
+        let dim0 = hash_u32(base.pixel_seed);
+        PixelSampler {
+            kind,
+            x,
+            y,
+            seed,
+            pixel_seed: base.pixel_seed,
+            camera_seeds: [
+                hash_u32(dim0 ^ 0x68bc_21eb),
+                hash_u32(dim0 ^ 0x02e5_be93),
+                hash_u32(dim0 ^ 0x967a_889b),
+                hash_u32(dim0 ^ 0x5bd1_e995),
+            ],
+        }
+    }
+
+    /// [`Sampler::new`] for sample `index` of this pixel.
+    #[inline]
+    pub fn sampler(&self, index: u32) -> Sampler {
+        match self.kind {
+            SamplerKind::Independent => Sampler::new(self.kind, self.x, self.y, index, self.seed),
+            SamplerKind::Sobol => Sampler {
+                kind: SamplerKind::Sobol,
+                pcg: Pcg32 { state: 0, inc: 1 },
+                index,
+                pixel_seed: self.pixel_seed,
+                dim: 0,
+            },
+        }
+    }
+
+    /// The camera samples of samples `first + i`, i < `N` ([`Sampler::camera_sample`] of
+    /// each): wavelength numbers and film jitter, and every sample's stream positioned after
+    /// them. With Sobol' the lanes are independent integer arithmetic (hashes, table lookups,
+    /// bit reversals) that compiles to SIMD.
+    #[inline]
+    pub fn camera_samples<const N: usize>(
+        &self,
+        first: u32,
+        wavelength_grid: bool,
+        bits: &mut [u32; N],
+        jitter: &mut [[f32; N]; 2],
+        samplers: &mut [Sampler; N],
+    ) {
+        if self.kind == SamplerKind::Independent {
+            for i in 0..N {
+                samplers[i] = self.sampler(first.wrapping_add(i as u32));
+                let (b, j) = samplers[i].camera_sample(wavelength_grid);
+                bits[i] = b;
+                jitter[0][i] = j.x;
+                jitter[1][i] = j.y;
+            }
+            return;
+        }
+        let [sx, sy, so, shift] = self.camera_seeds;
+        for i in 0..N {
+            let index = first.wrapping_add(i as u32);
+            let x = scrambled_vdc(index, sx);
+            let y = scrambled_sobol(1, index, sy);
+            let s2 = sobol_dim_reversed(2, index);
+            let owen = lk_hash(s2, so).reverse_bits();
+            bits[i] = if wavelength_grid {
+                ((s2.reverse_bits() ^ shift) & !3) | (owen >> 30)
+            } else {
+                owen
+            };
+            jitter[0][i] = to_unit(x);
+            jitter[1][i] = to_unit(y);
+        }
+        for (i, s) in samplers.iter_mut().enumerate() {
+            *s = self.sampler(first.wrapping_add(i as u32));
+            s.dim = 1;
+        }
+    }
+}
+
 /// A 32-bit avalanche hash (Wellons' lowbias32).
 #[inline]
 fn hash_u32(mut x: u32) -> u32 {
@@ -340,6 +436,35 @@ fn sobol_dim_reversed(dim: usize, i: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pixel_sampler_matches_sampler() {
+        for kind in [SamplerKind::Independent, SamplerKind::Sobol] {
+            for (x, y, seed) in [(0, 0, 0), (17, 3, 5), (255, 1000, u64::MAX)] {
+                let pixel = PixelSampler::new(kind, x, y, seed);
+                for grid in [false, true] {
+                    for first in [0u32, 8, 1000, u32::MAX - 20] {
+                        let mut bits = [0u32; 16];
+                        let mut jitter = [[0.0f32; 16]; 2];
+                        let mut samplers = [pixel.sampler(0); 16];
+                        pixel.camera_samples(first, grid, &mut bits, &mut jitter, &mut samplers);
+                        for i in 0..16u32 {
+                            let s = first.wrapping_add(i);
+                            let mut want = Sampler::new(kind, x, y, s, seed);
+                            let (b, j) = want.camera_sample(grid);
+                            let i = i as usize;
+                            assert_eq!((bits[i], jitter[0][i], jitter[1][i]), (b, j.x, j.y));
+                            let mut got = samplers[i];
+                            for _ in 0..5 {
+                                assert_eq!(got.next_u32(), want.next_u32());
+                                assert_eq!(got.next_2d(), want.next_2d());
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn streams_are_reproducible_and_distinct() {

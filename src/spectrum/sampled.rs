@@ -33,9 +33,10 @@ static CMF_D65_F32: [[f32; 4]; super::N_TABLE_NM] = {
     out
 };
 
-/// Linear-sRGB matching functions per nm, (r̄, ḡ, b̄, 0) = XYZ→sRGB · (x̄, ȳ, z̄) divided by
+/// Linear-sRGB matching functions per nm, (r̄, ḡ, b̄) = XYZ→sRGB · (x̄, ȳ, z̄) divided by
 /// the Monte-Carlo normalisation N·∫ȳ: a sample's RGB is Σ_k rgb̄(λ_k)·L_k/p(λ_k) directly,
-/// without the XYZ step and its f64 matrix product.
+/// without the XYZ step and its f64 matrix product. The fourth column is D65 as in
+/// [`CMF_D65_F32`], so one interpolated row serves both the film and the RGB illuminants.
 static RGB_CMF_F32: [[f32; 4]; super::N_TABLE_NM] = {
     let cmf = &super::tables::CIE_CMF_1NM;
     let m = &super::XYZ_TO_SRGB;
@@ -49,6 +50,7 @@ static RGB_CMF_F32: [[f32; 4]; super::N_TABLE_NM] = {
             out[i][r] = ((m[r][0] * c[0] + m[r][1] * c[1] + m[r][2] * c[2]) * norm) as f32;
             r += 1;
         }
+        out[i][3] = (super::tables::CIE_D65_1NM[i] / super::RGB_ILLUMINANT_D65_NORM) as f32;
         i += 1;
     }
     out
@@ -74,6 +76,14 @@ fn lerp_table(table: &[[f32; 4]; super::N_TABLE_NM], lambda_nm: f32) -> glam::Ve
 #[inline]
 pub fn cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
     lerp_table(&CMF_D65_F32, lambda_nm).to_array()
+}
+
+/// (r̄, ḡ, b̄, D65/[`super::RGB_ILLUMINANT_D65_NORM`]) at `lambda_nm`: the film's linear-sRGB
+/// matching functions (as in [`SampledSpectrum::to_linear_srgb`]) and the D65 factor of
+/// [`cmf_d65_f32`], bit for bit, from one interpolated row.
+#[inline]
+pub fn rgb_cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
+    lerp_table(&RGB_CMF_F32, lambda_nm).to_array()
 }
 
 /// Wavelengths carried by one path.
@@ -360,6 +370,18 @@ impl std::iter::Sum for SampledSpectrum {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rgb_cmf_d65_column_is_the_cmf_d65_factor() {
+        // The batch camera reads D65 from the RGB row; it must be the very value the
+        // single-ray path reads from the XYZ row, or 1- and N-lane renders would differ.
+        for i in 0..=5000 {
+            let lambda = 355.0 + i as f32 * 0.0951;
+            let a = rgb_cmf_d65_f32(lambda)[3];
+            let b = cmf_d65_f32(lambda)[3];
+            assert_eq!(a.to_bits(), b.to_bits(), "λ = {lambda}");
+        }
+    }
 
     #[test]
     fn rgb_table_matches_xyz_then_matrix() {

@@ -1,0 +1,218 @@
+//! A pixel's camera samples in struct-of-arrays form: the first stage of the renderer's
+//! per-pixel batch ([`super::trace_batch`]).
+//!
+//! [`BATCH`] samples of one pixel share their pixel, camera origin and scramble seeds, and
+//! their camera steps are the same arithmetic on different numbers: sample numbers
+//! ([`PixelSampler::camera_samples`]), hero wavelengths, film positions, ray directions
+//! ([`PerspectiveCamera::generate_rays`]) and the colour-matching rows of their wavelengths.
+//! Written as loops over lanes, each step compiles to SIMD (16 lanes are one AVX-512 or two
+//! AVX2 registers). Every lane's values are bit-identical to those of the one-sample functions
+//! ([`super::camera_sample`]; test `render::tests::batched_samples_equal_single_samples`).
+//!
+//! The rows (r̄, ḡ, b̄, D65) at a sample's wavelengths are looked up once here and used twice:
+//! by the environment lookups of every ray of the path (the D65 factor of RGB illuminants)
+//! and by the film (the sample's RGB).
+
+use super::camera::{PerspectiveCamera, Ray};
+use super::sampler::{PixelSampler, Sampler};
+use super::texture::Spec;
+use crate::spectrum::{SampledWavelengths, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+use glam::Vec3;
+
+/// Samples of one pixel traced together.
+pub const BATCH: usize = 16;
+
+/// Lane values, one per sample of the batch.
+pub type Lanes = [f32; BATCH];
+
+/// Camera samples `first .. first + n` of one pixel.
+pub struct CameraBatch {
+    pub n: usize,
+    /// Film position in pixels.
+    pub pos: [Lanes; 2],
+    /// The four wavelengths (nm) and their pdfs, `[k][lane]`.
+    pub lambda: [Lanes; 4],
+    pub pdf: [Lanes; 4],
+    /// (r̄, ḡ, b̄, D65) at wavelength k: `rows[k][channel][lane]`
+    /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]).
+    pub rows: [[Lanes; 4]; 4],
+    pub origin: Vec3,
+    pub dir: [Lanes; 3],
+    pub tmin: Lanes,
+    pub tmax: Lanes,
+    /// Each sample's stream, positioned after the camera dimensions.
+    pub samplers: [Sampler; BATCH],
+}
+
+impl CameraBatch {
+    /// The camera samples `first .. first + n` (n ≤ [`BATCH`]) of pixel (`x`, `y`). Lanes
+    /// from `n` on hold further samples of the pixel and are ignored.
+    #[allow(clippy::too_many_arguments)]
+    pub fn generate(
+        camera: &PerspectiveCamera,
+        pixel: &PixelSampler,
+        x: u32,
+        y: u32,
+        width: u32,
+        height: u32,
+        first: u32,
+        n: usize,
+        wavelength_grid: bool,
+    ) -> Self {
+        debug_assert!(n <= BATCH);
+        let mut bits = [0u32; BATCH];
+        let mut jitter = [[0.0f32; BATCH]; 2];
+        let mut samplers = [pixel.sampler(first); BATCH];
+        pixel.camera_samples(
+            first,
+            wavelength_grid,
+            &mut bits,
+            &mut jitter,
+            &mut samplers,
+        );
+        let mut u = [0.0f32; BATCH];
+        for (u, &b) in u.iter_mut().zip(&bits) {
+            *u = super::hero_wavelength_u(b);
+        }
+        let (lambda, pdf) = sample_visible_wavelengths_lanes(&u);
+        let mut rows = [[[0.0f32; BATCH]; 4]; 4];
+        for k in 0..4 {
+            for i in 0..BATCH {
+                let row = crate::spectrum::sampled::rgb_cmf_d65_f32(lambda[k][i]);
+                for c in 0..4 {
+                    rows[k][c][i] = row[c];
+                }
+            }
+        }
+        let mut pos = [[0.0f32; BATCH]; 2];
+        let mut film_uv = [[0.0f32; BATCH]; 2];
+        let size = [width as f32, height as f32];
+        for i in 0..BATCH {
+            pos[0][i] = x as f32 + jitter[0][i];
+            pos[1][i] = y as f32 + jitter[1][i];
+            film_uv[0][i] = pos[0][i] / size[0];
+            film_uv[1][i] = pos[1][i] / size[1];
+        }
+        let (dir, tmin, tmax) = camera.generate_rays(&film_uv);
+        CameraBatch {
+            n,
+            pos,
+            lambda,
+            pdf,
+            rows,
+            origin: camera.origin(),
+            dir,
+            tmin,
+            tmax,
+            samplers,
+        }
+    }
+
+    /// Lane `i`'s camera ray.
+    #[inline]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray {
+            origin: self.origin,
+            dir: self.direction(i),
+            tmin: self.tmin[i],
+            tmax: self.tmax[i],
+        }
+    }
+
+    #[inline]
+    pub fn direction(&self, i: usize) -> Vec3 {
+        Vec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i])
+    }
+
+    /// Lane `i`'s wavelengths.
+    #[inline]
+    pub fn wavelengths(&self, i: usize) -> SampledWavelengths {
+        SampledWavelengths::new(
+            [0, 1, 2, 3].map(|k| self.lambda[k][i]),
+            [0, 1, 2, 3].map(|k| self.pdf[k][i]),
+        )
+    }
+
+    /// D65 factor at lane `i`'s four wavelengths.
+    #[inline]
+    pub fn d65(&self, i: usize) -> Spec {
+        Spec::new(
+            self.rows[0][3][i],
+            self.rows[1][3][i],
+            self.rows[2][3][i],
+            self.rows[3][3][i],
+        )
+    }
+
+    /// Linear sRGB of lane `i`'s spectral radiance `l` with wavelength pdfs `pdf` (those of
+    /// [`Self::wavelengths`], or fewer after a dispersive refraction): Σ_k rgb̄(λ_k)·L_k/p_k
+    /// over the wavelengths with p_k > 0, the operations of
+    /// [`crate::spectrum::SampledSpectrum::to_linear_srgb`].
+    #[inline]
+    pub fn to_rgb(&self, i: usize, l: Spec, pdf: [f32; 4]) -> [f32; 3] {
+        let l = l.to_array();
+        let mut rgb = [0.0f32; 3];
+        for k in 0..4 {
+            if pdf[k] == 0.0 {
+                continue;
+            }
+            let s = l[k] / pdf[k];
+            for (c, v) in rgb.iter_mut().enumerate() {
+                *v += self.rows[k][c][i] * s;
+            }
+        }
+        rgb
+    }
+}
+
+/// [`super::sample_visible_wavelengths`] for [`BATCH`] numbers u at once, `[k][lane]`: the
+/// same operations per lane (so the same values bit for bit), in loops over lanes.
+fn sample_visible_wavelengths_lanes(u: &Lanes) -> ([Lanes; 4], [Lanes; 4]) {
+    const VISIBLE_PDF_NORM: f32 = 0.003_939_804;
+    let (lo, hi) = (LAMBDA_MIN_NM as f32, LAMBDA_MAX_NM as f32);
+    let mut lambda = [[0.0f32; BATCH]; 4];
+    let mut pdf = [[0.0f32; BATCH]; 4];
+    for k in 0..4 {
+        let offset = k as f32 * 0.25;
+        let mut x = [0.0f32; BATCH];
+        let mut ratio = [0.0f32; BATCH];
+        for i in 0..BATCH {
+            let up = u[i] + offset;
+            let up = if up > 1.0 { up - 1.0 } else { up };
+            x[i] = 0.856_910_6 - 1.827_502 * up;
+            ratio[i] = (1.0 + x[i]) / (1.0 - x[i]);
+        }
+        let ln = ln_fast_lanes(&ratio);
+        for i in 0..BATCH {
+            lambda[k][i] = 538.0 - 138.888_89 * (0.5 * ln[i]);
+            pdf[k][i] = VISIBLE_PDF_NORM * (1.0 - x[i] * x[i]);
+        }
+        for i in 0..BATCH {
+            // f32 rounding can overshoot the range ends by ~1e-4 nm (rare: scalar fix-up).
+            let l_in = lambda[k][i].clamp(lo, hi);
+            if l_in != lambda[k][i] {
+                lambda[k][i] = l_in;
+                pdf[k][i] = crate::spectrum::visible_wavelengths_pdf(l_in);
+            }
+        }
+    }
+    (lambda, pdf)
+}
+
+/// [`super::ln_fast4`] lane by lane (the same integer and float operations).
+#[inline]
+fn ln_fast_lanes(x: &Lanes) -> Lanes {
+    const SQRT_HALF_BITS: u32 = 0x3f35_04f3;
+    let mut out = [0.0f32; BATCH];
+    for i in 0..BATCH {
+        let bits = x[i].to_bits();
+        let e = (bits.wrapping_sub(SQRT_HALF_BITS) as i32) >> 23;
+        let m = f32::from_bits(bits.wrapping_sub((e as u32) << 23));
+        let e = e as f32;
+        let s = (m - 1.0) / (m + 1.0);
+        let s2 = s * s;
+        let p = 1.0 + s2 * (1.0 / 3.0 + s2 * (1.0 / 5.0 + s2 * (1.0 / 7.0 + s2 * (1.0 / 9.0))));
+        out[i] = e * std::f32::consts::LN_2 + 2.0 * s * p;
+    }
+    out
+}

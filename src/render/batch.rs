@@ -76,13 +76,8 @@ impl CameraBatch {
         }
         let (lambda, pdf) = sample_visible_wavelengths_lanes(&u);
         let mut rows = [[[0.0f32; BATCH]; 4]; 4];
-        for k in 0..4 {
-            for i in 0..BATCH {
-                let row = crate::spectrum::sampled::rgb_cmf_d65_f32(lambda[k][i]);
-                for c in 0..4 {
-                    rows[k][c][i] = row[c];
-                }
-            }
+        for (rows, lambda) in rows.iter_mut().zip(&lambda) {
+            *rows = crate::spectrum::sampled::rgb_cmf_d65_f32_lanes(lambda);
         }
         let mut pos = [[0.0f32; BATCH]; 2];
         let mut film_uv = [[0.0f32; BATCH]; 2];
@@ -163,6 +158,36 @@ impl CameraBatch {
         }
         rgb
     }
+
+    /// D65 factors of every lane, `[k][lane]`.
+    #[inline]
+    pub fn d65_lanes(&self) -> [Lanes; 4] {
+        [0, 1, 2, 3].map(|k| self.rows[k][3])
+    }
+
+    /// [`Self::to_rgb`] of every lane at once (`l[k][lane]`, `pdf[k][lane]`), `[channel][lane]`:
+    /// the same operations per lane, so the same values bit for bit (a skipped wavelength
+    /// adds +0 to a sum that starts at +0).
+    #[inline]
+    pub fn to_rgb_lanes(&self, l: &[Lanes; 4], pdf: &[Lanes; 4]) -> [Lanes; 3] {
+        let mut rgb = [[0.0f32; BATCH]; 3];
+        for k in 0..4 {
+            let mut s = [0.0f32; BATCH];
+            for i in 0..BATCH {
+                s[i] = if pdf[k][i] == 0.0 {
+                    0.0
+                } else {
+                    l[k][i] / pdf[k][i]
+                };
+            }
+            for (c, rgb) in rgb.iter_mut().enumerate() {
+                for i in 0..BATCH {
+                    rgb[i] += self.rows[k][c][i] * s[i];
+                }
+            }
+        }
+        rgb
+    }
 }
 
 /// [`super::sample_visible_wavelengths`] for [`BATCH`] numbers u at once, `[k][lane]`: the
@@ -187,12 +212,18 @@ fn sample_visible_wavelengths_lanes(u: &Lanes) -> ([Lanes; 4], [Lanes; 4]) {
             lambda[k][i] = 538.0 - 138.888_89 * (0.5 * ln[i]);
             pdf[k][i] = VISIBLE_PDF_NORM * (1.0 - x[i] * x[i]);
         }
+        // f32 rounding can overshoot the range ends by ~1e-4 nm (rare: scalar fix-up).
+        let mut outside = false;
         for i in 0..BATCH {
-            // f32 rounding can overshoot the range ends by ~1e-4 nm (rare: scalar fix-up).
-            let l_in = lambda[k][i].clamp(lo, hi);
-            if l_in != lambda[k][i] {
-                lambda[k][i] = l_in;
-                pdf[k][i] = crate::spectrum::visible_wavelengths_pdf(l_in);
+            outside |= !(lambda[k][i] >= lo && lambda[k][i] <= hi);
+        }
+        if outside {
+            for i in 0..BATCH {
+                let l_in = lambda[k][i].clamp(lo, hi);
+                if l_in != lambda[k][i] {
+                    lambda[k][i] = l_in;
+                    pdf[k][i] = crate::spectrum::visible_wavelengths_pdf(l_in);
+                }
             }
         }
     }

@@ -16,6 +16,7 @@ use super::accel::Hit;
 use super::bsdf::{Bsdf, BsdfSample, Counters, ShadingCtx};
 use super::camera::Ray;
 use super::geometry::{mis_power, offset_ray_origin, SurfaceInteraction};
+use super::lights::LANES;
 use super::sampler::Sampler;
 use super::texture::Spec;
 use super::PreparedScene;
@@ -265,6 +266,32 @@ pub fn escaped_camera_radiance(
     }
     for &li in &scene.lights.infinite {
         scene.lights.lights[li as usize].add_env_batch(dirs, lambda, d65, out);
+    }
+}
+
+/// [`escaped_camera_radiance`] for a batch in struct-of-arrays form (`dir[axis][lane]`,
+/// `lambda[k][lane]`, `d65[k][lane]`): `out[k][i]` for the lanes marked `escaped`, the others
+/// left as they are.
+pub fn escaped_camera_radiance_lanes(
+    scene: &PreparedScene,
+    dir: &[[f32; LANES]; 3],
+    lambda: &[[f32; LANES]; 4],
+    d65: &[[f32; LANES]; 4],
+    escaped: &[bool; LANES],
+    out: &mut [[f32; LANES]; 4],
+) {
+    for k in 0..4 {
+        for i in 0..LANES {
+            if escaped[i] {
+                out[k][i] = 0.0;
+            }
+        }
+    }
+    if scene.settings.hide_emitters {
+        return;
+    }
+    for &li in &scene.lights.infinite {
+        scene.lights.lights[li as usize].add_env_lanes(dir, lambda, d65, escaped, out);
     }
 }
 

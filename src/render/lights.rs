@@ -261,6 +261,9 @@ pub struct EnvMap {
     width: usize,
     height: usize,
     texels: Vec<RgbIlluminantSpectrum>,
+    /// The texels again as (c0, c1, c2, scale) rows: one 16-byte load per corner in the
+    /// batched lookups.
+    texel_rows: Vec<[f32; 4]>,
     scale: f32,
     to_world: Mat3,
     to_local: Mat3,
@@ -317,10 +320,15 @@ impl EnvMap {
                 func[i * w + j] = m * sin_theta;
             }
         }
+        let texel_rows = texels
+            .iter()
+            .map(|t| [t.poly.c[0], t.poly.c[1], t.poly.c[2], t.scale])
+            .collect();
         Ok(EnvMap {
             width: w,
             height: h,
             texels,
+            texel_rows,
             scale,
             to_world,
             to_local: to_world.inverse(),
@@ -366,40 +374,72 @@ impl EnvMap {
             .zip(out.chunks_mut(LANES))
         {
             let n = dirs.len();
-            let mut d = [Vec3::X; LANES];
-            d[..n].copy_from_slice(dirs);
+            let mut d = [[0.0f32; LANES]; 3];
+            d[0] = [1.0; LANES];
             let mut l = [[500.0f32; LANES]; 4];
             let mut w = [[0.0f32; LANES]; 4];
             for i in 0..n {
+                for c in 0..3 {
+                    d[c][i] = dirs[i][c];
+                }
                 for k in 0..4 {
                     l[k][i] = lambdas[i][k];
                     w[k][i] = d65s[i][k];
                 }
             }
-            let (uv, mut scalar) = self.uv_lanes(&d);
-            let (spec, bad) = self.eval_lanes(&uv, &l, &w);
-            for i in 0..n {
-                scalar[i] |= bad[i];
+            let mut active = [false; LANES];
+            active[..n].fill(true);
+            let mut sum = [[0.0f32; LANES]; 4];
+            self.add_lanes(&d, &l, &w, &active, &mut sum);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o += Spec::new(sum[0][i], sum[1][i], sum[2][i], sum[3][i]);
             }
-            for i in 0..n {
-                out[i] += if scalar[i] {
-                    let wl = SampledWavelengths::new(lambdas[i].to_array(), [1.0; 4]);
-                    self.eval(dirs[i], &wl)
-                } else {
-                    Spec::new(spec[0][i], spec[1][i], spec[2][i], spec[3][i])
-                };
+        }
+    }
+
+    /// [`Self::add_batch`] on one group of [`LANES`] lookups already in struct-of-arrays
+    /// form (`dir[axis][lane]`, `lambda[k][lane]`, `d65[k][lane]`): `out[k][i] +=` the
+    /// radiance of lane i where `active[i]`; inactive lanes are computed (their numbers must
+    /// be finite or NaN, nothing more) but left out.
+    pub fn add_lanes(
+        &self,
+        dir: &[[f32; LANES]; 3],
+        lambda: &[[f32; LANES]; 4],
+        d65: &[[f32; LANES]; 4],
+        active: &[bool; LANES],
+        out: &mut [[f32; LANES]; 4],
+    ) {
+        let (uv, mut scalar) = self.uv_lanes(dir);
+        let (mut spec, bad) = self.eval_lanes(&uv, lambda, d65);
+        for i in 0..LANES {
+            scalar[i] |= bad[i];
+        }
+        for i in 0..LANES {
+            if active[i] && scalar[i] {
+                let wl = SampledWavelengths::new([0, 1, 2, 3].map(|k| lambda[k][i]), [1.0; 4]);
+                let v = self.eval(Vec3::new(dir[0][i], dir[1][i], dir[2][i]), &wl);
+                for (k, row) in spec.iter_mut().enumerate() {
+                    row[i] = v[k];
+                }
+            }
+        }
+        for k in 0..4 {
+            for i in 0..LANES {
+                if active[i] {
+                    out[k][i] += spec[k][i];
+                }
             }
         }
     }
 
     /// [`Self::uv_of`] on [`LANES`] directions; `true` marks lanes whose atan2 needs the
     /// scalar special cases (NaN, or both arguments zero).
-    fn uv_lanes(&self, dirs: &[Vec3; LANES]) -> ([[f32; LANES]; 2], [bool; LANES]) {
+    fn uv_lanes(&self, dirs: &[[f32; LANES]; 3]) -> ([[f32; LANES]; 2], [bool; LANES]) {
         let m = &self.to_local;
         let (mut x, mut y, mut z) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
         for i in 0..LANES {
             // glam's Mat3 * Vec3 and Vec3::normalize, operation for operation.
-            let v = dirs[i];
+            let v = Vec3::new(dirs[0][i], dirs[1][i], dirs[2][i]);
             let lx = m.x_axis.x * v.x + m.y_axis.x * v.y + m.z_axis.x * v.z;
             let ly = m.x_axis.y * v.x + m.y_axis.y * v.y + m.z_axis.y * v.z;
             let lz = m.x_axis.z * v.x + m.y_axis.z * v.y + m.z_axis.z * v.z;
@@ -440,21 +480,19 @@ impl EnvMap {
         lambda: &[[f32; LANES]; 4],
         d65: &[[f32; LANES]; 4],
     ) -> ([[f32; LANES]; 4], [bool; LANES]) {
-        // Corner texels and bilinear weights per lane (gathers: scalar).
+        // Corner texels and bilinear weights per lane, then the corners' rows (gathers:
+        // scalar). Texels are finite and ≥ 0 (checked in `new`), so an unused corner (zero
+        // weight or zero scale) gets weight +0 and adds exactly +0, as skipping it would.
+        let (index, wgt) = self.bilinear_texels_lanes(uv);
         let mut coef = [[[0.0f32; LANES]; 3]; 4];
         let mut weight = [[0.0f32; LANES]; 4];
-        for i in 0..LANES {
-            for (t, (index, wgt)) in self
-                .bilinear_texels(uv[0][i], uv[1][i])
-                .into_iter()
-                .enumerate()
-            {
-                let texel = &self.texels[index];
-                let used = wgt > 0.0 && texel.scale > 0.0;
-                for (c, &v) in coef[t].iter_mut().zip(&texel.poly.c) {
-                    c[i] = if used { v } else { 0.0 };
-                }
-                weight[t][i] = if used { wgt * texel.scale } else { 0.0 };
+        for t in 0..4 {
+            for i in 0..LANES {
+                let row = self.texel_rows[index[t][i] as usize];
+                coef[t][0][i] = row[0];
+                coef[t][1][i] = row[1];
+                coef[t][2][i] = row[2];
+                weight[t][i] = wgt[t][i] * row[3];
             }
         }
         let mut out = [[0.0f32; LANES]; 4];
@@ -515,6 +553,49 @@ impl EnvMap {
             ((r0 + 1) * w + c0, (1.0 - fx) * fy),
             ((r0 + 1) * w + c1, fx * fy),
         ]
+    }
+
+    /// [`Self::bilinear_texels`] on [`LANES`] texture coordinates, `[corner][lane]`, with
+    /// the same arithmetic for u ∈ [0, 1) and v ∈ [0, 1] (what [`Self::uv_lanes`] gives; NaN
+    /// goes to texel 0 as there) but no branches, so that it compiles to SIMD.
+    #[inline]
+    fn bilinear_texels_lanes(
+        &self,
+        uv: &[[f32; LANES]; 2],
+    ) -> ([[u32; LANES]; 4], [[f32; LANES]; 4]) {
+        let (w, h) = (self.width as i32, self.height as i32);
+        let mut index = [[0u32; LANES]; 4];
+        let mut wgt = [[0.0f32; LANES]; 4];
+        for i in 0..LANES {
+            let x = uv[0][i] * w as f32 - 0.5;
+            let y = (uv[1][i] * (h - 1) as f32).clamp(0.0, (h - 1) as f32);
+            let mut xi = x as i32;
+            if (xi as f32) > x {
+                xi -= 1;
+            }
+            let fx = x - xi as f32;
+            // Wrap by one period either way, then clamp: in range for any input.
+            let c0 = if xi < 0 {
+                xi + w
+            } else if xi >= w {
+                xi - w
+            } else {
+                xi
+            }
+            .clamp(0, w - 1);
+            let c1 = if c0 + 1 == w { 0 } else { c0 + 1 };
+            let r0 = (y as i32).clamp(0, h - 2);
+            let fy = y - r0 as f32;
+            index[0][i] = (r0 * w + c0) as u32;
+            index[1][i] = (r0 * w + c1) as u32;
+            index[2][i] = ((r0 + 1) * w + c0) as u32;
+            index[3][i] = ((r0 + 1) * w + c1) as u32;
+            wgt[0][i] = (1.0 - fx) * (1.0 - fy);
+            wgt[1][i] = fx * (1.0 - fy);
+            wgt[2][i] = (1.0 - fx) * fy;
+            wgt[3][i] = fx * fy;
+        }
+        (index, wgt)
     }
 
     /// Radiance at texture coordinates `uv` ([`Self::uv_of`]).
@@ -632,6 +713,33 @@ impl Light {
             Light::Constant(s) => {
                 for (o, l) in out.iter_mut().zip(lambda) {
                     *o += s.eval(&SampledWavelengths::new(l.to_array(), [1.0; 4]));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// [`Self::add_env_batch`] on [`LANES`] lookups in struct-of-arrays form (see
+    /// [`EnvMap::add_lanes`]), for the lanes marked `active`.
+    pub fn add_env_lanes(
+        &self,
+        dir: &[[f32; LANES]; 3],
+        lambda: &[[f32; LANES]; 4],
+        d65: &[[f32; LANES]; 4],
+        active: &[bool; LANES],
+        out: &mut [[f32; LANES]; 4],
+    ) {
+        match self {
+            Light::Env(e) => e.add_lanes(dir, lambda, d65, active, out),
+            Light::Constant(s) => {
+                for i in 0..LANES {
+                    if active[i] {
+                        let l = [0, 1, 2, 3].map(|k| lambda[k][i]);
+                        let v = s.eval(&SampledWavelengths::new(l, [1.0; 4]));
+                        for (k, row) in out.iter_mut().enumerate() {
+                            row[i] += v[k];
+                        }
+                    }
                 }
             }
             _ => {}

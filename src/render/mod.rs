@@ -35,7 +35,6 @@ use film::{sample_to_rgb, tree_sum_in_place, Filter};
 use glam::{Vec2, Vec4};
 use rayon::prelude::*;
 use std::time::Instant;
-use texture::Spec;
 
 pub use effects::Effects;
 
@@ -369,32 +368,17 @@ fn trace_batch(
     scene.intersect_camera_batch(&rays[..m], x, y, &mut hits[..m]);
     counters.rays += m as u64;
 
-    // Rays that escape see the infinite lights (one batch of lookups); the others start paths.
-    let mut radiance = [Spec::ZERO; BATCH];
-    let mut pdf = [[0.0f32; 4]; BATCH];
-    let mut miss_dirs = [glam::Vec3::ZERO; BATCH];
-    let mut miss_lambda = [Spec::ZERO; BATCH];
-    let mut miss_d65 = [Spec::ZERO; BATCH];
-    let mut miss_index = [0usize; BATCH];
-    let mut n_miss = 0;
+    // Rays that escape see the infinite lights (one batch of lookups, straight on the camera
+    // batch's lanes); the others start paths.
+    let mut radiance = [[0.0f32; BATCH]; 4];
+    let mut pdf = cam.pdf;
+    let mut escaped = [false; BATCH];
     let mut hit_index = [0usize; BATCH];
     scratch.lanes.clear();
     scratch.first_hits.clear();
     for i in 0..m {
-        pdf[i] = [0, 1, 2, 3].map(|k| cam.pdf[k][i]);
         match hits[i] {
-            None => {
-                miss_dirs[n_miss] = cam.direction(i);
-                miss_lambda[n_miss] = Spec::new(
-                    cam.lambda[0][i],
-                    cam.lambda[1][i],
-                    cam.lambda[2][i],
-                    cam.lambda[3][i],
-                );
-                miss_d65[n_miss] = cam.d65(i);
-                miss_index[n_miss] = i;
-                n_miss += 1;
-            }
+            None => escaped[i] = true,
             hit => {
                 hit_index[scratch.lanes.len()] = i;
                 scratch.lanes.push(integrator::Lane::camera(
@@ -407,27 +391,30 @@ fn trace_batch(
             }
         }
     }
-    let mut miss_radiance = [Spec::ZERO; BATCH];
-    integrator::escaped_camera_radiance(
-        scene,
-        &miss_dirs[..n_miss],
-        &miss_lambda[..n_miss],
-        &miss_d65[..n_miss],
-        &mut miss_radiance[..n_miss],
-    );
-    for (&i, &l) in miss_index[..n_miss].iter().zip(&miss_radiance) {
-        radiance[i] = l;
+    if escaped.iter().any(|&e| e) {
+        integrator::escaped_camera_radiance_lanes(
+            scene,
+            &cam.dir,
+            &cam.lambda,
+            &cam.d65_lanes(),
+            &escaped,
+            &mut radiance,
+        );
     }
     if !scratch.lanes.is_empty() {
         integrator::trace_lanes(scene, scratch, counters);
         for (&i, lane) in hit_index.iter().zip(&scratch.lanes) {
-            radiance[i] = lane.radiance();
+            let l = lane.radiance();
             // A dispersive refraction may have terminated secondary wavelengths.
-            pdf[i] = lane.wl.pdf;
+            for k in 0..4 {
+                radiance[k][i] = l[k];
+                pdf[k][i] = lane.wl.pdf[k];
+            }
         }
     }
+    let rgb = cam.to_rgb_lanes(&radiance, &pdf);
     for (i, o) in out.iter_mut().enumerate() {
-        let rgb = finite_rgb(cam.to_rgb(i, radiance[i], pdf[i]), counters);
+        let rgb = finite_rgb([rgb[0][i], rgb[1][i], rgb[2][i]], counters);
         *o = (Vec2::new(cam.pos[0][i], cam.pos[1][i]), rgb);
     }
 }
@@ -630,8 +617,16 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         (buf, counters)
     };
 
-    let run =
-        || -> Vec<(Vec<[f32; 4]>, Counters)> { (0..h).into_par_iter().map(render_row).collect() };
+    // One row per task: rows cost very different amounts (background vs object), and
+    // rayon's adaptive splitting otherwise left one of two threads idle ~10 % of a teapot
+    // render (measured: 2-thread speed-up 1.77× → 1.94×).
+    let run = || -> Vec<(Vec<[f32; 4]>, Counters)> {
+        (0..h)
+            .into_par_iter()
+            .with_max_len(1)
+            .map(render_row)
+            .collect()
+    };
     let (rows, threads) = match options.threads {
         Some(t) => {
             if t == 0 {

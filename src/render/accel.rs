@@ -202,30 +202,47 @@ impl Accel {
     }
 
     /// Closest hits of a batch of rays (`hits[i]` for `rays[i]`, exactly [`Self::intersect`]'s
-    /// answers). Runs of up to [`PACKET`] coherent rays — directions within
-    /// [`PACKET_MIN_COS`] of the run's first — share one packet traversal; others are traced
-    /// one by one.
+    /// answers). Rays are grouped greedily into packets of up to [`PACKET`] coherent rays —
+    /// directions within [`PACKET_MIN_COS`] of the group's first, wherever they are in the
+    /// batch (a pixel's reflected and refracted rays come interleaved) — that share one
+    /// packet traversal; rays left alone are traced one by one.
     pub fn intersect_batch(&self, rays: &[Ray], hits: &mut Vec<Option<Hit>>) {
         hits.clear();
         #[cfg(target_arch = "x86_64")]
         if let (Some(bvh), true) = (&self.bvh, self.avx2) {
-            let mut start = 0;
-            while start < rays.len() {
-                let d0 = rays[start].dir;
-                let mut end = start + 1;
-                while end < rays.len()
-                    && end - start < PACKET
-                    && rays[end].dir.dot(d0) >= PACKET_MIN_COS
-                {
-                    end += 1;
-                }
-                if end - start == 1 {
-                    hits.push(self.intersect(&rays[start]));
+            hits.resize(rays.len(), None);
+            // Windows of 64 rays: `free` marks those not yet traced.
+            for (w, window) in rays.chunks(64).enumerate() {
+                let base = w * 64;
+                let mut free = if window.len() == 64 {
+                    u64::MAX
                 } else {
+                    (1u64 << window.len()) - 1
+                };
+                while free != 0 {
+                    let first = free.trailing_zeros() as usize;
+                    free &= free - 1;
+                    let d0 = window[first].dir;
+                    let mut members = [first; PACKET];
+                    let mut m = 1;
+                    let mut rest = free;
+                    while rest != 0 && m < PACKET {
+                        let j = rest.trailing_zeros() as usize;
+                        rest &= rest - 1;
+                        if window[j].dir.dot(d0) >= PACKET_MIN_COS {
+                            members[m] = j;
+                            m += 1;
+                            free &= !(1u64 << j);
+                        }
+                    }
+                    if m == 1 {
+                        hits[base + first] = self.intersect(&window[first]);
+                        continue;
+                    }
                     let mut packet =
                         [obvhs::ray::Ray::new_inf(Vec3::Z.into(), Vec3::Z.into()); PACKET];
-                    let m = end - start;
-                    for (p, r) in packet.iter_mut().zip(&rays[start..end]) {
+                    for (p, &j) in packet.iter_mut().zip(&members[..m]) {
+                        let r = &window[j];
                         *p = obvhs::ray::Ray::new(r.origin.into(), r.dir.into(), r.tmin, r.tmax);
                     }
                     let mut best = [u32::MAX; PACKET];
@@ -233,7 +250,8 @@ impl Accel {
                     let t = unsafe {
                         x86::closest_hit_packet_avx2(bvh, &self.rt_tris, &packet[..m], &mut best)
                     };
-                    for (i, r) in rays[start..end].iter().enumerate() {
+                    for (i, &j) in members[..m].iter().enumerate() {
+                        let r = &window[j];
                         let (tri_hit, tmax) = if best[i] != u32::MAX {
                             let hit = Hit {
                                 t: t[i],
@@ -243,10 +261,9 @@ impl Accel {
                         } else {
                             (None, r.tmax)
                         };
-                        hits.push(self.closest_sphere(r, tmax, tri_hit));
+                        hits[base + j] = self.closest_sphere(r, tmax, tri_hit);
                     }
                 }
-                start = end;
             }
             return;
         }

@@ -123,8 +123,14 @@ impl CameraBatch {
     #[inline]
     pub fn wavelengths(&self, i: usize) -> SampledWavelengths {
         SampledWavelengths::new(
-            [0, 1, 2, 3].map(|k| self.lambda[k][i]),
-            [0, 1, 2, 3].map(|k| self.pdf[k][i]),
+            // Written out: `[0, 1, 2, 3].map` was left as an out-of-line call.
+            [
+                self.lambda[0][i],
+                self.lambda[1][i],
+                self.lambda[2][i],
+                self.lambda[3][i],
+            ],
+            [self.pdf[0][i], self.pdf[1][i], self.pdf[2][i], self.pdf[3][i]],
         )
     }
 
@@ -162,7 +168,12 @@ impl CameraBatch {
     /// D65 factors of every lane, `[k][lane]`.
     #[inline]
     pub fn d65_lanes(&self) -> [Lanes; 4] {
-        [0, 1, 2, 3].map(|k| self.rows[k][3])
+        [
+            self.rows[0][3],
+            self.rows[1][3],
+            self.rows[2][3],
+            self.rows[3][3],
+        ]
     }
 
     /// [`Self::to_rgb`] of every lane at once (`l[k][lane]`, `pdf[k][lane]`), `[channel][lane]`:

@@ -8,7 +8,7 @@ use super::texture::{Spec, Spectrum};
 use crate::image_io::RgbImage;
 use crate::scene::{EmitterDesc, Geometry, Scene};
 use crate::spectrum::{RgbIlluminantSpectrum, SampledWavelengths};
-use glam::{Mat3, Vec2, Vec3, Vec4};
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::f32::consts::PI;
 
 /// Piecewise-constant 1-D distribution on [0, 1) (pbrt-v4 `PiecewiseConstant1D`).
@@ -227,8 +227,10 @@ fn atan2_fast2(y0: f32, x0: f32, y1: f32, x1: f32) -> (f32, f32) {
     (r.x, r.y)
 }
 
-/// Lanes of the batched environment lookup ([`EnvMap::add_batch`]).
+/// Lanes of the batched environment lookup ([`EnvMap::add_batch`]); a multiple of 4 (texel
+/// rows are transposed four at a time).
 pub(crate) const LANES: usize = 16;
+const _: () = assert!(LANES % 4 == 0);
 
 /// [`atan2_fast`] lane by lane, branch-free: the same operations per lane, so the results
 /// are bit-identical where `special` is false; `special` marks lanes (NaN, or both
@@ -486,13 +488,19 @@ impl EnvMap {
         let (index, wgt) = self.bilinear_texels_lanes(uv);
         let mut coef = [[[0.0f32; LANES]; 3]; 4];
         let mut weight = [[0.0f32; LANES]; 4];
+        let mut scale = [0.0f32; LANES];
         for t in 0..4 {
+            // Four lanes' rows at a time, transposed in registers (a 4×4 shuffle).
+            for i in (0..LANES).step_by(4) {
+                let row = |j: usize| Vec4::from(self.texel_rows[index[t][i + j] as usize]);
+                let m = Mat4::from_cols(row(0), row(1), row(2), row(3)).transpose();
+                for c in 0..3 {
+                    coef[t][c][i..i + 4].copy_from_slice(&m.col(c).to_array());
+                }
+                scale[i..i + 4].copy_from_slice(&m.col(3).to_array());
+            }
             for i in 0..LANES {
-                let row = self.texel_rows[index[t][i] as usize];
-                coef[t][0][i] = row[0];
-                coef[t][1][i] = row[1];
-                coef[t][2][i] = row[2];
-                weight[t][i] = wgt[t][i] * row[3];
+                weight[t][i] = wgt[t][i] * scale[i];
             }
         }
         let mut out = [[0.0f32; LANES]; 4];

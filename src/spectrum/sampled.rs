@@ -102,18 +102,31 @@ pub fn rgb_cmf_d65_f32_lanes<const N: usize>(lambda_nm: &[f32; N]) -> [[f32; N];
         }
     });
     let t: [f32; N] = std::array::from_fn(|i| x[i] - index[i] as f32);
-    let mut out = [[0.0f32; N]; 4];
-    for i in 0..N {
+    let row = |i: usize| {
         let a = glam::Vec4::from(RGB_CMF_F32[index[i] as usize]);
         let b = glam::Vec4::from(RGB_CMF_F32[index[i] as usize + 1]);
-        let row = if inside[i] {
+        if inside[i] {
             a + (b - a) * t[i]
         } else {
             glam::Vec4::ZERO
-        };
-        for (c, out) in out.iter_mut().enumerate() {
-            out[i] = row[c];
         }
+    };
+    let mut out = [[0.0f32; N]; 4];
+    let mut i = 0;
+    // Four lanes' rows at a time, transposed in registers (a 4×4 shuffle) into the channels.
+    while i + 4 <= N {
+        let m = glam::Mat4::from_cols(row(i), row(i + 1), row(i + 2), row(i + 3)).transpose();
+        for (c, out) in out.iter_mut().enumerate() {
+            out[i..i + 4].copy_from_slice(&m.col(c).to_array());
+        }
+        i += 4;
+    }
+    while i < N {
+        let r = row(i);
+        for (c, out) in out.iter_mut().enumerate() {
+            out[i] = r[c];
+        }
+        i += 1;
     }
     out
 }

@@ -130,7 +130,12 @@ impl CameraBatch {
                 self.lambda[2][i],
                 self.lambda[3][i],
             ],
-            [self.pdf[0][i], self.pdf[1][i], self.pdf[2][i], self.pdf[3][i]],
+            [
+                self.pdf[0][i],
+                self.pdf[1][i],
+                self.pdf[2][i],
+                self.pdf[3][i],
+            ],
         )
     }
 
@@ -224,10 +229,9 @@ fn sample_visible_wavelengths_lanes(u: &Lanes) -> ([Lanes; 4], [Lanes; 4]) {
             pdf[k][i] = VISIBLE_PDF_NORM * (1.0 - x[i] * x[i]);
         }
         // f32 rounding can overshoot the range ends by ~1e-4 nm (rare: scalar fix-up).
-        let mut outside = false;
-        for i in 0..BATCH {
-            outside |= !(lambda[k][i] >= lo && lambda[k][i] <= hi);
-        }
+        let outside = lambda[k]
+            .iter()
+            .fold(false, |out, &l| out | !(l >= lo && l <= hi));
         if outside {
             for i in 0..BATCH {
                 let l_in = lambda[k][i].clamp(lo, hi);

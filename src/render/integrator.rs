@@ -280,10 +280,10 @@ pub fn escaped_camera_radiance_lanes(
     escaped: &[bool; LANES],
     out: &mut [[f32; LANES]; 4],
 ) {
-    for k in 0..4 {
-        for i in 0..LANES {
-            if escaped[i] {
-                out[k][i] = 0.0;
+    for row in out.iter_mut() {
+        for (v, &e) in row.iter_mut().zip(escaped) {
+            if e {
+                *v = 0.0;
             }
         }
     }

@@ -494,8 +494,8 @@ impl EnvMap {
             for i in (0..LANES).step_by(4) {
                 let row = |j: usize| Vec4::from(self.texel_rows[index[t][i + j] as usize]);
                 let m = Mat4::from_cols(row(0), row(1), row(2), row(3)).transpose();
-                for c in 0..3 {
-                    coef[t][c][i..i + 4].copy_from_slice(&m.col(c).to_array());
+                for (c, coef) in coef[t].iter_mut().enumerate() {
+                    coef[i..i + 4].copy_from_slice(&m.col(c).to_array());
                 }
                 scale[i..i + 4].copy_from_slice(&m.col(3).to_array());
             }

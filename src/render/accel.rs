@@ -536,24 +536,24 @@ pub(super) struct RayLanes {
 }
 
 impl RayLanes {
-    /// Lanes of `rays` (at most [`PACKET`]; must not be empty).
-    pub(super) fn from_rays(rays: &[Ray]) -> Self {
-        let mut l = RayLanes {
-            o: [[0.0; PACKET]; 3],
-            d: [[0.0; PACKET]; 3],
-            tmin: [0.0; PACKET],
-            tmax: [0.0; PACKET],
-        };
-        for i in 0..PACKET {
-            let r = rays.get(i).unwrap_or(&rays[0]);
-            for k in 0..3 {
-                l.o[k][i] = r.origin[k];
-                l.d[k][i] = r.dir[k];
-            }
-            l.tmin[i] = r.tmin;
-            l.tmax[i] = r.tmax;
+    /// Lanes of rays sharing `origin`, given lane-wise.
+    #[inline]
+    pub(super) fn from_lanes(
+        origin: Vec3,
+        dir: &[[f32; PACKET]; 3],
+        tmin: &[f32; PACKET],
+        tmax: &[f32; PACKET],
+    ) -> Self {
+        RayLanes {
+            o: [
+                [origin.x; PACKET],
+                [origin.y; PACKET],
+                [origin.z; PACKET],
+            ],
+            d: *dir,
+            tmin: *tmin,
+            tmax: *tmax,
         }
-        l
     }
 
     /// Lane i's closest distance so far (its ray's tmax until a hit).

@@ -14,13 +14,15 @@
 //! and by the film (the sample's RGB).
 
 use super::camera::{PerspectiveCamera, Ray};
+use super::primary::PixelRays;
 use super::sampler::{PixelSampler, Sampler};
 use super::texture::Spec;
 use crate::spectrum::{SampledWavelengths, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
-use glam::Vec3;
 
 /// Samples of one pixel traced together.
 pub const BATCH: usize = 16;
+// A batch's camera rays are one packet of the screen-bin test and one group of env lookups.
+const _: () = assert!(BATCH == super::accel::PACKET && BATCH == super::lights::LANES);
 
 /// Lane values, one per sample of the batch.
 pub type Lanes = [f32; BATCH];
@@ -36,10 +38,8 @@ pub struct CameraBatch {
     /// (r̄, ḡ, b̄, D65) at wavelength k: `rows[k][channel][lane]`
     /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]).
     pub rows: [[Lanes; 4]; 4],
-    pub origin: Vec3,
-    pub dir: [Lanes; 3],
-    pub tmin: Lanes,
-    pub tmax: Lanes,
+    /// The camera rays.
+    pub rays: PixelRays,
     /// Each sample's stream, positioned after the camera dimensions.
     pub samplers: [Sampler; BATCH],
 }
@@ -95,10 +95,12 @@ impl CameraBatch {
             lambda,
             pdf,
             rows,
-            origin: camera.origin(),
-            dir,
-            tmin,
-            tmax,
+            rays: PixelRays {
+                origin: camera.origin(),
+                dir,
+                tmin,
+                tmax,
+            },
             samplers,
         }
     }
@@ -106,17 +108,7 @@ impl CameraBatch {
     /// Lane `i`'s camera ray.
     #[inline]
     pub fn ray(&self, i: usize) -> Ray {
-        Ray {
-            origin: self.origin,
-            dir: self.direction(i),
-            tmin: self.tmin[i],
-            tmax: self.tmax[i],
-        }
-    }
-
-    #[inline]
-    pub fn direction(&self, i: usize) -> Vec3 {
-        Vec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i])
+        self.rays.ray(i)
     }
 
     /// Lane `i`'s wavelengths.

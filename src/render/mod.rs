@@ -147,21 +147,22 @@ impl PreparedScene {
 }
 
 impl PreparedScene {
-    /// Closest hits of camera rays generated in pixel (`x`, `y`), through the screen bins
-    /// when there are some (all rays of the pixel tested at once).
+    /// Closest hits of the first `hits.len()` camera rays of a batch generated in pixel
+    /// (`x`, `y`), through the screen bins when there are some (all rays of the pixel tested
+    /// at once).
     #[inline]
-    pub fn intersect_camera_batch(
+    pub fn intersect_camera_lanes(
         &self,
-        rays: &[camera::Ray],
+        rays: &primary::PixelRays,
         x: u32,
         y: u32,
         hits: &mut [Option<accel::Hit>],
     ) {
         match &self.primary_bins {
-            Some(bins) => bins.intersect_batch(&self.accel, x, y, rays, hits),
+            Some(bins) => bins.intersect_lanes(&self.accel, x, y, rays, hits),
             None => {
-                for (h, r) in hits.iter_mut().zip(rays) {
-                    *h = self.accel.intersect(r);
+                for (i, h) in hits.iter_mut().enumerate() {
+                    *h = self.accel.intersect(&rays.ray(i));
                 }
             }
         }
@@ -360,12 +361,8 @@ fn trace_batch(
         m,
         !scene.effects.dispersion,
     );
-    let mut rays = [cam.ray(0); BATCH];
-    for (i, r) in rays.iter_mut().enumerate().take(m).skip(1) {
-        *r = cam.ray(i);
-    }
     let mut hits = [None; BATCH];
-    scene.intersect_camera_batch(&rays[..m], x, y, &mut hits[..m]);
+    scene.intersect_camera_lanes(&cam.rays, x, y, &mut hits[..m]);
     counters.rays += m as u64;
 
     // Rays that escape see the infinite lights (one batch of lookups, straight on the camera
@@ -382,7 +379,7 @@ fn trace_batch(
             hit => {
                 hit_index[scratch.lanes.len()] = i;
                 scratch.lanes.push(integrator::Lane::camera(
-                    rays[i],
+                    cam.ray(i),
                     cam.wavelengths(i),
                     cam.d65(i),
                     cam.samplers[i],
@@ -394,7 +391,7 @@ fn trace_batch(
     if escaped.iter().any(|&e| e) {
         integrator::escaped_camera_radiance_lanes(
             scene,
-            &cam.dir,
+            &cam.rays.dir,
             &cam.lambda,
             &cam.d65_lanes(),
             &escaped,

@@ -17,6 +17,7 @@
 
 use super::accel::{Accel, Hit, Prim, RayLanes, PACKET};
 use super::camera::{PerspectiveCamera, Ray};
+use glam::Vec3;
 
 /// Candidates beyond which a pixel is left to the BVH (deep depth complexity).
 pub const MAX_PER_PIXEL: usize = 64;
@@ -169,11 +170,8 @@ impl PrimaryBins {
     }
 
     /// Closest hits of camera rays generated inside pixel (`x`, `y`), `hits[i]` for
-    /// `rays[i]`, each the same hit as [`Accel::intersect`]'s. The pixel's candidates are
-    /// tested against all rays at once (SIMD lanes, [`PACKET`] rays at a time), nearest
-    /// first, until every ray's hit is nearer than the next candidate can be. (Out of line:
-    /// a batch-level stage, so profiles attribute it.)
-    #[inline(never)]
+    /// `rays[i]`, each the same hit as [`Accel::intersect`]'s ([`Self::intersect_lanes`],
+    /// [`PACKET`] rays at a time). Camera rays share the pinhole as origin.
     pub fn intersect_batch(
         &self,
         accel: &Accel,
@@ -182,59 +180,119 @@ impl PrimaryBins {
         rays: &[Ray],
         hits: &mut [Option<Hit>],
     ) {
+        for (rays, hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+            let mut lanes = PixelRays {
+                origin: rays[0].origin,
+                dir: [[0.0; PACKET]; 3],
+                tmin: [0.0; PACKET],
+                tmax: [0.0; PACKET],
+            };
+            for i in 0..PACKET {
+                let r = rays.get(i).unwrap_or(&rays[0]);
+                debug_assert_eq!(r.origin, lanes.origin);
+                for k in 0..3 {
+                    lanes.dir[k][i] = r.dir[k];
+                }
+                lanes.tmin[i] = r.tmin;
+                lanes.tmax[i] = r.tmax;
+            }
+            self.intersect_lanes(accel, x, y, &lanes, hits);
+        }
+    }
+
+    /// Closest hits of the first `hits.len()` (≤ [`PACKET`]) rays of `rays`, generated inside
+    /// pixel (`x`, `y`). The pixel's candidates are tested against all rays at once (SIMD
+    /// lanes), nearest first, until every ray's hit is nearer than the next candidate can
+    /// be. (Out of line: a batch-level stage, so profiles attribute it.)
+    #[inline(never)]
+    pub fn intersect_lanes(
+        &self,
+        accel: &Accel,
+        x: u32,
+        y: u32,
+        rays: &PixelRays,
+        hits: &mut [Option<Hit>],
+    ) {
+        let n = hits.len();
+        debug_assert!(n <= PACKET);
+        let ray = |i: usize| rays.ray(i);
         let p = y as usize * self.width as usize + x as usize;
         if x >= self.width || y >= self.height || self.bvh_pixel[p] {
-            for (h, r) in hits.iter_mut().zip(rays) {
-                *h = accel.intersect(r);
+            for (i, h) in hits.iter_mut().enumerate() {
+                *h = accel.intersect(&ray(i));
             }
             return;
         }
         let list = &self.candidates[self.offsets[p] as usize..self.offsets[p + 1] as usize];
-        for (rays, hits) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            // A hit at t has q.z = t·k; a triangle whose nearest vertex is deeper than the
-            // best hit cannot be nearer (with slack for rounding in k and the depths). Rays
-            // without a positive depth rate (never for a camera ray) use the BVH.
-            let mut k = [0.0f32; PACKET];
-            let mut binned = [false; PACKET];
-            for i in 0..rays.len() {
-                k[i] = self.camera.local_depth_rate(rays[i].dir) * (1.0 + 1e-4);
-                binned[i] = k[i] > 0.0;
-            }
-            if list.is_empty() && self.crossing.is_empty() {
-                for i in 0..rays.len() {
-                    hits[i] = if binned[i] {
-                        accel.closest_sphere(&rays[i], rays[i].tmax, None)
-                    } else {
-                        accel.intersect(&rays[i])
-                    };
-                }
-                continue;
-            }
-            let mut lanes = RayLanes::from_rays(rays);
-            let mut best = [u32::MAX; PACKET];
-            for &tri in &self.crossing {
-                accel.test_triangle_lanes(&mut lanes, tri, &mut best);
-            }
-            for c in list {
-                if (0..rays.len()).all(|i| !binned[i] || c.depth > lanes.tmax(i) * k[i]) {
-                    break;
-                }
-                accel.test_triangle_lanes(&mut lanes, c.tri, &mut best);
-            }
-            for i in 0..rays.len() {
-                hits[i] = if !binned[i] {
-                    accel.intersect(&rays[i])
-                } else if best[i] == u32::MAX {
-                    accel.closest_sphere(&rays[i], rays[i].tmax, None)
+        // A hit at t has q.z = t·k; a triangle whose nearest vertex is deeper than the best
+        // hit cannot be nearer (with slack for rounding in k and the depths). Rays without a
+        // positive depth rate (never for a camera ray) use the BVH.
+        let mut k = [0.0f32; PACKET];
+        let mut binned = [false; PACKET];
+        for i in 0..n {
+            k[i] = self.camera.local_depth_rate(rays.direction(i)) * (1.0 + 1e-4);
+            binned[i] = k[i] > 0.0;
+        }
+        if list.is_empty() && self.crossing.is_empty() {
+            for (i, h) in hits.iter_mut().enumerate() {
+                *h = if binned[i] {
+                    accel.closest_sphere(&ray(i), rays.tmax[i], None)
                 } else {
-                    let t = lanes.tmax(i);
-                    let hit = Hit {
-                        t,
-                        prim: Prim::Triangle(best[i]),
-                    };
-                    accel.closest_sphere(&rays[i], t, Some(hit))
+                    accel.intersect(&ray(i))
                 };
             }
+            return;
+        }
+        let mut lanes = RayLanes::from_lanes(rays.origin, &rays.dir, &rays.tmin, &rays.tmax);
+        let mut best = [u32::MAX; PACKET];
+        for &tri in &self.crossing {
+            accel.test_triangle_lanes(&mut lanes, tri, &mut best);
+        }
+        for c in list {
+            if (0..n).all(|i| !binned[i] || c.depth > lanes.tmax(i) * k[i]) {
+                break;
+            }
+            accel.test_triangle_lanes(&mut lanes, c.tri, &mut best);
+        }
+        for (i, h) in hits.iter_mut().enumerate() {
+            *h = if !binned[i] {
+                accel.intersect(&ray(i))
+            } else if best[i] == u32::MAX {
+                accel.closest_sphere(&ray(i), rays.tmax[i], None)
+            } else {
+                let t = lanes.tmax(i);
+                let hit = Hit {
+                    t,
+                    prim: Prim::Triangle(best[i]),
+                };
+                accel.closest_sphere(&ray(i), t, Some(hit))
+            };
+        }
+    }
+}
+
+/// [`PACKET`] camera rays of one pixel in lanes: the pinhole and per-lane directions and
+/// ranges (all lanes valid rays, also those past the ones asked about).
+pub struct PixelRays {
+    pub origin: Vec3,
+    pub dir: [[f32; PACKET]; 3],
+    pub tmin: [f32; PACKET],
+    pub tmax: [f32; PACKET],
+}
+
+impl PixelRays {
+    #[inline]
+    pub fn direction(&self, i: usize) -> Vec3 {
+        Vec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i])
+    }
+
+    #[inline]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray {
+            origin: self.origin,
+            dir: self.direction(i),
+            tmin: self.tmin[i],
+            tmax: self.tmax[i],
         }
     }
 }

@@ -161,13 +161,11 @@ impl ThinFilmX4 {
         for i in 0..4 {
             let n2c_64 = n2c_sq[i].sqrt();
             let two_beta = 2.0 * (n2c_64 * (2.0 * PI * d_64 / lambda_nm[i] as f64));
-            // Nearest multiple of π without libm `round` (no SSE4.1 at the baseline
-            // target); |2β/π| is far below 2⁶³. Ties may go either way: y stays in ±π/2.
-            let q = two_beta / PI;
-            let k = (q.abs() + 0.5) as i64;
-            let k = if q < 0.0 { -k } else { k };
-            y_a[i] = (two_beta - k as f64 * PI) as f32;
-            odd_a[i] = if k & 1 == 0 { 0.0 } else { 1.0 };
+            // Nearest multiple of π (one `vroundpd` where SSE4.1 is there); |2β/π| is far
+            // below 2⁵³, so k is an exact integer. Ties may go either way: y stays in ±π/2.
+            let k = (two_beta / PI).round_ties_even();
+            y_a[i] = (two_beta - k * PI) as f32;
+            odd_a[i] = if (k as i64) & 1 == 0 { 0.0 } else { 1.0 };
             n2c_a[i] = n2c_64 as f32;
         }
         let n2c = Vec4::from_array(n2c_a);

@@ -163,7 +163,8 @@ impl ThinFilmX4 {
             let two_beta = 2.0 * (n2c_64 * (2.0 * PI * d_64 / lambda_nm[i] as f64));
             // Nearest multiple of π (one `vroundpd` where SSE4.1 is there); |2β/π| is far
             // below 2⁵³, so k is an exact integer. Ties may go either way: y stays in ±π/2.
-            let k = (two_beta / PI).round_ties_even();
+            // (× 1/π, not ÷ π: k only needs to be a nearest integer, and y is exact given k.)
+            let k = (two_beta * std::f64::consts::FRAC_1_PI).round_ties_even();
             y_a[i] = (two_beta - k * PI) as f32;
             odd_a[i] = if (k as i64) & 1 == 0 { 0.0 } else { 1.0 };
             n2c_a[i] = n2c_64 as f32;

@@ -545,11 +545,7 @@ impl RayLanes {
         tmax: &[f32; PACKET],
     ) -> Self {
         RayLanes {
-            o: [
-                [origin.x; PACKET],
-                [origin.y; PACKET],
-                [origin.z; PACKET],
-            ],
+            o: [[origin.x; PACKET], [origin.y; PACKET], [origin.z; PACKET]],
             d: *dir,
             tmin: *tmin,
             tmax: *tmax,

@@ -142,26 +142,6 @@ impl CameraBatch {
         )
     }
 
-    /// Linear sRGB of lane `i`'s spectral radiance `l` with wavelength pdfs `pdf` (those of
-    /// [`Self::wavelengths`], or fewer after a dispersive refraction): Σ_k rgb̄(λ_k)·L_k/p_k
-    /// over the wavelengths with p_k > 0, the operations of
-    /// [`crate::spectrum::SampledSpectrum::to_linear_srgb`].
-    #[inline]
-    pub fn to_rgb(&self, i: usize, l: Spec, pdf: [f32; 4]) -> [f32; 3] {
-        let l = l.to_array();
-        let mut rgb = [0.0f32; 3];
-        for k in 0..4 {
-            if pdf[k] == 0.0 {
-                continue;
-            }
-            let s = l[k] / pdf[k];
-            for (c, v) in rgb.iter_mut().enumerate() {
-                *v += self.rows[k][c][i] * s;
-            }
-        }
-        rgb
-    }
-
     /// D65 factors of every lane, `[k][lane]`.
     #[inline]
     pub fn d65_lanes(&self) -> [Lanes; 4] {
@@ -173,9 +153,11 @@ impl CameraBatch {
         ]
     }
 
-    /// [`Self::to_rgb`] of every lane at once (`l[k][lane]`, `pdf[k][lane]`), `[channel][lane]`:
-    /// the same operations per lane, so the same values bit for bit (a skipped wavelength
-    /// adds +0 to a sum that starts at +0).
+    /// Linear sRGB of every lane's spectral radiance (`l[k][lane]`, wavelength pdfs
+    /// `pdf[k][lane]`: the batch's, or fewer after a dispersive refraction), `[channel][lane]`:
+    /// Σ_k rgb̄(λ_k)·L_k/p_k over the wavelengths with p_k > 0, per lane the operations of
+    /// [`crate::spectrum::SampledSpectrum::to_linear_srgb`], so the same values bit for bit
+    /// (a skipped wavelength adds +0 to a sum that starts at +0).
     #[inline]
     pub fn to_rgb_lanes(&self, l: &[Lanes; 4], pdf: &[Lanes; 4]) -> [Lanes; 3] {
         let mut rgb = [[0.0f32; BATCH]; 3];

@@ -250,28 +250,11 @@ pub fn li(
     lane.radiance
 }
 
-/// What camera rays that hit nothing see: the infinite lights, unless `hide_emitters`; the
-/// value [`trace_lanes`] gives such a lane (factor 1), computed a stage at a time over a batch
-/// so the long dependency chains of several lookups overlap.
-pub fn escaped_camera_radiance(
-    scene: &PreparedScene,
-    dirs: &[Vec3],
-    lambda: &[Spec],
-    d65: &[Spec],
-    out: &mut [Spec],
-) {
-    out.fill(Spec::ZERO);
-    if scene.settings.hide_emitters {
-        return;
-    }
-    for &li in &scene.lights.infinite {
-        scene.lights.lights[li as usize].add_env_batch(dirs, lambda, d65, out);
-    }
-}
-
-/// [`escaped_camera_radiance`] for a batch in struct-of-arrays form (`dir[axis][lane]`,
-/// `lambda[k][lane]`, `d65[k][lane]`): `out[k][i]` for the lanes marked `escaped`, the others
-/// left as they are.
+/// What camera rays that hit nothing see: the infinite lights, unless `hide_emitters` (the
+/// value [`trace_lanes`] gives such a lane, factor 1). A batch in struct-of-arrays form
+/// (`dir[axis][lane]`, `lambda[k][lane]`, `d65[k][lane]`) is looked up at once, so the long
+/// dependency chains of the lookups overlap: `out[k][i]` for the lanes marked `escaped`, the
+/// others left as they are.
 pub fn escaped_camera_radiance_lanes(
     scene: &PreparedScene,
     dir: &[[f32; LANES]; 3],
@@ -517,14 +500,7 @@ fn vertex(
 
     // ---- Emitter sampling (the shadow ray is traced with the batch's others) ----
     if bsdf.has_smooth_component() && !lights.lights.is_empty() {
-        let n = lights.lights.len();
-        let pick = if n == 1 {
-            sampler.skip(1, 0);
-            0
-        } else {
-            ((sampler.next_1d() * n as f32) as usize).min(n - 1)
-        };
-        let light = &lights.lights[pick];
+        let light = lights.pick(sampler);
         if let Some(ls) = light.sample(si.p, sampler.next_2d(), wl) {
             let wo = si.shading.to_local(ls.wi);
             let f = bsdf.eval(&ctx, wi, wo, counters);

@@ -536,14 +536,7 @@ fn trace(
 
         // ---- Emitter sampling ----
         if bsdf.has_smooth_component() && !lights.lights.is_empty() {
-            let n = lights.lights.len();
-            let pick = if n == 1 {
-                sampler.skip(1, 0);
-                0
-            } else {
-                ((sampler.next_1d() * n as f32) as usize).min(n - 1)
-            };
-            let light = &lights.lights[pick];
+            let light = lights.pick(sampler);
             if let Some(ls) = light.sample(si.p, sampler.next_2d(), wl) {
                 let wo = si.shading.to_local(ls.wi);
                 let lobe = eval_lobe(bsdf, &ctx, &si.shading, wi, wo, false, counters);

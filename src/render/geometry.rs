@@ -71,6 +71,16 @@ pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
     Vec3::new(r * c, r * s, z)
 }
 
+/// Uniform direction in the cone of half-angle acos(`cos_max`) around +Z; pdf
+/// 1 / (2π (1 − cos_max)) (Mitsuba `warp::square_to_uniform_cone`).
+#[inline]
+pub fn square_to_uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
+    let z = 1.0 - u.y * (1.0 - cos_max);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let (s, c) = (2.0 * PI * u.x).sin_cos();
+    Vec3::new(r * c, r * s, z)
+}
+
 /// Uniform barycentrics on a triangle (b1, b2), b0 = 1 − b1 − b2.
 #[inline]
 pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {

@@ -505,12 +505,6 @@ fn vertex(
             let wo = si.shading.to_local(ls.wi);
             let f = bsdf.eval(&ctx, wi, wo, counters);
             if ls.pdf > 0.0 && f.max_element() > 0.0 && ls.radiance.max_element() > 0.0 {
-                let origin = offset_ray_origin(si.p, si.ng, ls.wi);
-                let tmax = if ls.dist.is_finite() {
-                    (ls.dist * (1.0 - 1e-4)).max(0.0)
-                } else {
-                    f32::INFINITY
-                };
                 let light_pdf = sel_pdf * ls.pdf;
                 let w = if ls.delta {
                     1.0
@@ -520,12 +514,7 @@ fn vertex(
                 counters.shadow_rays += 1;
                 shadow.push(ShadowRequest {
                     lane: index,
-                    ray: Ray {
-                        origin,
-                        dir: ls.wi,
-                        tmin: 0.0,
-                        tmax,
-                    },
+                    ray: ls.shadow_ray(si.p, si.ng),
                     contribution: b.throughput * f * ls.radiance * (w / light_pdf),
                 });
             }

@@ -26,7 +26,7 @@
 
 use super::bsdf::{Bsdf, BsdfSample, Counters, ShadingCtx};
 use super::camera::Ray;
-use super::geometry::{mis_power, offset_ray_origin, Frame, SurfaceInteraction};
+use super::geometry::{mis_power, Frame, SurfaceInteraction};
 use super::integrator::{run_branches, PathState};
 use super::polarization::{
     film_reflection, row_times_rotation, specular_reflection, specular_reflection_conductor,
@@ -542,18 +542,7 @@ fn trace(
                 let lobe = eval_lobe(bsdf, &ctx, &si.shading, wi, wo, false, counters);
                 let f = lobe.column0(&b.rows, b.basis, wi_world);
                 if ls.pdf > 0.0 && f.max_element() > 0.0 && ls.radiance.max_element() > 0.0 {
-                    let origin = offset_ray_origin(si.p, si.ng, ls.wi);
-                    let tmax = if ls.dist.is_finite() {
-                        (ls.dist * (1.0 - 1e-4)).max(0.0)
-                    } else {
-                        f32::INFINITY
-                    };
-                    let shadow = Ray {
-                        origin,
-                        dir: ls.wi,
-                        tmin: 0.0,
-                        tmax,
-                    };
+                    let shadow = ls.shadow_ray(si.p, si.ng);
                     counters.shadow_rays += 1;
                     if !scene.accel.occluded(&shadow) {
                         let light_pdf = sel_pdf * ls.pdf;

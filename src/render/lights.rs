@@ -3,7 +3,11 @@
 //! environment, area lights on shapes and point lights.
 
 use super::accel::Accel;
-use super::geometry::{square_to_uniform_sphere, square_to_uniform_triangle};
+use super::camera::Ray;
+use super::geometry::{
+    offset_ray_origin, square_to_uniform_cone, square_to_uniform_sphere,
+    square_to_uniform_triangle, Frame,
+};
 use super::texture::{Spec, Spectrum};
 use crate::image_io::RgbImage;
 use crate::scene::{EmitterDesc, Geometry, Scene};
@@ -690,11 +694,61 @@ pub struct LightSample {
     pub wi: Vec3,
     /// Distance to the sampled point (∞ for environment lights).
     pub dist: f32,
+    /// The sampled point on the light (unused for infinite lights).
+    pub p_light: Vec3,
+    /// Geometric normal at `p_light` (zero for point and infinite lights).
+    pub n_light: Vec3,
     pub radiance: Spec,
     /// Solid-angle pdf including the light-selection probability (1 for delta lights, times
     /// the selection probability).
     pub pdf: f32,
     pub delta: bool,
+}
+
+impl LightSample {
+    /// The shadow ray from a surface point `p` (geometric normal `ng`) towards this sample.
+    ///
+    /// For a light at a finite distance both ends are moved off their surfaces and the ray
+    /// is aimed from one moved end to the other (pbrt-v4 `SpawnRayTo(pFrom, nFrom, pTo, nTo)`).
+    /// Offsetting only the origin and keeping `wi` and `dist` (as this renderer once did)
+    /// makes the ray run parallel to the true segment, `offset / cos θ_light` closer to
+    /// the emitter's plane than `dist` says: on a floor lit from above every shadow ray then
+    /// hit the emitting rectangle itself, and only points straight under a light were lit.
+    pub fn shadow_ray(&self, p: Vec3, ng: Vec3) -> Ray {
+        let origin = offset_ray_origin(p, ng, self.wi);
+        if !self.dist.is_finite() {
+            return Ray {
+                origin,
+                dir: self.wi,
+                tmin: 0.0,
+                tmax: f32::INFINITY,
+            };
+        }
+        let target = if self.n_light == Vec3::ZERO {
+            self.p_light
+        } else {
+            offset_ray_origin(self.p_light, self.n_light, -self.wi)
+        };
+        let d = target - origin;
+        let len = d.length();
+        if len <= 0.0 || !len.is_finite() {
+            // The two moved ends met (a light touching the surface): nothing can be in between.
+            return Ray {
+                origin,
+                dir: self.wi,
+                tmin: 0.0,
+                tmax: 0.0,
+            };
+        }
+        Ray {
+            origin,
+            dir: d / len,
+            tmin: 0.0,
+            // The moved target lies in front of the emitter's surface, so the emitter itself
+            // is beyond `len`; the small margin only guards against the target's own rounding.
+            tmax: len * (1.0 - 1e-5),
+        }
+    }
 }
 
 impl Light {
@@ -763,15 +817,25 @@ impl Light {
             Light::Constant(_) => 1.0 / (4.0 * PI),
             Light::Point { .. } => 0.0,
             Light::Area { geometry, .. } => {
-                let _ = p;
-                let cos_l = n_light.dot(-dir).abs();
-                if cos_l <= 0.0 {
-                    return 0.0;
-                }
                 let pdf_area = match geometry {
                     AreaGeometry::Triangles { area, .. } => 1.0 / area,
-                    AreaGeometry::Sphere { radius, .. } => 1.0 / (4.0 * PI * radius * radius),
+                    AreaGeometry::Sphere {
+                        center,
+                        radius,
+                        flip,
+                    } => {
+                        if let (false, Some((sin2, cos))) =
+                            (*flip, sphere_cone((*center - p).length(), *radius))
+                        {
+                            return sphere_cone_pdf(sin2, cos);
+                        }
+                        1.0 / (4.0 * PI * radius * radius)
+                    }
                 };
+                let cos_l = n_light.dot(-dir).abs();
+                if cos_l.is_nan() || cos_l <= 0.0 {
+                    return 0.0;
+                }
                 pdf_area * dist * dist / cos_l
             }
         }
@@ -785,6 +849,8 @@ impl Light {
                 Some(LightSample {
                     wi,
                     dist: f32::INFINITY,
+                    p_light: Vec3::ZERO,
+                    n_light: Vec3::ZERO,
                     radiance: e.eval(wi, wl),
                     pdf,
                     delta: false,
@@ -795,6 +861,8 @@ impl Light {
                 Some(LightSample {
                     wi,
                     dist: f32::INFINITY,
+                    p_light: Vec3::ZERO,
+                    n_light: Vec3::ZERO,
                     radiance: s.eval(wl),
                     pdf: 1.0 / (4.0 * PI),
                     delta: false,
@@ -813,6 +881,8 @@ impl Light {
                 Some(LightSample {
                     wi: d / dist,
                     dist,
+                    p_light: *position,
+                    n_light: Vec3::ZERO,
                     radiance: intensity.eval(wl) / dist2,
                     pdf: 1.0,
                     delta: true,
@@ -821,7 +891,7 @@ impl Light {
             Light::Area {
                 radiance, geometry, ..
             } => {
-                let (q, n, pdf_area) = match geometry {
+                let (q, n, pdf) = match geometry {
                     AreaGeometry::Triangles { tris, dist, area } => {
                         let (x, _, i) = dist.sample(u.x);
                         // Reuse the fractional position inside the chosen cell for one barycentric.
@@ -831,43 +901,101 @@ impl Light {
                         let [a, bb, c] = tris[i];
                         let q = a * (1.0 - b.x - b.y) + bb * b.x + c * b.y;
                         let n = (bb - a).cross(c - a).normalize();
-                        (q, n, 1.0 / area)
+                        (q, n, LightPdf::Area(1.0 / area))
                     }
                     AreaGeometry::Sphere {
                         center,
                         radius,
                         flip,
-                    } => {
-                        let n = square_to_uniform_sphere(u);
-                        (
-                            *center + n * *radius,
-                            if *flip { -n } else { n },
-                            1.0 / (4.0 * PI * radius * radius),
-                        )
-                    }
+                    } => sample_sphere(p, *center, *radius, *flip, u)?,
                 };
                 let d = q - p;
                 let dist2 = d.length_squared();
-                if dist2 <= 0.0 {
+                if dist2.is_nan() || dist2 <= 0.0 {
                     return None;
                 }
                 let dist = dist2.sqrt();
                 let wi = d / dist;
                 let cos_l = n.dot(-wi);
                 // Area lights emit from their front side only (Mitsuba `area`).
-                if cos_l <= 0.0 {
+                if cos_l.is_nan() || cos_l <= 0.0 {
                     return None;
                 }
+                let pdf = match pdf {
+                    LightPdf::Area(pdf_area) => pdf_area * dist2 / cos_l,
+                    LightPdf::SolidAngle(pdf) => pdf,
+                };
                 Some(LightSample {
                     wi,
                     dist,
+                    p_light: q,
+                    n_light: n,
                     radiance: radiance.eval(wl),
-                    pdf: pdf_area * dist2 / cos_l,
+                    pdf,
                     delta: false,
                 })
             }
         }
     }
+}
+
+/// How a sampled point on an area light was drawn.
+enum LightPdf {
+    /// Uniformly by area: density per unit area.
+    Area(f32),
+    /// By solid angle seen from the reference point.
+    SolidAngle(f32),
+}
+
+/// Sine and cosine of the half-angle of the cone a sphere subtends from a point at distance
+/// `dist` from its centre (`None` inside or on it). 1 − cos α is written sin²α / (1 + cos α)
+/// so that small, far spheres keep their precision.
+fn sphere_cone(dist: f32, radius: f32) -> Option<(f32, f32)> {
+    if dist.is_nan() || dist <= radius * (1.0 + 1e-4) {
+        return None;
+    }
+    let sin2 = (radius / dist).powi(2);
+    let cos = (1.0 - sin2).max(0.0).sqrt();
+    Some((sin2, cos))
+}
+
+/// Solid-angle pdf of the cone sampling of [`sample_sphere`].
+fn sphere_cone_pdf(sin2: f32, cos: f32) -> f32 {
+    (1.0 + cos) / (2.0 * PI * sin2)
+}
+
+/// A point on a spherical emitter seen from `p`: uniform over the cone of directions the
+/// sphere subtends when `p` is outside an outward-facing sphere (Mitsuba's and pbrt-v4's
+/// `Sphere::Sample(ctx)`: every sample lands on the visible cap, so the noise of uniform-area
+/// sampling, half of whose points face away, is gone); uniform by area otherwise.
+fn sample_sphere(
+    p: Vec3,
+    center: Vec3,
+    radius: f32,
+    flip: bool,
+    u: Vec2,
+) -> Option<(Vec3, Vec3, LightPdf)> {
+    let to_center = center - p;
+    let dist = to_center.length();
+    if let (false, Some((sin2, cos_alpha))) = (flip, sphere_cone(dist, radius)) {
+        let axis = to_center / dist;
+        let local = square_to_uniform_cone(u, cos_alpha);
+        let dir = Frame::from_normal(axis).to_world(local);
+        // Nearest intersection of the ray p + t·dir with the sphere (law of cosines), clamped
+        // for directions at the cone's rim where rounding makes the discriminant negative.
+        let cos_t = local.z;
+        let disc = (radius * radius - dist * dist * (1.0 - cos_t * cos_t)).max(0.0);
+        let t = dist * cos_t - disc.sqrt();
+        let q = p + dir * t;
+        let n = (q - center).normalize();
+        return Some((q, n, LightPdf::SolidAngle(sphere_cone_pdf(sin2, cos_alpha))));
+    }
+    let n = square_to_uniform_sphere(u);
+    Some((
+        center + n * radius,
+        if flip { -n } else { n },
+        LightPdf::Area(1.0 / (4.0 * PI * radius * radius)),
+    ))
 }
 
 /// All lights of a scene, with the shape → light map for emitters hit by BSDF sampling.

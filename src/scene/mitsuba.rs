@@ -1537,7 +1537,16 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 self.bsdfs.len() - 1
             }
             _ => {
-                self.bsdfs.push(BsdfDesc::default_diffuse());
+                // Mitsuba 3 (`Shape::Shape`): a shape without a BSDF gets a diffuse one, black
+                // when the shape is an emitter, so light falling on an area light's front is
+                // not reflected.
+                self.bsdfs.push(if emission.is_some() {
+                    BsdfDesc::Diffuse {
+                        reflectance: TextureDesc::Value(SpectrumDesc::Constant(0.0)),
+                    }
+                } else {
+                    BsdfDesc::default_diffuse()
+                });
                 self.bsdfs.len() - 1
             }
         };

@@ -13,9 +13,10 @@ use crate::compare::figure::{
 use crate::compare::metrics::{compare_images, delta_e00_map};
 use crate::image_io::{self, RgbImage};
 use crate::material::FilmMaterial;
+use crate::render::bsdf::Bsdf;
 use crate::render::{self, RenderOptions};
 use crate::scene::{
-    self, look_at, sky, teapot, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
+    self, look_at, sky, teapot, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
     IntegratorSettings, ReconstructionFilter, Scene, Shape,
 };
 use anyhow::{bail, Context, Result};
@@ -75,7 +76,7 @@ pub fn teapot_scene(settings: &RenderSettings) -> Scene {
             emission: None,
             name: Some("teapot".into()),
         }],
-        bsdfs: vec![BsdfDesc::default_diffuse()],
+        bsdfs: vec![Bsdf::default_diffuse()],
         emitters: vec![EmitterDesc::Envmap {
             image: Arc::new(sky::studio_environment(w, h)),
             scale: 1.0,
@@ -94,7 +95,7 @@ pub fn render_with_material(
     settings: &RenderSettings,
 ) -> Result<RgbImage> {
     let mut scene = base.clone();
-    scene.bsdfs = vec![material.bsdf()];
+    scene.bsdfs = vec![material.bsdf()?];
     for shape in &mut scene.shapes {
         shape.bsdf = 0;
     }

@@ -15,8 +15,10 @@ use std::sync::Arc;
 use thinfilm::compare::references::{load_manifest, Reference};
 use thinfilm::compare::{compare_images, downsample_box, ImageMetrics};
 use thinfilm::image_io::{read_exr_rgb, RgbImage};
+use thinfilm::render::bsdf::Bsdf;
+use thinfilm::render::texture::{Spectrum, Texture};
 use thinfilm::render::{render, RenderOptions};
-use thinfilm::scene::{BsdfDesc, Scene, SpectrumDesc, TextureDesc};
+use thinfilm::scene::Scene;
 
 /// Our render: 64×64 at this many samples per pixel.
 const OUR_SIZE: u32 = 64;
@@ -127,14 +129,14 @@ fn every_reference_scene_matches_mitsuba() {
 fn scale_thickness(scene: &mut Scene, factor: f32) -> usize {
     let mut changed = 0;
     for b in &mut scene.bsdfs {
-        let mut desc = b;
-        while let BsdfDesc::TwoSided(inner) = desc {
-            desc = inner;
+        let mut bsdf = b;
+        while let Bsdf::TwoSided(t) = bsdf {
+            bsdf = &mut t.inner;
         }
-        if let BsdfDesc::ThinFilm { thickness_nm, .. } = desc {
-            match thickness_nm {
-                TextureDesc::Value(SpectrumDesc::Constant(v)) => *v *= factor,
-                TextureDesc::Bitmap(bmp) => {
+        if let Bsdf::ThinFilm(film) = bsdf {
+            match &mut film.thickness_nm {
+                Texture::Value(Spectrum::Constant(v)) => *v *= factor,
+                Texture::Bitmap(bmp) => {
                     let mut t = (**bmp).clone();
                     t.data.iter_mut().for_each(|v| *v *= factor);
                     if let Some((lo, hi)) = &mut t.value_range {
@@ -143,7 +145,7 @@ fn scale_thickness(scene: &mut Scene, factor: f32) -> usize {
                     }
                     *bmp = Arc::new(t);
                 }
-                other => panic!("unexpected thickness description {other:?}"),
+                other => panic!("unexpected thickness {other:?}"),
             }
             changed += 1;
         }

@@ -10,9 +10,7 @@ use thinfilm::compare::references::load_manifest;
 use thinfilm::compare::{compare_images, downsample_box, ImageMetrics};
 use thinfilm::image_io::{read_exr_rgb, RgbImage};
 use thinfilm::optics::{Complex64, ThinFilm};
-use thinfilm::render::bsdf::Counters;
 use thinfilm::render::camera::Ray;
-use thinfilm::render::integrator_polarized::{self, PolarizedSetup};
 use thinfilm::render::sampler::Sampler;
 use thinfilm::render::{integrator, prepare, render, render_prepared, RenderOptions};
 use thinfilm::scene::{mitsuba::load_str, Polarizer, Scene};
@@ -54,27 +52,17 @@ fn film_plane_scene(polarizer: &str) -> Scene {
 
 const LAMBDAS: [f32; 4] = [430.0, 515.0, 590.0, 680.0];
 
-/// Polarised-integrator radiance along `ray` at LAMBDAS.
+/// Polarised-transport radiance along `ray` at LAMBDAS (`force`: even without a polariser).
 fn li_pol(scene: &Scene, ray: Ray, force: bool) -> [f32; 4] {
-    let mut prepared = prepare(scene, &RenderOptions::default()).unwrap();
-    if force && prepared.polarized.is_none() {
-        prepared.polarized = Some(Box::new(
-            PolarizedSetup::build(scene, &prepared.bsdfs).unwrap(),
-        ));
-    }
-    let setup = prepared.polarized.as_deref().expect("polarisation on");
+    let options = RenderOptions {
+        force_polarization: force,
+        ..Default::default()
+    };
+    let prepared = prepare(scene, &options).unwrap();
+    assert!(prepared.polarized().is_some(), "polarisation on");
     let mut wl = SampledWavelengths::new(LAMBDAS, [1.0; 4]);
     let mut sampler = Sampler::for_sample(0, 0, 0, 0);
-    let l = integrator_polarized::li(
-        &prepared,
-        setup,
-        ray,
-        None,
-        &mut wl,
-        &mut sampler,
-        &mut Counters::default(),
-    );
-    l.to_array()
+    integrator::li(&prepared, ray, None, &mut wl, &mut sampler).to_array()
 }
 
 fn ray_at_incidence(deg: f32) -> Ray {
@@ -144,7 +132,7 @@ fn fixed_polariser_angle_is_measured_in_the_image_plane() {
     // axis is the s direction there, its vertical axis projects onto p.
     let scene = film_plane_scene("0");
     let prepared = prepare(&scene, &RenderOptions::default()).unwrap();
-    let ray = prepared.camera.generate_ray(Vec2::new(0.5, 0.5));
+    let ray = prepared.camera().generate_ray(Vec2::new(0.5, 0.5));
     let at = |v: &str| li_pol(&film_plane_scene(v), ray, false);
     let (s, p, h) = (at("s"), at("p"), at("45"));
     let (a0, a90, a180) = (at("0"), at("90"), at("180"));
@@ -164,20 +152,12 @@ fn without_a_polariser_the_polarised_transport_equals_the_unpolarised_one() {
     // integrators give R·L to float precision.
     let scene = film_plane_scene("");
     let prepared = prepare(&scene, &RenderOptions::default()).unwrap();
-    assert!(prepared.polarized.is_none() && !prepared.effects.polarization);
+    assert!(prepared.polarized().is_none() && !prepared.effects().polarization);
     for deg in [10.0f32, 50.0, 80.0] {
         let ray = ray_at_incidence(deg);
         let mut wl = SampledWavelengths::new(LAMBDAS, [1.0; 4]);
         let mut sampler = Sampler::for_sample(0, 0, 0, 0);
-        let plain = integrator::li(
-            &prepared,
-            ray,
-            None,
-            &mut wl,
-            &mut sampler,
-            &mut Counters::default(),
-        )
-        .to_array();
+        let plain = integrator::li(&prepared, ray, None, &mut wl, &mut sampler).to_array();
         let pol = li_pol(&scene, ray, true);
         for k in 0..4 {
             assert!(
@@ -194,12 +174,13 @@ fn without_a_polariser_the_polarised_transport_equals_the_unpolarised_one() {
         resolution: Some((24, 24)),
         ..Default::default()
     };
-    let mut prepared = prepare(&scene, &options).unwrap();
+    let prepared = prepare(&scene, &options).unwrap();
     let plain = render_prepared(&prepared, &options).unwrap().image;
-    prepared.polarized = Some(Box::new(
-        PolarizedSetup::build(&scene, &prepared.bsdfs).unwrap(),
-    ));
-    let forced = render_prepared(&prepared, &options).unwrap().image;
+    let forced_options = RenderOptions {
+        force_polarization: true,
+        ..options
+    };
+    let forced = render(&scene, &forced_options).unwrap().image;
     let mut worst = 0.0f32;
     for (a, b) in plain.pixels.iter().zip(&forced.pixels) {
         for c in 0..3 {
@@ -225,16 +206,16 @@ fn scenes_without_a_polariser_keep_the_unpolarised_integrator() {
         };
         let prepared = prepare(&scene, &options).unwrap();
         let name = path.file_name().unwrap().to_string_lossy().to_string();
-        let text = prepared.effects.to_string();
+        let text = prepared.effects().to_string();
         if name.starts_with("polarizer_") {
-            assert!(prepared.effects.polarization && prepared.polarized.is_some());
+            assert!(prepared.effects().polarization && prepared.polarized().is_some());
             assert!(
                 text.contains("polarisation: ON — because of 1 polarizer BSDF(s) in use"),
                 "{text}"
             );
         } else {
             assert!(
-                !prepared.effects.polarization && prepared.polarized.is_none(),
+                !prepared.effects().polarization && prepared.polarized().is_none(),
                 "{name}"
             );
             assert!(text.contains("polarisation: off"), "{name}: {text}");
@@ -248,7 +229,7 @@ fn scenes_without_a_polariser_keep_the_unpolarised_integrator() {
     assert_eq!(scene.polarizer, Some(Polarizer::S));
     let prepared = prepare(&scene, &RenderOptions::default()).unwrap();
     assert!(prepared
-        .effects
+        .effects()
         .to_string()
         .contains("polarisation: ON — because of an S polariser on the sensor"));
 }
@@ -322,26 +303,40 @@ fn polariser_scene_errors_are_clear() {
     );
     let e = format!("{:#}", load(&sensor("sideways")).unwrap_err());
     assert!(e.contains("polarizer") && e.contains("sideways"), "{e}");
-    // A polariser on a sphere has no (u, v) axis to follow.
+    // A polariser is two-sided already: wrapping it is refused where the file is read.
+    let e = format!(
+        "{:#}",
+        load(r#"<scene version="3.0.0"><shape type="rectangle"><bsdf type="twosided"><bsdf type="polarizer"/></bsdf></shape></scene>"#)
+            .unwrap_err()
+    );
+    assert!(
+        e.contains("already two-sided") && e.contains("t.xml:1:"),
+        "{e}"
+    );
+    // On a curved shape the axis follows ∂p/∂u there, as in Mitsuba (a sphere's parallels).
     let xml = r#"<scene version="3.0.0">
+        <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>
         <emitter type="constant"/>
         <shape type="sphere"><bsdf type="polarizer"><float name="theta" value="10"/></bsdf></shape>
     </scene>"#;
-    let scene = load(xml).unwrap();
-    let e = format!(
-        "{:#}",
-        prepare(&scene, &RenderOptions::default()).err().unwrap()
-    );
-    assert!(e.contains("polarizer") && e.contains("planar"), "{e}");
+    let out = render(&load(xml).unwrap(), &RenderOptions::default()).unwrap();
+    assert!(out.effects.polarization);
+    assert!(out
+        .image
+        .pixels
+        .iter()
+        .flatten()
+        .all(|v| v.is_finite() && *v > 0.0));
 }
 
-/// Layered and free-standing films have no Mueller matrices in the polarised integrator:
-/// asking for a polariser with them must be a clear error, not a silently depolarised image.
+/// Free-standing films and coated interfaces have no Mueller matrices: asking for a
+/// polariser with them must be a clear error naming the model and why, not a silently
+/// depolarised image.
 #[test]
 fn polariser_with_unpolarisable_films_is_refused() {
     for bsdf in [
         r#"<bsdf type="thinfilm_bubble"><float name="thickness" value="300"/></bsdf>"#,
-        r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:100, TiO2:50"/></bsdf>"#,
         r#"<bsdf type="coateddielectric"><string name="coating" value="MgF2:99.6"/></bsdf>"#,
     ] {
         let xml = |pol: &str| {
@@ -367,5 +362,18 @@ fn polariser_with_unpolarisable_films_is_refused() {
             thinfilm::render::effects::analyze(&polarised).unwrap_err()
         );
         assert!(e.contains("Mueller") && e.contains("polariser"), "{e}");
+        assert!(e.contains("not implemented"), "{e}");
     }
+    // A multilayer stack has its polarised form (the transfer-matrix amplitudes).
+    let xml = r#"<scene version="3.0.0">
+        <sensor type="perspective"><string name="polarizer" value="s"/></sensor>
+        <emitter type="constant"/>
+        <shape type="sphere"><bsdf type="thinfilm"><string name="layers" value="MgF2:100, TiO2:50"/></bsdf></shape>
+    </scene>"#;
+    let scene = load_str(xml, Path::new("."), &[], "t.xml").unwrap();
+    assert!(
+        thinfilm::render::effects::analyze(&scene)
+            .unwrap()
+            .polarization
+    );
 }

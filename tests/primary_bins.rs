@@ -6,6 +6,7 @@
 use glam::{Vec2, Vec3};
 use std::path::Path;
 use thinfilm::render::accel::{Hit, Prim};
+use thinfilm::render::bsdf::{diffuse::Diffuse, Bsdf};
 use thinfilm::render::primary::{PrimaryBins, MAX_CROSSING};
 use thinfilm::render::{prepare, render_prepared, PreparedScene, RenderOptions};
 use thinfilm::scene::*;
@@ -36,7 +37,7 @@ fn prim_id(h: &Hit) -> (u8, u32) {
 /// and through the BVH; every pair must agree on the distance (and on the primitive unless
 /// two primitives are hit at exactly the same distance). Returns (hits, ties).
 fn compare_with_bvh(p: &PreparedScene, bins: &PrimaryBins, per_pixel: u32) -> (usize, usize) {
-    let size = Vec2::new(p.width as f32, p.height as f32);
+    let size = Vec2::new(p.width() as f32, p.height() as f32);
     let (mut hits, mut ties) = (0, 0);
     let mut state = 0x9e37_79b9u32;
     let mut next = || {
@@ -45,8 +46,8 @@ fn compare_with_bvh(p: &PreparedScene, bins: &PrimaryBins, per_pixel: u32) -> (u
         state ^= state << 5;
         (state >> 8) as f32 / 16_777_216.0
     };
-    for y in 0..p.height {
-        for x in 0..p.width {
+    for y in 0..p.height() {
+        for x in 0..p.width() {
             for k in 0..per_pixel {
                 let jitter = match k {
                     0 => Vec2::ZERO,
@@ -55,9 +56,9 @@ fn compare_with_bvh(p: &PreparedScene, bins: &PrimaryBins, per_pixel: u32) -> (u
                     _ => Vec2::new(next(), next()),
                 };
                 let pos = Vec2::new(x as f32, y as f32) + jitter;
-                let ray = p.camera.generate_ray(pos / size);
-                let a = bins.intersect(&p.accel, x, y, &ray);
-                let b = p.accel.intersect(&ray);
+                let ray = p.camera().generate_ray(pos / size);
+                let a = bins.intersect(p.accel(), x, y, &ray);
+                let b = p.accel().intersect(&ray);
                 match (a, b) {
                     (None, None) => {}
                     (Some(a), Some(b)) => {
@@ -86,7 +87,7 @@ fn compare_with_bvh(p: &PreparedScene, bins: &PrimaryBins, per_pixel: u32) -> (u
 #[test]
 fn teapot_camera_rays_find_the_bvh_hit() {
     let p = teapot(64, 1);
-    let bins = p.primary_bins.as_ref().expect("bins for the teapot");
+    let bins = p.primary_bins().expect("bins for the teapot");
     let stats = bins.stats();
     assert_eq!(stats.crossing, 0);
     assert!(stats.candidates > 0);
@@ -191,9 +192,9 @@ fn room(extra: Vec<Shape>) -> Scene {
         seed: 0,
         sampler: SamplerKind::default(),
         shapes,
-        bsdfs: vec![BsdfDesc::Diffuse {
-            reflectance: TextureDesc::Value(SpectrumDesc::Constant(0.5)),
-        }],
+        bsdfs: vec![Bsdf::from(Diffuse::new(&TextureDesc::Value(
+            SpectrumDesc::Constant(0.5),
+        )))],
         emitters: vec![EmitterDesc::Constant {
             radiance: SpectrumDesc::Constant(1.0),
         }],
@@ -205,7 +206,7 @@ fn room(extra: Vec<Shape>) -> Scene {
 #[test]
 fn room_with_geometry_crossing_the_camera_plane() {
     let p = prepare(&room(vec![]), &options(40, 4)).unwrap();
-    let bins = p.primary_bins.as_ref().expect("bins for the room");
+    let bins = p.primary_bins().expect("bins for the room");
     // Floor and ceiling: two triangles each cross the camera plane.
     assert_eq!(bins.stats().crossing, 4);
     let (hits, _) = compare_with_bvh(&p, bins, 16);
@@ -242,7 +243,7 @@ fn bins_step_aside_when_many_triangles_cross_the_camera_plane() {
         name: Some("fan".into()),
     };
     let p = prepare(&room(vec![fan]), &options(40, 4)).unwrap();
-    assert!(p.primary_bins.is_none());
+    assert!(p.primary_bins().is_none());
     // The render still works (through the BVH).
     let out = render_prepared(&p, &options(40, 4)).unwrap();
     assert!(out.image.pixels.iter().flatten().all(|v| v.is_finite()));
@@ -252,9 +253,9 @@ fn bins_step_aside_when_many_triangles_cross_the_camera_plane() {
 #[test]
 fn render_with_bins_equals_render_without() {
     let with = teapot(48, 4);
-    assert!(with.primary_bins.is_some());
+    assert!(with.primary_bins().is_some());
     let mut without = teapot(48, 4);
-    without.primary_bins = None;
+    without.use_bvh_for_camera_rays();
     let a = render_prepared(&with, &options(48, 4)).unwrap();
     let b = render_prepared(&without, &options(48, 4)).unwrap();
     assert_eq!(a.stats.rays, b.stats.rays);

@@ -4,6 +4,10 @@
 
 use glam::{Vec2, Vec3};
 use thinfilm::optics::Ior;
+use thinfilm::render::bsdf::{
+    conductor::Conductor, dielectric::Dielectric, diffuse::Diffuse, thinfilm::ThinFilmBsdf,
+    twosided::TwoSided, Bsdf,
+};
 use thinfilm::render::{render, RenderOptions};
 use thinfilm::scene::*;
 
@@ -19,7 +23,7 @@ fn camera(origin: Vec3, target: Vec3, fov: f32) -> Camera {
 
 fn base_scene(
     shapes: Vec<Shape>,
-    bsdfs: Vec<BsdfDesc>,
+    bsdfs: Vec<Bsdf>,
     emitters: Vec<EmitterDesc>,
     res: u32,
     spp: u32,
@@ -92,13 +96,15 @@ fn white_env() -> EmitterDesc {
     }
 }
 
-fn thin_film(alpha: f32, thickness: f32) -> BsdfDesc {
-    BsdfDesc::ThinFilm {
-        film_ior: Ior::real(1.37),
-        thickness_nm: constant(thickness),
-        substrate_ior: Ior::real(1.64),
+fn thin_film(alpha: f32, thickness: f32) -> Bsdf {
+    ThinFilmBsdf::new(
+        Ior::real(1.37),
+        &constant(thickness),
+        Ior::real(1.64),
         alpha,
-    }
+    )
+    .unwrap()
+    .into()
 }
 
 fn assert_all_finite(img: &thinfilm::image_io::RgbImage, what: &str) {
@@ -116,11 +122,11 @@ fn assert_all_finite(img: &thinfilm::image_io::RgbImage, what: &str) {
 /// wavelengths (so the estimate has no colour-matching noise), and the largest deviation of
 /// any wavelength from `expect`.
 fn furnace_deviation(scene: &Scene, uvs: &[Vec2], n: u32, expect: f32) -> f32 {
-    use thinfilm::render::{bsdf::Counters, integrator, prepare, sampler::Sampler};
+    use thinfilm::render::{integrator, prepare, sampler::Sampler};
     use thinfilm::spectrum::SampledWavelengths;
     let prepared = prepare(scene, &RenderOptions::default()).unwrap();
+    thinfilm::render::counters::take();
     let mut worst = 0.0f32;
-    let mut counters = Counters::default();
     for (k, uv) in uvs.iter().enumerate() {
         let mut sum = [0.0f64; 4];
         for s in 0..n {
@@ -129,8 +135,8 @@ fn furnace_deviation(scene: &Scene, uvs: &[Vec2], n: u32, expect: f32) -> f32 {
                 lambda: [400.0, 500.0, 600.0, 700.0],
                 pdf: [1.0; 4],
             };
-            let ray = prepared.camera.generate_ray(*uv);
-            let l = integrator::li(&prepared, ray, None, &mut wl, &mut sampler, &mut counters);
+            let ray = prepared.camera().generate_ray(*uv);
+            let l = integrator::li(&prepared, ray, None, &mut wl, &mut sampler);
             for (s, v) in sum.iter_mut().zip(l.to_array()) {
                 *s += v as f64;
             }
@@ -139,7 +145,7 @@ fn furnace_deviation(scene: &Scene, uvs: &[Vec2], n: u32, expect: f32) -> f32 {
             worst = worst.max((s / n as f64 - expect as f64).abs() as f32 / expect);
         }
     }
-    assert_eq!(counters.invalid_samples, 0);
+    assert_eq!(thinfilm::render::counters::take().invalid_samples, 0);
     worst
 }
 
@@ -160,9 +166,7 @@ fn film_grid(k: usize) -> Vec<Vec2> {
 fn furnace_diffuse_sphere_is_invisible() {
     let scene = base_scene(
         vec![sphere(0)],
-        vec![BsdfDesc::Diffuse {
-            reflectance: constant(1.0),
-        }],
+        vec![Bsdf::from(Diffuse::new(&constant(1.0)))],
         vec![white_env()],
         24,
         1,
@@ -191,9 +195,9 @@ fn furnace_diffuse_sphere_is_invisible() {
 fn furnace_two_sided_diffuse_quad() {
     let mut scene = base_scene(
         vec![floor(-0.5, 3.0, 0)],
-        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse {
-            reflectance: constant(1.0),
-        }))],
+        vec![TwoSided::new(Diffuse::new(&constant(1.0)).into())
+            .unwrap()
+            .into()],
         vec![white_env()],
         16,
         1,
@@ -210,9 +214,7 @@ fn film_scene(res: u32, spp: u32) -> Scene {
         vec![sphere(0), floor(-1.0, 4.0, 1)],
         vec![
             thin_film(0.15, 400.0),
-            BsdfDesc::Diffuse {
-                reflectance: constant(0.6),
-            },
+            Bsdf::from(Diffuse::new(&constant(0.6))),
         ],
         vec![
             EmitterDesc::Constant {
@@ -343,14 +345,8 @@ fn effect_analysis_switches_interference() {
     let plain = base_scene(
         vec![sphere(0), floor(-1.0, 4.0, 1)],
         vec![
-            BsdfDesc::Conductor {
-                eta: "0.2+3.9i".parse().unwrap(),
-                alpha_u: 0.2,
-                alpha_v: 0.2,
-            },
-            BsdfDesc::Diffuse {
-                reflectance: constant(0.5),
-            },
+            Bsdf::from(Conductor::new("0.2+3.9i".parse().unwrap(), 0.2, 0.2).unwrap()),
+            Bsdf::from(Diffuse::new(&constant(0.5))),
             // Declared but used by no shape: must not switch interference on.
             thin_film(0.0, 300.0),
         ],
@@ -363,7 +359,7 @@ fn effect_analysis_switches_interference() {
     assert_eq!(out.stats.film_evals, 0);
     assert!(out
         .effects
-        .reasons
+        .lines()
         .iter()
         .any(|r| r.starts_with("interference: off")));
 
@@ -373,7 +369,7 @@ fn effect_analysis_switches_interference() {
     assert!(out.stats.film_evals > 0);
     assert!(out
         .effects
-        .reasons
+        .lines()
         .iter()
         .any(|r| r.starts_with("interference: ON")));
 
@@ -384,7 +380,7 @@ fn effect_analysis_switches_interference() {
     assert!(out.effects.polarization);
     assert!(out
         .effects
-        .reasons
+        .lines()
         .iter()
         .any(|r| r.starts_with("polarisation: ON")));
 }
@@ -410,9 +406,9 @@ fn no_nan_at_grazing_views_and_zero_thickness() {
     // Camera inside a diffuse sphere lit by a point light.
     let mut scene = base_scene(
         vec![sphere(0)],
-        vec![BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse {
-            reflectance: constant(0.9),
-        }))],
+        vec![TwoSided::new(Diffuse::new(&constant(0.9)).into())
+            .unwrap()
+            .into()],
         vec![EmitterDesc::Point {
             position: Vec3::new(0.2, 0.1, 0.0),
             intensity: SpectrumDesc::Constant(1.0),
@@ -427,14 +423,8 @@ fn no_nan_at_grazing_views_and_zero_thickness() {
     let glass = base_scene(
         vec![sphere(0), floor(-1.0, 4.0, 1)],
         vec![
-            BsdfDesc::Dielectric {
-                int_ior: Ior::real(1.5),
-                ext_ior: Ior::real(1.0),
-                alpha: 0.0,
-            },
-            BsdfDesc::Diffuse {
-                reflectance: constant(0.5),
-            },
+            Bsdf::from(Dielectric::new(Ior::real(1.5), Ior::real(1.0))),
+            Bsdf::from(Diffuse::new(&constant(0.5))),
         ],
         vec![white_env()],
         12,
@@ -450,9 +440,7 @@ fn no_nan_at_grazing_views_and_zero_thickness() {
 fn max_depth_one_shows_only_emitters() {
     let scene = base_scene(
         vec![sphere(0)],
-        vec![BsdfDesc::Diffuse {
-            reflectance: constant(1.0),
-        }],
+        vec![Bsdf::from(Diffuse::new(&constant(1.0)))],
         vec![white_env()],
         16,
         2,
@@ -615,12 +603,8 @@ fn emissive_box(h: f32, bsdf: usize) -> Shape {
 /// spheres and of triangle meshes, MIS with BSDF sampling, one-sided emission).
 #[test]
 fn area_light_enclosure() {
-    let black = BsdfDesc::Diffuse {
-        reflectance: constant(0.0),
-    };
-    let grey = BsdfDesc::Diffuse {
-        reflectance: constant(0.5),
-    };
+    let black = Bsdf::from(Diffuse::new(&constant(0.0)));
+    let grey = Bsdf::from(Diffuse::new(&constant(0.5)));
     let centre: Vec<Vec2> = (0..9)
         .map(|i| Vec2::new(0.45 + 0.05 * (i % 3) as f32, 0.45 + 0.05 * (i / 3) as f32))
         .collect();
@@ -658,12 +642,7 @@ fn area_light_enclosure() {
     }
     let scene = base_scene(
         vec![sphere(0), sphere_light],
-        vec![
-            BsdfDesc::Diffuse {
-                reflectance: constant(0.5),
-            },
-            black,
-        ],
+        vec![Bsdf::from(Diffuse::new(&constant(0.5))), black],
         vec![],
         8,
         1,
@@ -674,9 +653,7 @@ fn area_light_enclosure() {
 /// Per-path estimates at one film position and four fixed wavelengths (the first one's
 /// value per path), with `splits` Fresnel splits; unpolarised or polarised integrator.
 fn path_estimates(scene: &Scene, uv: Vec2, n: u32, splits: u32) -> Vec<f64> {
-    use thinfilm::render::{
-        bsdf::Counters, integrator, integrator_polarized, prepare, sampler::Sampler,
-    };
+    use thinfilm::render::{counters, integrator, prepare, sampler::Sampler};
     use thinfilm::spectrum::SampledWavelengths;
     let prepared = prepare(
         scene,
@@ -686,8 +663,8 @@ fn path_estimates(scene: &Scene, uv: Vec2, n: u32, splits: u32) -> Vec<f64> {
         },
     )
     .unwrap();
-    assert_eq!(prepared.fresnel_splits, splits);
-    let mut counters = Counters::default();
+    assert_eq!(prepared.fresnel_splits(), splits);
+    counters::take();
     let out = (0..n)
         .map(|s| {
             let mut sampler = Sampler::for_sample(0, 0, s, 3);
@@ -695,23 +672,12 @@ fn path_estimates(scene: &Scene, uv: Vec2, n: u32, splits: u32) -> Vec<f64> {
                 lambda: [450.0, 520.0, 600.0, 680.0],
                 pdf: [1.0; 4],
             };
-            let ray = prepared.camera.generate_ray(uv);
-            let l = match &prepared.polarized {
-                None => integrator::li(&prepared, ray, None, &mut wl, &mut sampler, &mut counters),
-                Some(setup) => integrator_polarized::li(
-                    &prepared,
-                    setup,
-                    ray,
-                    None,
-                    &mut wl,
-                    &mut sampler,
-                    &mut counters,
-                ),
-            };
+            let ray = prepared.camera().generate_ray(uv);
+            let l = integrator::li(&prepared, ray, None, &mut wl, &mut sampler);
             l.x as f64
         })
         .collect();
-    assert_eq!(counters.invalid_samples, 0);
+    assert_eq!(counters::take().invalid_samples, 0);
     out
 }
 
@@ -724,11 +690,7 @@ fn fresnel_splitting_keeps_the_mean_and_removes_lobe_noise() {
     for polarizer in [None, Some(Polarizer::AngleDeg(30.0))] {
         let mut scene = base_scene(
             vec![floor(0.0, 50.0, 0)],
-            vec![BsdfDesc::Dielectric {
-                int_ior: Ior::real(1.5),
-                ext_ior: Ior::real(1.0),
-                alpha: 0.0,
-            }],
+            vec![Bsdf::from(Dielectric::new(Ior::real(1.5), Ior::real(1.0)))],
             vec![white_env()],
             8,
             1,
@@ -766,11 +728,7 @@ fn effect_analysis_switches_fresnel_splitting() {
     let glass = |n: Ior| {
         base_scene(
             vec![sphere(0)],
-            vec![BsdfDesc::Dielectric {
-                int_ior: n,
-                ext_ior: Ior::real(1.0),
-                alpha: 0.0,
-            }],
+            vec![Bsdf::from(Dielectric::new(n, Ior::real(1.0)))],
             vec![white_env()],
             4,
             1,
@@ -778,17 +736,17 @@ fn effect_analysis_switches_fresnel_splitting() {
     };
     let prepared = |s: &Scene| thinfilm::render::prepare(s, &RenderOptions::default()).unwrap();
     let p = prepared(&glass(Ior::real(1.5)));
-    assert!(p.effects.fresnel_split);
-    assert_eq!(p.fresnel_splits, thinfilm::render::DEFAULT_FRESNEL_SPLITS);
+    assert!(p.effects().fresnel_split);
+    assert_eq!(p.fresnel_splits(), thinfilm::render::DEFAULT_FRESNEL_SPLITS);
     let bk7: Ior = "material:BK7".parse().unwrap();
     let p = prepared(&glass(bk7));
-    assert!(p.effects.dispersion && !p.effects.fresnel_split);
-    assert_eq!(p.fresnel_splits, 0);
+    assert!(p.effects().dispersion && !p.effects().fresnel_split);
+    assert_eq!(p.fresnel_splits(), 0);
     let p = prepared(&film_scene(4, 1));
-    assert!(!p.effects.fresnel_split && p.fresnel_splits == 0);
+    assert!(!p.effects().fresnel_split && p.fresnel_splits() == 0);
     assert!(p
-        .effects
-        .reasons
+        .effects()
+        .lines()
         .iter()
         .any(|r| r.starts_with("Fresnel splitting: off")));
 }

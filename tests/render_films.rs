@@ -3,9 +3,11 @@
 //! terminated only where a scene declares dispersion.
 
 use std::path::Path;
-use thinfilm::render::{bsdf::Counters, effects, integrator, prepare, sampler::Sampler};
+use thinfilm::render::bsdf::Bsdf;
+use thinfilm::render::counters::{self, Counters};
+use thinfilm::render::{effects, integrator, prepare, sampler::Sampler};
 use thinfilm::render::{render, RenderOptions};
-use thinfilm::scene::{mitsuba, BsdfDesc, Scene};
+use thinfilm::scene::{mitsuba, Scene};
 use thinfilm::spectrum::SampledWavelengths;
 
 fn scenes_dir() -> &'static Path {
@@ -44,7 +46,7 @@ fn furnace_scene(shape: &str, bsdf: &str) -> String {
 /// worst relative deviation from 1 over positions and wavelengths.
 fn furnace_deviation(scene: &Scene, n: u32) -> (f32, Counters) {
     let prepared = prepare(scene, &RenderOptions::default()).unwrap();
-    let mut counters = Counters::default();
+    counters::take();
     let mut worst = 0.0f32;
     for k in 0..9 {
         let uv = glam::Vec2::new(0.3 + 0.2 * (k % 3) as f32, 0.3 + 0.2 * (k / 3) as f32);
@@ -52,8 +54,8 @@ fn furnace_deviation(scene: &Scene, n: u32) -> (f32, Counters) {
         for s in 0..n {
             let mut sampler = Sampler::for_sample(k, 0, s, 1);
             let mut wl = SampledWavelengths::new([410.0, 495.0, 580.0, 665.0], [1.0; 4]);
-            let ray = prepared.camera.generate_ray(uv);
-            let l = integrator::li(&prepared, ray, None, &mut wl, &mut sampler, &mut counters);
+            let ray = prepared.camera().generate_ray(uv);
+            let l = integrator::li(&prepared, ray, None, &mut wl, &mut sampler);
             for (s, v) in sum.iter_mut().zip(l.to_array()) {
                 *s += v as f64;
             }
@@ -62,7 +64,7 @@ fn furnace_deviation(scene: &Scene, n: u32) -> (f32, Counters) {
             worst = worst.max((s / n as f64 - 1.0).abs() as f32);
         }
     }
-    (worst, counters)
+    (worst, counters::take())
 }
 
 const BUBBLE_TEXTURED: &str = r#"<bsdf type="thinfilm_bubble">
@@ -118,17 +120,20 @@ fn dispersion_only_when_declared() {
             },
         )
         .unwrap();
-        let mut c = Counters::default();
+        counters::take();
         for y in 0..24 {
             for x in 0..24 {
                 let mut sampler = Sampler::for_sample(x, y, 0, 0);
                 let mut wl = SampledWavelengths::new([420.0, 500.0, 580.0, 660.0], [1.0; 4]);
                 let uv = glam::Vec2::new((x as f32 + 0.5) / 24.0, (y as f32 + 0.5) / 24.0);
-                let ray = out.camera.generate_ray(uv);
-                integrator::li(&out, ray, None, &mut wl, &mut sampler, &mut c);
+                let ray = out.camera().generate_ray(uv);
+                integrator::li(&out, ray, None, &mut wl, &mut sampler);
             }
         }
-        (c.secondary_terminations, out.effects.dispersion)
+        (
+            counters::take().secondary_terminations,
+            out.effects().dispersion,
+        )
     };
     let (n, on) = count(&load_file("prism.xml", &[]));
     assert!(on && n > 20, "prism: {n} terminations, dispersion {on}");
@@ -148,10 +153,9 @@ fn dispersion_only_when_declared() {
 #[test]
 fn effect_analysis_reports_films_and_stacks() {
     let line = |e: &effects::Effects, key: &str| {
-        e.reasons
-            .iter()
+        e.lines()
+            .into_iter()
             .find(|r| r.starts_with(key))
-            .cloned()
             .unwrap_or_default()
     };
     let e = effects::analyze(&load_file("bubble.xml", &[])).unwrap();
@@ -180,14 +184,15 @@ fn effect_analysis_reports_films_and_stacks() {
 /// and clear errors.
 #[test]
 fn scene_syntax_for_films_stacks_and_dispersion() {
-    let bsdf = |xml: &str| -> anyhow::Result<BsdfDesc> {
+    let bsdf = |xml: &str| -> anyhow::Result<Bsdf> {
         let s = load(&format!(
             r#"<scene version="3.0.0"><shape type="sphere">{xml}</shape></scene>"#
         ))?;
         Ok(s.bsdfs[s.shapes[0].bsdf].clone())
     };
     match bsdf(r#"<bsdf type="thinfilm"><string name="layers" value="MgF2:100; 2.3:50, 1.5+0.1i:10, (TiO2:5, SiO2:6)x3"/><string name="substrate_ior" value="Au"/><float name="alpha" value="0.1"/></bsdf>"#).unwrap() {
-        BsdfDesc::ThinFilmStack { layers, substrate_ior, alpha } => {
+        Bsdf::Stack(b) => {
+            let (layers, substrate_ior, alpha) = (b.layers, b.substrate_ior, b.ggx.unwrap().alpha_u);
             assert_eq!(layers.len(), 9);
             assert_eq!(layers[0].1, 100.0);
             assert!(layers[0].0.is_dispersive());
@@ -200,18 +205,16 @@ fn scene_syntax_for_films_stacks_and_dispersion() {
         other => panic!("{other:?}"),
     }
     match bsdf(r#"<bsdf type="thinfilm_bubble"/>"#).unwrap() {
-        BsdfDesc::Bubble {
-            film_ior, ext_ior, ..
-        } => {
-            assert_eq!(film_ior.at(500.0).re, 1.33);
-            assert_eq!(ext_ior.at(500.0).re, 1.0);
+        Bsdf::Bubble(b) => {
+            assert_eq!(b.film_ior.at(500.0).re, 1.33);
+            assert_eq!(b.ext_ior, 1.0);
         }
         other => panic!("{other:?}"),
     }
     let dielectric = |v: &str| match bsdf(&format!(
         r#"<bsdf type="dielectric"><string name="int_ior" value="{v}"/></bsdf>"#
     )) {
-        Ok(BsdfDesc::Dielectric { int_ior, .. }) => Ok(int_ior),
+        Ok(Bsdf::Dielectric(d)) => Ok(d.int_ior),
         Ok(other) => panic!("{other:?}"),
         Err(e) => Err(format!("{e:#}")),
     };
@@ -232,7 +235,7 @@ fn scene_syntax_for_films_stacks_and_dispersion() {
     )
     .unwrap()
     {
-        BsdfDesc::Dielectric { int_ior, .. } => assert!(int_ior.is_dispersive()),
+        Bsdf::Dielectric(d) => assert!(d.int_ior.is_dispersive()),
         other => panic!("{other:?}"),
     }
     // Errors name the problem and the line.

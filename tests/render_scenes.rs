@@ -50,9 +50,10 @@ fn all_scene_files_render_finite() {
             // issue 9: soap bubble, multilayer coatings, AR-coated lens.
             || ["bubble", "coatings", "lens"].iter().any(|k| name.contains(k));
         assert_eq!(
-            out.effects.interference, film,
+            out.effects.interference,
+            film,
             "{name}: {:?}",
-            out.effects.reasons
+            out.effects.lines()
         );
         assert_eq!(out.stats.film_evals > 0, film, "{name}");
     }

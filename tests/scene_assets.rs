@@ -155,7 +155,7 @@ fn every_scene_loads() {
         assert!(!s.shapes.is_empty());
         if path.ends_with("teapot_gold.xml") {
             assert!(
-                matches!(&s.bsdfs[s.shapes[0].bsdf], BsdfDesc::Conductor { eta: thinfilm::optics::Ior::Material(m), .. } if m.name == "Au")
+                matches!(&s.bsdfs[s.shapes[0].bsdf], thinfilm::render::bsdf::Bsdf::Conductor(c) if matches!(c.eta, thinfilm::optics::Ior::Material(m) if m.name == "Au"))
             );
         }
         // The camera sees the geometry's centre.

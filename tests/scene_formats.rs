@@ -3,6 +3,7 @@
 use glam::{Vec2, Vec3};
 use std::path::Path;
 use thinfilm::optics::Ior;
+use thinfilm::render::bsdf::Bsdf;
 use thinfilm::scene::*;
 
 /// A one-triangle glTF with an iridescent material, a thickness texture (G = 128) and a
@@ -72,12 +73,12 @@ fn gltf_iridescence_camera_and_transforms() {
     assert_eq!(m.uvs[2], Vec2::new(0.0, 1.0));
     assert!(m.normals.iter().all(|n| (*n - Vec3::Z).length() < 1e-6));
     match &s.bsdfs[s.shapes[0].bsdf] {
-        BsdfDesc::ThinFilm {
-            film_ior,
-            thickness_nm: TextureDesc::Bitmap(b),
-            substrate_ior,
-            alpha,
-        } => {
+        Bsdf::ThinFilm(f) => {
+            let (film_ior, substrate_ior) = (&f.film_ior, &f.substrate_ior);
+            let alpha = f.ggx.unwrap().alpha_u;
+            let TextureDesc::Bitmap(b) = f.thickness_nm.desc() else {
+                panic!("bitmap thickness expected")
+            };
             assert_eq!(*film_ior, Ior::real(1.8));
             assert_eq!(*substrate_ior, Ior::real(1.45f32 as f64));
             assert!((alpha - 0.09).abs() < 1e-6);
@@ -108,11 +109,9 @@ fn gltf_metal_and_default_camera() {
     let path = write_gltf(dir.path(), false);
     let s = load(&path, &[]).unwrap();
     match &s.bsdfs[0] {
-        BsdfDesc::Conductor {
-            eta,
-            alpha_u,
-            alpha_v,
-        } => {
+        Bsdf::Conductor(cond) => {
+            let (eta, ggx) = (&cond.eta, cond.ggx.unwrap());
+            let (alpha_u, alpha_v) = (&ggx.alpha_u, &ggx.alpha_v);
             // F0 of n = 1 + ik equals the base colour luminance 0.5.
             let c = eta.at(550.0);
             let f0 = ((c.re - 1.0).powi(2) + c.im.powi(2)) / ((c.re + 1.0).powi(2) + c.im.powi(2));
@@ -151,7 +150,7 @@ fn obj_quad_with_uvs() {
     let to_center =
         (Vec3::new(0.5, 0.5, 0.0) - s.camera.to_world.transform_point3(Vec3::ZERO)).normalize();
     assert!(to_center.dot(s.camera.to_world.transform_vector3(Vec3::Z).normalize()) > 0.999);
-    assert!(matches!(s.bsdfs[0], BsdfDesc::Diffuse { .. }));
+    assert!(matches!(s.bsdfs[0], Bsdf::Diffuse(_)));
     assert_eq!(s.emitters.len(), 1);
     let e = format!("{:#}", load(&p, &[("spp".into(), "4".into())]).unwrap_err());
     assert!(e.contains("Mitsuba XML scenes only"), "{e}");

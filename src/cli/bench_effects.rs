@@ -13,7 +13,6 @@
 
 use anyhow::{Context, Result};
 use std::path::Path;
-use thinfilm::render::bsdf::Counters;
 use thinfilm::render::{prepare, render_prepared, RenderOptions};
 use thinfilm::scene::mitsuba::load_str;
 
@@ -212,11 +211,10 @@ pub fn run(args: &EffectsArgs) -> Result<()> {
         let samples = s.samples.max(1) as f64;
         let us_per_sample = s.seconds / samples * 1e6;
         let base = *baseline.get_or_insert(us_per_sample);
-        // Secondary terminations are not in RenderStats: count them on a 32×32, 1-spp pass.
-        let terminations = count_terminations(&prepared);
+        let terminations = s.secondary_terminations as f64 / samples;
         eprintln!("{label}: {:.3} s", s.seconds);
         rows.push(format!(
-            "| {label} | {effect} | {us_per_sample:.3} | {:.2}× | {:.2} | {:.2} | {} |",
+            "| {label} | {effect} | {us_per_sample:.3} | {:.2}× | {:.2} | {:.2} | {:.3} |",
             us_per_sample / base,
             s.rays_per_second() / 1e6,
             s.film_evals as f64 / samples,
@@ -225,7 +223,7 @@ pub fn run(args: &EffectsArgs) -> Result<()> {
     }
     let mut table = format!(
         "Effect cost: {r}×{r}, {spp} spp, seed {seed}, {threads} thread(s); render time without setup.\n\n\
-         | material | effect switched on | µs / sample | vs diffuse | Mrays/s | film evals / sample | secondary terminations (32², 1 spp) |\n\
+         | material | effect switched on | µs / sample | vs diffuse | Mrays/s | film evals / sample | secondary terminations / sample |\n\
          |---|---|---:|---:|---:|---:|---:|\n",
         r = args.resolution,
         spp = args.spp,
@@ -247,21 +245,4 @@ pub fn run(args: &EffectsArgs) -> Result<()> {
         .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(())
-}
-
-/// Paths whose secondary wavelengths were terminated, over a 32×32 grid of camera rays.
-fn count_terminations(scene: &thinfilm::render::PreparedScene) -> u64 {
-    use thinfilm::render::{integrator, sampler::Sampler};
-    use thinfilm::spectrum::SampledWavelengths;
-    let mut c = Counters::default();
-    for y in 0..32u32 {
-        for x in 0..32u32 {
-            let mut sampler = Sampler::for_sample(x, y, 0, 1);
-            let mut wl = SampledWavelengths::sample_visible(sampler.next_1d());
-            let uv = glam::Vec2::new((x as f32 + 0.5) / 32.0, (y as f32 + 0.5) / 32.0);
-            let ray = scene.camera.generate_ray(uv);
-            integrator::li(scene, ray, None, &mut wl, &mut sampler, &mut c);
-        }
-    }
-    c.secondary_terminations
 }

@@ -45,6 +45,11 @@ pub struct Args {
     /// expected image; splitting costs rays and removes the noise of rarely chosen lobes.
     #[arg(long)]
     pub fresnel_splits: Option<u32>,
+    /// Trace with Stokes vectors and Mueller matrices even without a polariser in the scene
+    /// (a check: the image must equal the unpolarised one within float rounding; refused if
+    /// a material has no polarised form).
+    #[arg(long)]
+    pub force_polarization: bool,
     /// Exposure multiplier for the PNG only.
     #[arg(long, default_value_t = 1.0)]
     pub exposure: f32,
@@ -115,6 +120,7 @@ pub fn run(args: Args) -> Result<()> {
         sampler: args.sampler,
         fresnel_splits: args.fresnel_splits,
         progress: true,
+        force_polarization: args.force_polarization,
     };
     let out =
         render(&scene, &options).with_context(|| format!("rendering {}", args.scene.display()))?;

@@ -113,13 +113,13 @@ pub fn read(path: &Path) -> Result<FilmMaterial> {
         } else {
             Ior::real(m.ior().unwrap_or(1.5) as f64)
         };
-        let film = crate::scene::BsdfDesc::ThinFilm {
-            film_ior: Ior::real(film_n),
-            thickness_nm: thickness,
+        let film = crate::render::bsdf::thinfilm::ThinFilmBsdf::new(
+            Ior::real(film_n),
+            &thickness,
             substrate_ior,
-            alpha: 0.0,
-        };
-        return FilmMaterial::from_bsdf(&film).with_context(|| what);
+            0.0,
+        )?;
+        return FilmMaterial::from_bsdf(&film.into()).with_context(|| what);
     }
     bail!("{file}: no material with KHR_materials_iridescence")
 }

@@ -18,7 +18,9 @@ pub use fit_file::{finite, FitFile, MapStats, PixelCounts, TruthComparison, FIT_
 
 use crate::capture::GroundTruth;
 use crate::optics::Ior;
-use crate::scene::{BitmapTexture, BsdfDesc, TextureDesc, TextureFilter, WrapMode};
+use crate::render::bsdf::{thinfilm::ThinFilmBsdf, Bsdf};
+use crate::render::texture::{Spectrum, Texture};
+use crate::scene::{BitmapTexture, TextureDesc, TextureFilter, WrapMode};
 use anyhow::{bail, Context, Result};
 use glam::Mat3;
 use std::path::Path;
@@ -143,43 +145,38 @@ impl FilmMaterial {
     }
 
     /// The `thinfilm` BSDF with the (filled) thickness map as a bilinear, mirrored texture.
-    pub fn bsdf(&self) -> BsdfDesc {
-        BsdfDesc::ThinFilm {
-            film_ior: self.film_ior.clone(),
-            thickness_nm: TextureDesc::Bitmap(Arc::new(BitmapTexture {
-                width: self.width,
-                height: self.height,
-                channels: 1,
-                data: self.filled_thickness_nm(),
-                filter: TextureFilter::Bilinear,
-                wrap: WrapMode::Mirror,
-                to_uv: Mat3::IDENTITY,
-                value_range: None,
-                path: None,
-            })),
-            substrate_ior: self.substrate_ior.clone(),
-            alpha: 0.0,
-        }
+    pub fn bsdf(&self) -> Result<Bsdf> {
+        let thickness = TextureDesc::Bitmap(Arc::new(BitmapTexture {
+            width: self.width,
+            height: self.height,
+            channels: 1,
+            data: self.filled_thickness_nm(),
+            filter: TextureFilter::Bilinear,
+            wrap: WrapMode::Mirror,
+            to_uv: Mat3::IDENTITY,
+            value_range: None,
+            path: None,
+        }));
+        let film = ThinFilmBsdf::new(
+            self.film_ior.clone(),
+            &thickness,
+            self.substrate_ior.clone(),
+            0.0,
+        )?;
+        Ok(film.into())
     }
 
-    /// The material a scene's `thinfilm` BSDF describes: its indices and its thickness (a
-    /// bitmap's texels after its value range, or a constant as a 1×1 map).
-    pub fn from_bsdf(bsdf: &BsdfDesc) -> Result<Self> {
-        let BsdfDesc::ThinFilm {
-            film_ior,
-            thickness_nm,
-            substrate_ior,
-            ..
-        } = bsdf
-        else {
-            bail!("not a single-film thinfilm BSDF");
+    /// The material of a scene's single-film `thinfilm` BSDF: its indices and its thickness
+    /// (a bitmap's texels after its value range, or a constant as a 1×1 map).
+    pub fn from_bsdf(bsdf: &Bsdf) -> Result<Self> {
+        let Bsdf::ThinFilm(film) = bsdf else {
+            bail!("not a single-film thinfilm BSDF: {}", bsdf.describe());
         };
-        let (width, height, thickness_nm) = match thickness_nm {
-            TextureDesc::Value(crate::scene::SpectrumDesc::Constant(d)) => (1, 1, vec![*d]),
-            TextureDesc::Bitmap(b) => {
-                let (lo, hi) = b.value_range.unwrap_or((0.0, 1.0));
+        let (width, height, thickness_nm) = match &film.thickness_nm {
+            Texture::Value(Spectrum::Constant(d)) => (1, 1, vec![*d]),
+            Texture::Bitmap(b) => {
                 let range = |v: f32| match b.value_range {
-                    Some(_) => lo + v * (hi - lo),
+                    Some((lo, hi)) => lo + v * (hi - lo),
                     None => v,
                 };
                 let data = b.data.iter().step_by(b.channels).map(|&v| range(v));
@@ -188,8 +185,8 @@ impl FilmMaterial {
             other => bail!("the film thickness is neither a number nor a bitmap: {other:?}"),
         };
         Ok(FilmMaterial {
-            film_ior: film_ior.clone(),
-            substrate_ior: substrate_ior.clone(),
+            film_ior: film.film_ior.clone(),
+            substrate_ior: film.substrate_ior.clone(),
             width,
             height,
             thickness_nm,
@@ -236,12 +233,11 @@ mod tests {
         m.thickness_nm = vec![400.0; 12];
         m.thickness_nm[0] = f32::NAN;
         m.thickness_nm[1] = 500.0;
-        let BsdfDesc::ThinFilm {
-            thickness_nm: TextureDesc::Bitmap(tex),
-            ..
-        } = m.bsdf()
-        else {
-            panic!("expected a thin film with a bitmap thickness");
+        let Bsdf::ThinFilm(film) = m.bsdf().unwrap() else {
+            panic!("expected a thin film");
+        };
+        let Texture::Bitmap(tex) = &film.thickness_nm else {
+            panic!("expected a bitmap thickness");
         };
         assert_eq!(tex.data[0], 400.0);
         assert_eq!(tex.data[1], 500.0);

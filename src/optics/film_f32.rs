@@ -45,6 +45,35 @@ impl FilmResponseX4 {
     }
 }
 
+/// Complex reflection amplitudes r_s, r_p of four wavelengths (the e^{−iωt} convention of
+/// [`ThinFilm::amplitudes`]).
+pub type AmplitudesX4 = [[Complex32; 2]; 4];
+
+/// What the lossless Airy sums of four wavelengths share: the ambient index and n1 cosθ1,
+/// the film and substrate indices and n cosθ (all real), and E − 1 = e^{2iβ} − 1 formed
+/// without cancellation.
+struct LosslessLanes {
+    n1: f32,
+    n1c: f32,
+    n2: glam::Vec4,
+    n3: glam::Vec4,
+    n2c: glam::Vec4,
+    n3c: glam::Vec4,
+    em1_re: glam::Vec4,
+    em1_im: glam::Vec4,
+}
+
+/// One lane of the general Airy sums: complex r and t of s and p, and whether f32 keeps
+/// 1e-5 there (the denominator's condition number is at most [`F32_MAX_CONDITION`]).
+struct GeneralLane {
+    rs: Complex32,
+    rp: Complex32,
+    ts: Complex32,
+    tp: Complex32,
+    n3c: Complex32,
+    well_conditioned: bool,
+}
+
 /// Forward-branch square root of `z = (n cosθ)²` (Im ≥ 0, or Re > 0 when lossless), f64.
 #[inline]
 fn forward_sqrt64(z: Complex64) -> Complex64 {
@@ -117,12 +146,13 @@ impl ThinFilmX4 {
 
     /// The common dielectric case — real film and substrate indices, light propagating in
     /// both (n² > n1² sin²θ1) — with the four wavelengths in SIMD lanes: the admittances
-    /// are real and only E = e^{2iβ} is complex, so the Airy sums below are
+    /// are real and only E = e^{2iβ} is complex, so the Airy sums of
+    /// [`Self::response_lossless`] and [`Self::amplitudes_lossless`] are
     /// [`Self::response_general`]'s formulas with the zero imaginary parts dropped. The film
-    /// phase is formed and reduced in f64 exactly as there. Returns None (caller falls back
-    /// to the general path) for absorbing or evanescent layers and for ill-conditioned lanes.
+    /// phase is formed and reduced in f64 exactly as there. None (the caller falls back to
+    /// the general path) for absorbing or evanescent layers.
     #[inline]
-    fn response_lossless(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> Option<FilmResponseX4> {
+    fn lossless_setup(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> Option<LosslessLanes> {
         use glam::Vec4;
         if self.film_ior.iter().any(|z| z.im != 0.0)
             || self.substrate_ior.iter().any(|z| z.im != 0.0)
@@ -189,8 +219,36 @@ impl ThinFilmX4 {
         let odd = Vec4::from_array(odd_a).cmpgt(Vec4::ZERO);
         let em1_re = Vec4::select(odd, -m_re - Vec4::splat(2.0), m_re);
         let em1_im = Vec4::select(odd, -m_im, m_im);
+        Some(LosslessLanes {
+            n1,
+            n1c,
+            n2,
+            n3,
+            n2c,
+            n3c,
+            em1_re,
+            em1_im,
+        })
+    }
+
+    /// [`FilmResponseX4`] of the lossless case ([`Self::lossless_setup`]); None for absorbing
+    /// or evanescent layers and ill-conditioned lanes.
+    #[inline]
+    fn response_lossless(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> Option<FilmResponseX4> {
+        use glam::Vec4;
+        let LosslessLanes {
+            n1,
+            n1c,
+            n2,
+            n3,
+            n2c,
+            n3c,
+            em1_re,
+            em1_im,
+        } = self.lossless_setup(lambda_nm, cos_theta1)?;
         let e_re = em1_re + Vec4::ONE;
         let e_im = em1_im;
+
         // Airy sum with real admittances a, b, c (see response_general).
         let airy = |a: Vec4, b: Vec4, c: Vec4| {
             let (amb, apb, bpc, bmc) = (a - b, a + b, b + c, b - c);
@@ -234,85 +292,90 @@ impl ThinFilmX4 {
         Some(out)
     }
 
+    /// Complex reflection amplitudes (r_s, r_p) at four wavelengths for `cos θ1` in the ambient
+    /// (polarised rendering: their Mueller matrix), within 1e-5 of the f64
+    /// [`ThinFilm::amplitudes`] as [`Self::response`] is of its powers: the lossless SIMD path
+    /// where it applies, else the general complex lanes, else f64 for ill-conditioned lanes.
+    #[inline]
+    pub fn reflection_amplitudes(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> AmplitudesX4 {
+        if let Some(a) = self.amplitudes_lossless(lambda_nm, cos_theta1) {
+            return a;
+        }
+        let cos1 = cos_theta1.clamp(0.0, 1.0);
+        std::array::from_fn(|i| {
+            let lane = self.general_lane(i, lambda_nm[i], cos1);
+            if lane.well_conditioned {
+                [lane.rs, lane.rp]
+            } else {
+                let c = |z: Complex32| Complex64::new(z.re as f64, z.im as f64);
+                let a = ThinFilm {
+                    ambient_ior: self.ambient_ior as f64,
+                    film_ior: c(self.film_ior[i]),
+                    thickness_nm: self.thickness_nm as f64,
+                    substrate_ior: c(self.substrate_ior[i]),
+                }
+                .amplitudes(lambda_nm[i] as f64, cos1 as f64);
+                let c32 = |z: Complex64| Complex32::new(z.re as f32, z.im as f32);
+                [c32(a.r_s), c32(a.r_p)]
+            }
+        })
+    }
+
+    /// [`Self::reflection_amplitudes`] of the lossless case: r = N·conj(D)/|D|² with the
+    /// numerator and denominator of [`Self::response_lossless`]'s Airy sums.
+    #[inline]
+    fn amplitudes_lossless(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> Option<AmplitudesX4> {
+        use glam::Vec4;
+        let l = self.lossless_setup(lambda_nm, cos_theta1)?;
+        let (e_re, e_im) = (l.em1_re + Vec4::ONE, l.em1_im);
+        let airy = |a: Vec4, b: Vec4, c: Vec4| {
+            let (amb, apb, bpc, bmc) = (a - b, a + b, b + c, b - c);
+            let p = apb * bmc;
+            let (num_re, num_im) = (amb * bpc + p * e_re, p * e_im);
+            let q = amb * bmc;
+            let den0 = Vec4::splat(2.0) * b * (a + c);
+            let (den_re, den_im) = (den0 + q * l.em1_re, q * l.em1_im);
+            let inv2 = Vec4::ONE / (den_re * den_re + den_im * den_im);
+            let big2 = Vec4::splat(2.0)
+                * (den0 * den0 + q * q * (l.em1_re * l.em1_re + l.em1_im * l.em1_im));
+            (
+                (num_re * den_re + num_im * den_im) * inv2,
+                (num_im * den_re - num_re * den_im) * inv2,
+                big2 * inv2,
+            )
+        };
+        let a_s = Vec4::splat(l.n1c);
+        let (rs_re, rs_im, cond_s) = airy(a_s, l.n2c, l.n3c);
+        let (rp_re, rp_im, cond_p) = airy(
+            a_s / (l.n1 * l.n1),
+            l.n2c / (l.n2 * l.n2),
+            l.n3c / (l.n3 * l.n3),
+        );
+        let max2 = Vec4::splat(F32_MAX_CONDITION * F32_MAX_CONDITION);
+        if !(cond_s.cmple(max2).all() && cond_p.cmple(max2).all()) {
+            return None;
+        }
+        Some(std::array::from_fn(|i| {
+            [
+                Complex32::new(rs_re[i], rs_im[i]),
+                Complex32::new(rp_re[i], rp_im[i]),
+            ]
+        }))
+    }
+
     /// Any indices, lane by lane (complex arithmetic; f64 fallback for ill-conditioned lanes).
     #[inline]
     #[allow(clippy::needless_range_loop)] // lane i indexes four parallel arrays
     pub fn response_general(&self, lambda_nm: [f32; 4], cos_theta1: f32) -> FilmResponseX4 {
         let cos1 = cos_theta1.clamp(0.0, 1.0);
-        let n1 = self.ambient_ior;
-        let cos1_64 = cos1 as f64;
-        let n1_64 = n1 as f64;
-        let kx2_64 = n1_64 * n1_64 * ((1.0 - cos1_64) * (1.0 + cos1_64));
-        let d_64 = self.thickness_nm as f64;
-        let n1c = n1 * cos1;
+        let n1c = self.ambient_ior * cos1;
         let mut out = FilmResponseX4::default();
         for i in 0..4 {
-            let n2 = self.film_ior[i];
-            let n3 = self.substrate_ior[i];
-            // Film n cosθ and phase in f64 (see module docs), reduced before sin/cos.
-            let n2_64 = Complex64::new(n2.re as f64, n2.im as f64);
-            let n2c_64 = forward_sqrt64(n2_64 * n2_64 - kx2_64);
-            let beta = n2c_64 * (2.0 * PI * d_64 / lambda_nm[i] as f64);
-            // Only E = e^{2iβ} and |e^{iβ}| enter R and T. Write 2 Re β = kπ + y with
-            // |y| ≤ π/2 (in f64, so y keeps full relative precision in f32); then
-            // E = ±e^{x} e^{iy}, x = −2 Im β, and E − 1 is formed without cancellation:
-            // e^{x} e^{iy} − 1 = expm1(x) e^{iy} + (e^{iy} − 1),  e^{iy} − 1 = −2 sin²(y/2) + i sin y.
-            let two_beta = 2.0 * beta.re;
-            let k = (two_beta / PI).round();
-            let y = (two_beta - k * PI) as f32;
-            let (sh, ch) = (0.5 * y).sin_cos();
-            let eiy_m1 = Complex32::new(-2.0 * sh * sh, 2.0 * sh * ch);
-            // Lossless film (the common case): x = 0, skip the exponentials.
-            let (em1x, decay) = if beta.im == 0.0 {
-                (0.0, 1.0)
-            } else {
-                (((-2.0 * beta.im) as f32).exp_m1(), (-beta.im).exp() as f32)
-            };
-            let plus = eiy_m1 * em1x + em1x + eiy_m1; // e^{x} e^{iy} − 1
-            let e_minus_1 = if (k as i64) % 2 == 0 {
-                plus
-            } else {
-                -plus - 2.0
-            };
-
-            let n2c = Complex32::new(n2c_64.re as f32, n2c_64.im as f32);
-            // n3² − n1² sin²θ1 written as (n3 − n1)(n3 + n1) + (n1 cosθ1)²: no cancellation
-            // when n3 ≈ n1 at grazing incidence (where n3² − kx² loses all f32 digits).
-            let n1c_c = Complex32::new(n1, 0.0);
-            let n1c_sq = Complex32::new(n1c * n1c, 0.0);
-            let n3c = forward_sqrt32((n3 - n1c_c) * (n3 + n1c_c) + n1c_sq);
-            // The Airy sum cleared of fractions. With admittances a, b, c of ambient, film and
-            // substrate (s: n cosθ; p: n cosθ / n² = cosθ / n), r_ij = (y_i − y_j)/(y_i + y_j) and
-            //   N = (a+b)(b+c) + (a−b)(b−c) E = 2b(a+c) + (a−b)(b−c)(E − 1),
-            //   r = [(a−b)(b+c) + (a+b)(b−c) E] / N,
-            //   t_s = 4ab e^{iβ} / N,   t_p = (n1/n3) 4ab e^{iβ} / N  (only |t| is needed, so
-            //   e^{iβ} is replaced by its modulus).
-            // Near grazing 1 + r12 r23 E → 0 and the textbook form loses ~2 digits in f32;
-            // this form has no such cancellation.
-            let airy = |a: Complex32, b: Complex32, cc: Complex32| {
-                let e_full = e_minus_1 + 1.0;
-                let num = (a - b) * (b + cc) + (a + b) * (b - cc) * e_full;
-                let den = 2.0 * b * (a + cc) + (a - b) * (b - cc) * e_minus_1;
-                // Condition number of the denominator: how much the cancellation in N
-                // amplifies f32 rounding (≈ finesse of the resonance).
-                // (|x| + |y|)² ≤ 2(|x|² + |y|²): a squared upper bound without hypot().
-                let big2 = 2.0
-                    * ((2.0 * b * (a + cc)).norm_sqr()
-                        + ((a - b) * (b - cc) * e_minus_1).norm_sqr());
-                let inv = den.inv();
-                (num * inv, 4.0 * a * b * decay * inv, big2 * inv.norm_sqr())
-            };
-            let n1x = Complex32::new(n1, 0.0);
-            let a_s = Complex32::new(n1c, 0.0);
-            let (rs, ts, cond_s) = airy(a_s, n2c, n3c);
-            let (rp, tp0, cond_p) = airy(a_s / (n1x * n1x), n2c / (n2 * n2), n3c / (n3 * n3));
-            let tp = tp0 * n1x / n3;
+            let lane = self.general_lane(i, lambda_nm[i], cos1);
             // A sharp resonance (high finesse: near-grazing incidence, or a film between two
             // strong reflectors) amplifies f32 rounding of the phase and admittances beyond
             // 1e-5; such lanes are evaluated in f64 instead (rare in practice; always correct).
-            let max2 = F32_MAX_CONDITION * F32_MAX_CONDITION;
-            let well_conditioned = cond_s <= max2 && cond_p <= max2;
-            if !well_conditioned {
+            if !lane.well_conditioned {
                 let r = self.lane_f64(i, lambda_nm[i], cos1);
                 out.r_s[i] = r.r_s as f32;
                 out.r_p[i] = r.r_p as f32;
@@ -320,16 +383,96 @@ impl ThinFilmX4 {
                 out.t_p[i] = r.t_p as f32;
                 continue;
             }
-            out.r_s[i] = rs.norm_sqr();
-            out.r_p[i] = rp.norm_sqr();
+            out.r_s[i] = lane.rs.norm_sqr();
+            out.r_p[i] = lane.rp.norm_sqr();
             if n1c > 0.0 {
                 // tmm.T_from_t: s uses Re(n3 cosθ3), p uses Re(n3 conj(cosθ3)).
-                let cos3 = n3c / n3;
-                out.t_s[i] = (ts.norm_sqr() * n3c.re / n1c).max(0.0);
-                out.t_p[i] = (tp.norm_sqr() * (n3 * cos3.conj()).re / n1c).max(0.0);
+                let n3 = self.substrate_ior[i];
+                let cos3 = lane.n3c / n3;
+                out.t_s[i] = (lane.ts.norm_sqr() * lane.n3c.re / n1c).max(0.0);
+                out.t_p[i] = (lane.tp.norm_sqr() * (n3 * cos3.conj()).re / n1c).max(0.0);
             }
         }
         out
+    }
+
+    /// Lane `i` of the general Airy sums at `lambda_nm` for the clamped `cos1`.
+    #[inline]
+    fn general_lane(&self, i: usize, lambda_nm: f32, cos1: f32) -> GeneralLane {
+        let n1 = self.ambient_ior;
+        let cos1_64 = cos1 as f64;
+        let n1_64 = n1 as f64;
+        let kx2_64 = n1_64 * n1_64 * ((1.0 - cos1_64) * (1.0 + cos1_64));
+        let d_64 = self.thickness_nm as f64;
+        let n1c = n1 * cos1;
+        let n2 = self.film_ior[i];
+        let n3 = self.substrate_ior[i];
+        // Film n cosθ and phase in f64 (see module docs), reduced before sin/cos.
+        let n2_64 = Complex64::new(n2.re as f64, n2.im as f64);
+        let n2c_64 = forward_sqrt64(n2_64 * n2_64 - kx2_64);
+        let beta = n2c_64 * (2.0 * PI * d_64 / lambda_nm as f64);
+        // Only E = e^{2iβ} and |e^{iβ}| enter R and T. Write 2 Re β = kπ + y with
+        // |y| ≤ π/2 (in f64, so y keeps full relative precision in f32); then
+        // E = ±e^{x} e^{iy}, x = −2 Im β, and E − 1 is formed without cancellation:
+        // e^{x} e^{iy} − 1 = expm1(x) e^{iy} + (e^{iy} − 1),  e^{iy} − 1 = −2 sin²(y/2) + i sin y.
+        let two_beta = 2.0 * beta.re;
+        let k = (two_beta / PI).round();
+        let y = (two_beta - k * PI) as f32;
+        let (sh, ch) = (0.5 * y).sin_cos();
+        let eiy_m1 = Complex32::new(-2.0 * sh * sh, 2.0 * sh * ch);
+        // Lossless film (the common case): x = 0, skip the exponentials.
+        let (em1x, decay) = if beta.im == 0.0 {
+            (0.0, 1.0)
+        } else {
+            (((-2.0 * beta.im) as f32).exp_m1(), (-beta.im).exp() as f32)
+        };
+        let plus = eiy_m1 * em1x + em1x + eiy_m1; // e^{x} e^{iy} − 1
+        let e_minus_1 = if (k as i64) % 2 == 0 {
+            plus
+        } else {
+            -plus - 2.0
+        };
+
+        let n2c = Complex32::new(n2c_64.re as f32, n2c_64.im as f32);
+        // n3² − n1² sin²θ1 written as (n3 − n1)(n3 + n1) + (n1 cosθ1)²: no cancellation
+        // when n3 ≈ n1 at grazing incidence (where n3² − kx² loses all f32 digits).
+        let n1c_c = Complex32::new(n1, 0.0);
+        let n1c_sq = Complex32::new(n1c * n1c, 0.0);
+        let n3c = forward_sqrt32((n3 - n1c_c) * (n3 + n1c_c) + n1c_sq);
+        // The Airy sum cleared of fractions. With admittances a, b, c of ambient, film and
+        // substrate (s: n cosθ; p: n cosθ / n² = cosθ / n), r_ij = (y_i − y_j)/(y_i + y_j) and
+        //   N = (a+b)(b+c) + (a−b)(b−c) E = 2b(a+c) + (a−b)(b−c)(E − 1),
+        //   r = [(a−b)(b+c) + (a+b)(b−c) E] / N,
+        //   t_s = 4ab e^{iβ} / N,   t_p = (n1/n3) 4ab e^{iβ} / N  (only |t| is needed, so
+        //   e^{iβ} is replaced by its modulus).
+        // Near grazing 1 + r12 r23 E → 0 and the textbook form loses ~2 digits in f32;
+        // this form has no such cancellation.
+        let airy = |a: Complex32, b: Complex32, cc: Complex32| {
+            let e_full = e_minus_1 + 1.0;
+            let num = (a - b) * (b + cc) + (a + b) * (b - cc) * e_full;
+            let den = 2.0 * b * (a + cc) + (a - b) * (b - cc) * e_minus_1;
+            // Condition number of the denominator: how much the cancellation in N
+            // amplifies f32 rounding (≈ finesse of the resonance).
+            // (|x| + |y|)² ≤ 2(|x|² + |y|²): a squared upper bound without hypot().
+            let big2 = 2.0
+                * ((2.0 * b * (a + cc)).norm_sqr() + ((a - b) * (b - cc) * e_minus_1).norm_sqr());
+            let inv = den.inv();
+            (num * inv, 4.0 * a * b * decay * inv, big2 * inv.norm_sqr())
+        };
+        let n1x = Complex32::new(n1, 0.0);
+        let a_s = Complex32::new(n1c, 0.0);
+        let (rs, ts, cond_s) = airy(a_s, n2c, n3c);
+        let (rp, tp0, cond_p) = airy(a_s / (n1x * n1x), n2c / (n2 * n2), n3c / (n3 * n3));
+        let tp = tp0 * n1x / n3;
+        let max2 = F32_MAX_CONDITION * F32_MAX_CONDITION;
+        GeneralLane {
+            rs,
+            rp,
+            ts,
+            tp,
+            n3c,
+            well_conditioned: cond_s <= max2 && cond_p <= max2,
+        }
     }
 }
 
@@ -384,6 +527,49 @@ mod tests {
         }
         assert!(taken > 3 * 101 * 40, "fast path taken only {taken} times");
         println!("lossless SIMD path: {taken} evaluations, max |Δ| {max_err:.2e}");
+    }
+
+    /// Complex amplitudes of every path (lossless SIMD, general complex, f64 fallback) against
+    /// the f64 film's, phases included: what the Mueller matrices of polarised rendering use.
+    #[test]
+    fn reflection_amplitudes_match_f64() {
+        let mut max_err = 0.0f64;
+        for (n2, n3) in [
+            (Complex32::new(1.37, 0.0), Complex32::new(1.64, 0.0)),
+            (Complex32::new(2.37, 0.0), Complex32::new(1.5, 0.0)),
+            (Complex32::new(1.38, 0.0), Complex32::new(0.18, 3.4)),
+            (Complex32::new(1.9, 0.05), Complex32::new(1.5, 0.0)),
+        ] {
+            for d in [0.0f32, 120.0, 400.0, 1500.0, 4800.0] {
+                for deg in [0.0f32, 30.0, 60.0, 85.0, 89.5] {
+                    let cos1 = deg.to_radians().cos();
+                    let film = ThinFilmX4 {
+                        ambient_ior: 1.0,
+                        film_ior: [n2; 4],
+                        thickness_nm: d,
+                        substrate_ior: [n3; 4],
+                    };
+                    let lambdas = [380.0, 471.5, 588.25, 760.0];
+                    let got = film.reflection_amplitudes(lambdas, cos1);
+                    for (i, &l) in lambdas.iter().enumerate() {
+                        let c = |z: Complex32| Complex64::new(z.re as f64, z.im as f64);
+                        let want = ThinFilm {
+                            ambient_ior: 1.0,
+                            film_ior: c(n2),
+                            thickness_nm: d as f64,
+                            substrate_ior: c(n3),
+                        }
+                        .amplitudes(l as f64, cos1 as f64);
+                        for (g, w) in [(got[i][0], want.r_s), (got[i][1], want.r_p)] {
+                            let e = (c(g) - w).norm();
+                            assert!(e < 2e-5, "{n2}/{n3} d {d} {deg}° λ {l}: {g} vs {w}");
+                            max_err = max_err.max(e);
+                        }
+                    }
+                }
+            }
+        }
+        println!("amplitudes: max |Δr| {max_err:.2e}");
     }
 
     #[test]

@@ -372,13 +372,17 @@ impl Accel {
                         ns = n / len;
                     }
                 }
+                // Mitsuba's default parameterisation without UVs: the barycentrics, i.e.
+                // vertex UVs (0, 0), (1, 0), (0, 1).
+                let [t0, t1, t2] = if mesh.uvs.is_empty() {
+                    [Vec2::ZERO, Vec2::X, Vec2::Y]
+                } else {
+                    idx.map(|k| mesh.uvs[k as usize])
+                };
                 let uv = if mesh.uvs.is_empty() {
-                    // Mitsuba's default parameterisation without UVs: the barycentrics.
                     Vec2::new(b1, b2)
                 } else {
-                    mesh.uvs[idx[0] as usize] * b0
-                        + mesh.uvs[idx[1] as usize] * b1
-                        + mesh.uvs[idx[2] as usize] * b2
+                    t0 * b0 + t1 * b1 + t2 * b2
                 };
                 SurfaceInteraction {
                     p,
@@ -386,6 +390,7 @@ impl Accel {
                     ng,
                     shading: Frame::from_normal(ns),
                     uv,
+                    dpdu: triangle_dpdu(e1, e2, t1 - t0, t2 - t0),
                     shape,
                 }
             }
@@ -404,12 +409,15 @@ impl Accel {
                 if s.flip_normals {
                     n = -n;
                 }
+                // Mitsuba's sphere: ∂p/∂u ∝ (−y, x, 0) about the centre (zero at the poles).
+                let dpdu = Vec3::new(-(p.y - s.center.y), p.x - s.center.x, 0.0);
                 SurfaceInteraction {
                     p,
                     t: hit.t,
                     ng: n,
                     shading: Frame::from_normal(n),
                     uv,
+                    dpdu,
                     shape: s.shape,
                 }
             }
@@ -981,6 +989,16 @@ fn sphere_intersect(s: &SphereGeom, origin: Vec3, dir: Vec3, tmin: f32, tmax: f3
     }
 }
 
+/// ∂p/∂u of a triangle with edges `e1` = p1 − p0, `e2` = p2 − p0 and UV edges `duv1`,
+/// `duv2` (pbrt-v4 / Mitsuba); zero for a degenerate parameterisation.
+#[inline]
+fn triangle_dpdu(e1: Vec3, e2: Vec3, duv1: Vec2, duv2: Vec2) -> Vec3 {
+    let det = duv1.x * duv2.y - duv1.y * duv2.x;
+    if det.abs() < 1e-12 {
+        return Vec3::ZERO;
+    }
+    (duv2.y * e1 - duv1.y * e2) / det
+}
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -119,6 +119,9 @@ pub struct SurfaceInteraction {
     /// Shading frame (interpolated normal as z).
     pub shading: Frame,
     pub uv: Vec2,
+    /// ∂p/∂u (world, not normalised; zero where the parameterisation degenerates): the
+    /// tangent of models that need one ([`super::bsdf::BsdfModel::shading_frame`]).
+    pub dpdu: Vec3,
     /// Index into the prepared scene's shapes.
     pub shape: u32,
 }

@@ -1,30 +1,179 @@
 //! The `path` integrator: unidirectional path tracing with hero-wavelength spectral transport
 //! (four wavelengths follow one path), next-event estimation with multiple importance sampling
 //! (power heuristic) between BSDF and emitter sampling, and Russian roulette, all with Mitsuba 3
-//! semantics (conventions.md "Path integrator"):
+//! semantics (`docs/conventions.md`, "Path integrator"):
 //! - `max_depth` counts path vertices: 1 = directly visible emitters only, −1 = unlimited;
 //! - from depth ≥ `rr_depth` a path survives with probability min(max β · η², 0.95).
 //!
+//! One integrator for every scene, generic over what a path carries ([`Carrier`]): a spectral
+//! throughput (`Spec`), or — when the scene asks for a polariser — a Stokes covector per
+//! wavelength ([`super::stokes::StokesPath`]). The sampling decisions, MIS, Russian roulette
+//! and random-number layout are the same code for both, and both run in the wavefront
+//! batches of [`trace_lanes`].
+//!
 //! One departure, which changes the noise and not the expectation: at the first
-//! [`PreparedScene::fresnel_splits`] smooth reflect/transmit interfaces of a path (glass,
-//! coated glass, bubbles; [`Bsdf::is_fresnel_pair`]) *both* lobes are followed with their full
-//! Fresnel weights instead of one chosen with probability R (splitting; Arvo & Kirk 1990).
-//! Mitsuba picks one; at 4 % reflectance that leaves a glass surface's mirrored highlights to
-//! one sample in 25, the main source of noise in `scenes/lens.xml`.
+//! `fresnel_splits` smooth reflect/transmit interfaces of a path (glass, coated glass,
+//! bubbles; [`Bsdf::is_fresnel_pair`]) *both* lobes are followed with their full Fresnel
+//! weights instead of one chosen with probability R (splitting; Arvo & Kirk 1990), sampled
+//! with lobe masks ([`Bsdf::sample_split`]). Mitsuba picks one; at 4 % reflectance that
+//! leaves a glass surface's mirrored highlights to one sample in 25, the main source of noise
+//! in `scenes/lens.xml`.
 
 use super::accel::Hit;
-use super::bsdf::{Bsdf, BsdfSample, Counters, ShadingCtx};
+use super::bsdf::{Bsdf, BsdfSample, Lobes, ShadingCtx};
 use super::camera::Ray;
-use super::geometry::{mis_power, offset_ray_origin, SurfaceInteraction};
+use super::counters::{count, Counter};
+use super::geometry::{mis_power, offset_ray_origin, Frame, SurfaceInteraction};
 use super::lights::LANES;
 use super::sampler::Sampler;
 use super::texture::Spec;
 use super::PreparedScene;
 use crate::spectrum::SampledWavelengths;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+
+/// What a path carries between vertices besides its state ([`PathState`]): the throughput
+/// that the BSDF values along the path multiply.
+pub trait Carrier: Copy {
+    /// Scene data the carrier needs, prepared once per render.
+    type Setup: Sync;
+    /// What a BSDF sample multiplies the carrier by.
+    type Value;
+
+    /// The carrier of a camera ray along `dir`, before its first vertex.
+    fn camera(dir: Vec3) -> Self;
+
+    /// At the path's first vertex, found along `dir` (`normal`: the shading normal there, None
+    /// on a miss): a sensor polariser sets the carrier.
+    fn at_first_vertex(&mut self, setup: &Self::Setup, dir: Vec3, normal: Option<Vec3>);
+
+    /// What the sensor passes of unpolarised light arriving directly (camera rays that hit
+    /// nothing): 1, or ½ behind a polariser.
+    fn direct_view(setup: &Self::Setup) -> f32;
+
+    /// What unpolarised light of unit radiance arriving along the path contributes, per
+    /// wavelength (the spectral throughput; S0 of a Stokes covector).
+    fn s0(&self) -> Spec;
+
+    /// For light sampling: the carrier times the BSDF value for unpolarised light arriving
+    /// along `wo` (local), or None where that value is zero.
+    fn eval(&self, bsdf: &Bsdf, ctx: &ShadingCtx, v: &VertexFrame, wo: Vec3) -> Option<Spec>;
+
+    /// Samples the BSDF (all lobes).
+    fn sample(
+        bsdf: &Bsdf,
+        ctx: &ShadingCtx,
+        v: &VertexFrame,
+        u1: f32,
+        u2: Vec2,
+    ) -> Option<(BsdfSample, Self::Value)>;
+
+    /// Both lobes of a Fresnel pair at full weight ([`Bsdf::sample_split`]).
+    fn sample_split(
+        bsdf: &Bsdf,
+        ctx: &ShadingCtx,
+        v: &VertexFrame,
+        u1: f32,
+        u2: Vec2,
+    ) -> [Option<(BsdfSample, Self::Value)>; 2];
+
+    /// Crosses a vertex along `wo_world` with the sampled `value`.
+    fn scatter(&mut self, value: &Self::Value, v: &VertexFrame, wo_world: Vec3);
+
+    /// Drops the secondary wavelengths (a dispersive refraction).
+    fn keep_hero_only(&mut self);
+
+    /// The largest S0 throughput, for Russian roulette (Mitsuba's
+    /// `unpolarized_spectrum(throughput)`).
+    fn max_component(&self) -> f32;
+
+    /// Divides by the survival probability of Russian roulette.
+    fn divide(&mut self, q: f32);
+}
+
+/// A vertex as its BSDF scatters: the frame it scatters in and the direction back along the
+/// path, local and world.
+pub struct VertexFrame {
+    pub frame: Frame,
+    pub wi: Vec3,
+    pub wi_world: Vec3,
+}
+
+/// The spectral throughput of an unpolarised path.
+impl Carrier for Spec {
+    type Setup = ();
+    type Value = Spec;
+
+    #[inline]
+    fn camera(_dir: Vec3) -> Self {
+        Spec::ONE
+    }
+
+    #[inline]
+    fn at_first_vertex(&mut self, _setup: &(), _dir: Vec3, _normal: Option<Vec3>) {}
+
+    #[inline]
+    fn direct_view(_setup: &()) -> f32 {
+        1.0
+    }
+
+    #[inline]
+    fn s0(&self) -> Spec {
+        *self
+    }
+
+    #[inline]
+    fn eval(&self, bsdf: &Bsdf, ctx: &ShadingCtx, v: &VertexFrame, wo: Vec3) -> Option<Spec> {
+        let f = bsdf.eval(ctx, v.wi, wo);
+        (f.max_element() > 0.0).then(|| *self * f)
+    }
+
+    #[inline]
+    fn sample(
+        bsdf: &Bsdf,
+        ctx: &ShadingCtx,
+        v: &VertexFrame,
+        u1: f32,
+        u2: Vec2,
+    ) -> Option<(BsdfSample, Spec)> {
+        let s = bsdf.sample(ctx, v.wi, u1, u2, Lobes::ALL)?;
+        Some((s, s.weight))
+    }
+
+    #[inline]
+    fn sample_split(
+        bsdf: &Bsdf,
+        ctx: &ShadingCtx,
+        v: &VertexFrame,
+        u1: f32,
+        u2: Vec2,
+    ) -> [Option<(BsdfSample, Spec)>; 2] {
+        bsdf.sample_split(ctx, v.wi, u1, u2)
+            .map(|s| s.map(|s| (s, s.weight)))
+    }
+
+    #[inline]
+    fn scatter(&mut self, value: &Spec, _v: &VertexFrame, _wo_world: Vec3) {
+        *self *= *value;
+    }
+
+    #[inline]
+    fn keep_hero_only(&mut self) {
+        *self = Spec::new(self.x, 0.0, 0.0, 0.0);
+    }
+
+    #[inline]
+    fn max_component(&self) -> f32 {
+        self.max_element()
+    }
+
+    #[inline]
+    fn divide(&mut self, q: f32) {
+        *self /= q;
+    }
+}
 
 /// What a path (or one branch of a split path) carries between vertices besides its
-/// throughput, which is a spectrum here and Stokes covectors in the polarised integrator.
+/// [`Carrier`].
 #[derive(Clone, Copy)]
 pub(super) struct PathState {
     pub ray: Ray,
@@ -36,15 +185,11 @@ pub(super) struct PathState {
     prev_bsdf_delta: bool,
     /// Fresnel splits already made on the way here.
     pub splits: u32,
-    /// The pixel a camera ray was generated in (None after the first vertex): lets
-    /// [`PreparedScene::intersect`] use the screen bins.
-    pub pixel: Option<[u32; 2]>,
 }
 
 impl PathState {
-    pub fn camera(ray: Ray, pixel: Option<[u32; 2]>) -> Self {
+    pub fn camera(ray: Ray) -> Self {
         PathState {
-            pixel,
             ray,
             eta: 1.0,
             depth: 0,
@@ -66,12 +211,19 @@ impl PathState {
         }
     }
 
-    /// Moves the path across vertex `si` along the sampled `bs`, returning the new world
-    /// direction, or None if it leaves on the wrong side of the geometric surface for its
-    /// lobe (shading-normal light leaks), like Mitsuba's one-sided handling.
+    /// Moves the path across vertex `si` (scattering in `frame`) along the sampled `bs`,
+    /// returning the new world direction, or None if it leaves on the wrong side of the
+    /// geometric surface for its lobe (shading-normal light leaks), like Mitsuba's one-sided
+    /// handling.
     #[inline]
-    pub fn cross(&mut self, si: &SurfaceInteraction, wi: Vec3, bs: &BsdfSample) -> Option<Vec3> {
-        let wo_world = si.shading.to_world(bs.wo);
+    pub fn cross(
+        &mut self,
+        si: &SurfaceInteraction,
+        frame: &Frame,
+        wi: Vec3,
+        bs: &BsdfSample,
+    ) -> Option<Vec3> {
+        let wo_world = frame.to_world(bs.wo);
         let geo_cos_o = si.ng.dot(wo_world);
         let geo_cos_i = si.ng.dot(-self.ray.dir);
         let reflected = bs.wo.z * wi.z > 0.0;
@@ -84,7 +236,7 @@ impl PathState {
         self.eta *= bs.eta;
         self.prev_p = si.p;
         self.prev_bsdf_pdf = bs.pdf;
-        self.prev_bsdf_delta = bs.delta;
+        self.prev_bsdf_delta = bs.is_delta();
         self.ray = Ray {
             origin: offset_ray_origin(si.p, si.ng, wo_world),
             dir: wo_world,
@@ -92,7 +244,6 @@ impl PathState {
             tmax: f32::INFINITY,
         };
         self.depth += 1;
-        self.pixel = None;
         Some(wo_world)
     }
 
@@ -117,34 +268,18 @@ impl PathState {
     }
 }
 
-/// Runs `trace` on the camera path and then on every branch it or its descendants set aside
-/// at Fresnel splits (depth first), summing what they collect. A branch made by the k-th split
-/// can only add branches of split count > k, so at most `fresnel_splits` wait at a time.
-pub(super) fn run_branches<B>(first: B, mut trace: impl FnMut(B, &mut Vec<B>) -> Spec) -> Spec {
-    let mut radiance = Spec::ZERO;
-    let mut pending = Vec::new();
-    let mut branch = first;
-    loop {
-        radiance += trace(branch, &mut pending);
-        match pending.pop() {
-            Some(b) => branch = b,
-            None => return radiance,
-        }
-    }
-}
-
-/// A path branch of the unpolarised integrator.
+/// A path branch.
 #[derive(Clone, Copy)]
-pub(super) struct Branch {
+pub(super) struct Branch<C> {
     path: PathState,
-    throughput: Spec,
+    carrier: C,
 }
 
 /// One camera sample's path in a batch ([`trace_lanes`]): the branch being followed, what
 /// the path has collected so far, its random numbers and its wavelengths.
 #[derive(Clone, Copy)]
-pub(super) struct Lane {
-    branch: Branch,
+pub(super) struct Lane<C> {
+    branch: Branch<C>,
     radiance: Spec,
     pub sampler: Sampler,
     pub wl: SampledWavelengths,
@@ -154,15 +289,15 @@ pub(super) struct Lane {
     active: bool,
 }
 
-impl Lane {
+impl<C: Carrier> Lane<C> {
     /// A path starting with camera ray `ray`; `d65`: the D65 factor at `wl`
     /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]).
     #[inline]
     pub fn camera(ray: Ray, wl: SampledWavelengths, d65: Spec, sampler: Sampler) -> Self {
         Lane {
             branch: Branch {
-                path: PathState::camera(ray, None),
-                throughput: Spec::ONE,
+                path: PathState::camera(ray),
+                carrier: C::camera(ray.dir),
             },
             radiance: Spec::ZERO,
             sampler,
@@ -197,16 +332,24 @@ struct ShadowRequest {
     contribution: Spec,
 }
 
+/// Where a lane's vertex puts what it asks for: branches set aside at Fresnel splits,
+/// environment lookups and shadow rays.
+struct Requests<'a, C> {
+    lane: u32,
+    pending: &'a mut Vec<Branch<C>>,
+    env: &'a mut Vec<EnvRequest>,
+    shadow: &'a mut Vec<ShadowRequest>,
+}
+
 /// The paths of a batch and the reusable buffers of [`trace_lanes`] (one set per worker
 /// row, not per sample).
-#[derive(Default)]
-pub struct PathScratch {
+pub struct PathScratch<C> {
     /// The batch's paths, filled by the caller with [`Lane::camera`].
-    pub(super) lanes: Vec<Lane>,
+    pub(super) lanes: Vec<Lane<C>>,
     /// Closest hit of each lane's camera ray.
     pub(super) first_hits: Vec<Option<Hit>>,
     /// Branches set aside at Fresnel splits, per lane.
-    pending: Vec<Vec<Branch>>,
+    pending: Vec<Vec<Branch<C>>>,
     env: Vec<EnvRequest>,
     shadow: Vec<ShadowRequest>,
     rays: Vec<Ray>,
@@ -220,8 +363,30 @@ pub struct PathScratch {
     le_gathered: Vec<Spec>,
 }
 
-/// Radiance along `ray` at the path's wavelengths. May terminate secondary wavelengths in
-/// `wl` (dispersion; never in a scene with Fresnel splitting on, whose branches share `wl`).
+impl<C> Default for PathScratch<C> {
+    fn default() -> Self {
+        PathScratch {
+            lanes: Vec::new(),
+            first_hits: Vec::new(),
+            pending: Vec::new(),
+            env: Vec::new(),
+            shadow: Vec::new(),
+            rays: Vec::new(),
+            lane_of: Vec::new(),
+            hits: Vec::new(),
+            dirs: Vec::new(),
+            lambdas: Vec::new(),
+            d65s: Vec::new(),
+            le: Vec::new(),
+            gathered: Vec::new(),
+            le_gathered: Vec::new(),
+        }
+    }
+}
+
+/// Radiance along `ray` at the path's wavelengths, with the scene's transport (polarised or
+/// not). May terminate secondary wavelengths in `wl` (dispersion; never in a scene with
+/// Fresnel splitting on, whose branches share `wl`).
 ///
 /// `pixel`: the pixel a camera ray was generated in (its first hit may then come from the
 /// screen bins); None for any other ray. One path through [`trace_lanes`]: the same values
@@ -232,18 +397,31 @@ pub fn li(
     pixel: Option<[u32; 2]>,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
-    counters: &mut Counters,
+) -> Spec {
+    match scene.polarized() {
+        None => li_with::<Spec>(scene, &(), ray, pixel, wl, sampler),
+        Some(setup) => li_with::<super::stokes::StokesPath>(scene, setup, ray, pixel, wl, sampler),
+    }
+}
+
+fn li_with<C: Carrier>(
+    scene: &PreparedScene,
+    setup: &C::Setup,
+    ray: Ray,
+    pixel: Option<[u32; 2]>,
+    wl: &mut SampledWavelengths,
+    sampler: &mut Sampler,
 ) -> Spec {
     let hit = scene.intersect(&ray, pixel);
-    counters.rays += 1;
-    let mut scratch = PathScratch::default();
+    count(Counter::Rays, 1);
+    let mut scratch = PathScratch::<C>::default();
     let d65 = Spec::from_array(
         wl.lambda
             .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
     );
     scratch.lanes.push(Lane::camera(ray, *wl, d65, *sampler));
     scratch.first_hits.push(hit);
-    trace_lanes(scene, &mut scratch, counters);
+    trace_lanes(scene, setup, &mut scratch);
     let lane = &scratch.lanes[0];
     *wl = lane.wl;
     *sampler = lane.sampler;
@@ -270,11 +448,12 @@ pub fn escaped_camera_radiance_lanes(
             }
         }
     }
-    if scene.settings.hide_emitters {
+    if scene.settings().hide_emitters {
         return;
     }
-    for &li in &scene.lights.infinite {
-        scene.lights.lights[li as usize].add_env_lanes(dir, lambda, d65, escaped, out);
+    let lights = scene.lights();
+    for &li in &lights.infinite {
+        lights.lights[li as usize].add_env_lanes(dir, lambda, d65, escaped, out);
     }
 }
 
@@ -289,10 +468,10 @@ pub fn escaped_camera_radiance_lanes(
 /// lookups in SIMD lanes. A lane's result depends only on its own numbers: each lane adds its
 /// terms in its own order (vertex emission, then shadow-ray terms, then environment terms), so
 /// a batch of one ([`li`]) gives bit-identical values.
-pub(super) fn trace_lanes(
+pub(super) fn trace_lanes<C: Carrier>(
     scene: &PreparedScene,
-    scratch: &mut PathScratch,
-    counters: &mut Counters,
+    setup: &C::Setup,
+    scratch: &mut PathScratch<C>,
 ) {
     let PathScratch {
         lanes,
@@ -313,16 +492,13 @@ pub(super) fn trace_lanes(
     shadow.clear();
     for (i, (lane, &hit)) in lanes.iter_mut().zip(first_hits.iter()).enumerate() {
         pending[i].clear();
-        lane.active = step(
-            scene,
-            i as u32,
-            lane,
-            hit,
-            &mut pending[i],
+        let mut requests = Requests {
+            lane: i as u32,
+            pending: &mut pending[i],
             env,
             shadow,
-            counters,
-        );
+        };
+        lane.active = step(scene, setup, lane, hit, &mut requests);
     }
     loop {
         rays.clear();
@@ -336,24 +512,21 @@ pub(super) fn trace_lanes(
         if rays.is_empty() {
             break;
         }
-        counters.rays += rays.len() as u64;
-        scene.accel.intersect_batch(rays, hits);
+        count(Counter::Rays, rays.len() as u64);
+        scene.intersect_batch(rays, hits);
         for (&i, &hit) in lane_of.iter().zip(hits.iter()) {
             let i = i as usize;
-            lanes[i].active = step(
-                scene,
-                i as u32,
-                &mut lanes[i],
-                hit,
-                &mut pending[i],
+            let mut requests = Requests {
+                lane: i as u32,
+                pending: &mut pending[i],
                 env,
                 shadow,
-                counters,
-            );
+            };
+            lanes[i].active = step(scene, setup, &mut lanes[i], hit, &mut requests);
         }
     }
     for r in shadow.iter() {
-        if !scene.accel.occluded(&r.ray) {
+        if !scene.occluded(&r.ray) {
             lanes[r.lane as usize].radiance += r.contribution;
         }
     }
@@ -363,7 +536,7 @@ pub(super) fn trace_lanes(
 /// Adds the environment terms of [`trace_lanes`]: every lookup of the batch at once per
 /// infinite light ([`super::lights::Light::add_env_batch`]), then each lane's terms in the
 /// order they arose.
-fn resolve_env(scene: &PreparedScene, scratch: &mut PathScratch) {
+fn resolve_env<C>(scene: &PreparedScene, scratch: &mut PathScratch<C>) {
     let PathScratch {
         lanes,
         env,
@@ -380,7 +553,8 @@ fn resolve_env(scene: &PreparedScene, scratch: &mut PathScratch) {
     }
     le.clear();
     le.resize(env.len(), Spec::ZERO);
-    for &li in &scene.lights.infinite {
+    let lights = scene.lights();
+    for &li in &lights.infinite {
         gathered.clear();
         dirs.clear();
         lambdas.clear();
@@ -396,7 +570,7 @@ fn resolve_env(scene: &PreparedScene, scratch: &mut PathScratch) {
         }
         le_gathered.clear();
         le_gathered.resize(gathered.len(), Spec::ZERO);
-        scene.lights.lights[li as usize].add_env_batch(dirs, lambdas, d65s, le_gathered);
+        lights.lights[li as usize].add_env_batch(dirs, lambdas, d65s, le_gathered);
         for (&k, &l) in gathered.iter().zip(le_gathered.iter()) {
             le[k as usize] = l;
         }
@@ -406,24 +580,20 @@ fn resolve_env(scene: &PreparedScene, scratch: &mut PathScratch) {
     }
 }
 
-/// Processes the vertex that lane `index`'s ray found (`hit`: its closest hit) and moves the
-/// lane on: true if it has a new ray to trace, false once its path (every branch) has ended.
-#[allow(clippy::too_many_arguments)]
+/// Processes the vertex that lane's ray found (`hit`: its closest hit) and moves the lane
+/// on: true if it has a new ray to trace, false once its path (every branch) has ended.
 #[inline]
-fn step(
+fn step<C: Carrier>(
     scene: &PreparedScene,
-    index: u32,
-    lane: &mut Lane,
+    setup: &C::Setup,
+    lane: &mut Lane<C>,
     hit: Option<Hit>,
-    pending: &mut Vec<Branch>,
-    env: &mut Vec<EnvRequest>,
-    shadow: &mut Vec<ShadowRequest>,
-    counters: &mut Counters,
+    requests: &mut Requests<C>,
 ) -> bool {
-    if vertex(scene, index, lane, hit, pending, env, shadow, counters) {
+    if vertex(scene, setup, lane, hit, requests) {
         return true;
     }
-    match pending.pop() {
+    match requests.pending.pop() {
         Some(b) => {
             lane.branch = b;
             true
@@ -434,17 +604,13 @@ fn step(
 
 /// One vertex of the lane's current branch: emission seen, light sampling, BSDF sampling (or
 /// both lobes of a Fresnel pair). True if the branch goes on (its ray is the next one).
-#[allow(clippy::too_many_arguments)]
 #[inline]
-fn vertex(
+fn vertex<C: Carrier>(
     scene: &PreparedScene,
-    index: u32,
-    lane: &mut Lane,
+    setup: &C::Setup,
+    lane: &mut Lane<C>,
     hit: Option<Hit>,
-    pending: &mut Vec<Branch>,
-    env: &mut Vec<EnvRequest>,
-    shadow: &mut Vec<ShadowRequest>,
-    counters: &mut Counters,
+    requests: &mut Requests<C>,
 ) -> bool {
     let Lane {
         branch: b,
@@ -453,69 +619,80 @@ fn vertex(
         wl,
         ..
     } = lane;
-    let max_depth = scene.settings.max_depth;
-    let lights = &scene.lights;
+    let settings = scene.settings();
+    let lights = scene.lights();
     let sel_pdf = lights.selection_pdf();
     let ray = b.path.ray;
+    let hide_emitter = b.path.depth == 0 && settings.hide_emitters;
 
     // ---- Emitter seen by this ray (environment on a miss, area light on a hit) ----
     let Some(hit) = hit else {
-        if !(b.path.depth == 0 && scene.settings.hide_emitters) {
+        if b.path.depth == 0 {
+            b.carrier.at_first_vertex(setup, ray.dir, None);
+        }
+        if !hide_emitter {
             for &li in &lights.infinite {
                 let light = &lights.lights[li as usize];
                 let w = b.path.emitter_hit_weight(|prev_p| {
                     sel_pdf * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO)
                 });
-                env.push(EnvRequest {
-                    lane: index,
+                requests.env.push(EnvRequest {
+                    lane: requests.lane,
                     light: li,
                     dir: ray.dir,
-                    factor: b.throughput * w,
+                    factor: b.carrier.s0() * w,
                 });
             }
         }
         return false;
     };
-    let si = scene.accel.interaction(&ray, &hit);
-    if let Some(li) = lights.shape_light[si.shape as usize] {
-        // One-sided emission from the geometric front face.
-        if si.ng.dot(-ray.dir) > 0.0 && !(b.path.depth == 0 && scene.settings.hide_emitters) {
-            let light = &lights.lights[li as usize];
-            if let super::lights::Light::Area { radiance: le, .. } = light {
+    let si = scene.interaction(&ray, &hit);
+    if b.path.depth == 0 {
+        b.carrier
+            .at_first_vertex(setup, ray.dir, Some(si.shading.n));
+    }
+    if let Some(light) = si.emitter() {
+        if !hide_emitter {
+            if let Some(le) = light.emitted(si.ng, ray.dir, wl) {
                 let w = b.path.emitter_hit_weight(|prev_p| {
                     sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng)
                 });
-                *radiance += b.throughput * le.eval(wl) * w;
+                *radiance += b.carrier.s0() * le * w;
             }
         }
     }
 
     // ---- Continue? (Mitsuba: depth + 1 < max_depth) ----
-    if max_depth >= 0 && b.path.depth as i64 + 1 >= max_depth as i64 {
+    if settings.max_depth >= 0 && b.path.depth as i64 + 1 >= settings.max_depth as i64 {
         return false;
     }
-    let bsdf: &Bsdf = &scene.bsdfs[scene.shape_bsdf[si.shape as usize] as usize];
-    let wi = si.shading.to_local(-ray.dir);
+    let bsdf = si.bsdf();
+    let frame = bsdf.shading_frame(&si);
+    let v = VertexFrame {
+        frame,
+        wi: frame.to_local(-ray.dir),
+        wi_world: -ray.dir,
+    };
     let ctx = ShadingCtx { wl, uv: si.uv };
 
     // ---- Emitter sampling (the shadow ray is traced with the batch's others) ----
-    if bsdf.has_smooth_component() && !lights.lights.is_empty() {
+    if bsdf.has_smooth_lobe() && !lights.lights.is_empty() {
         let light = lights.pick(sampler);
         if let Some(ls) = light.sample(si.p, sampler.next_2d(), wl) {
-            let wo = si.shading.to_local(ls.wi);
-            let f = bsdf.eval(&ctx, wi, wo, counters);
-            if ls.pdf > 0.0 && f.max_element() > 0.0 && ls.radiance.max_element() > 0.0 {
+            let wo = frame.to_local(ls.wi);
+            let f = b.carrier.eval(bsdf, &ctx, &v, wo);
+            if let (true, Some(f), true) = (ls.pdf > 0.0, f, ls.radiance.max_element() > 0.0) {
                 let light_pdf = sel_pdf * ls.pdf;
                 let w = if ls.delta {
                     1.0
                 } else {
-                    mis_power(light_pdf, bsdf.pdf(wi, wo))
+                    mis_power(light_pdf, bsdf.pdf(&ctx, v.wi, wo))
                 };
-                counters.shadow_rays += 1;
-                shadow.push(ShadowRequest {
-                    lane: index,
+                count(Counter::ShadowRays, 1);
+                requests.shadow.push(ShadowRequest {
+                    lane: requests.lane,
                     ray: ls.shadow_ray(si.p, si.ng),
-                    contribution: b.throughput * f * ls.radiance * (w / light_pdf),
+                    contribution: f * ls.radiance * (w / light_pdf),
                 });
             }
         }
@@ -527,53 +704,57 @@ fn vertex(
     // ---- BSDF sampling, or both lobes of a Fresnel pair ----
     let u1 = sampler.next_1d();
     let u2 = sampler.next_2d();
-    if b.path.splits < scene.fresnel_splits && bsdf.is_fresnel_pair() {
-        let [reflected, transmitted] = bsdf.split(&ctx, wi, counters);
+    if b.path.splits < scene.fresnel_splits() && bsdf.is_fresnel_pair() {
+        let [reflected, transmitted] = C::sample_split(bsdf, &ctx, &v, u1, u2);
         b.path.splits += 1;
-        if let Some(bs) = reflected {
+        if let Some((bs, value)) = reflected {
             let mut r = *b;
-            if advance(scene, &mut r, &si, wi, &bs, wl, sampler) {
-                pending.push(r);
+            if advance(scene, &mut r, &si, &v, &bs, &value, wl, sampler) {
+                requests.pending.push(r);
             }
         }
         return match transmitted {
-            Some(bs) => advance(scene, b, &si, wi, &bs, wl, sampler),
+            Some((bs, value)) => advance(scene, b, &si, &v, &bs, &value, wl, sampler),
             None => false,
         };
     }
-    let Some(bs) = bsdf.sample(&ctx, wi, u1, u2, counters) else {
+    let Some((bs, value)) = C::sample(bsdf, &ctx, &v, u1, u2) else {
         return false;
     };
-    advance(scene, b, &si, wi, &bs, wl, sampler)
+    advance(scene, b, &si, &v, &bs, &value, wl, sampler)
 }
 
-/// Moves branch `b` across vertex `si` along the sampled `bs`, with Russian roulette; false
-/// if the path ends there.
-fn advance(
+/// Moves branch `b` across vertex `si` along the sampled `bs` of value `value`, with
+/// Russian roulette; false if the path ends there.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn advance<C: Carrier>(
     scene: &PreparedScene,
-    b: &mut Branch,
+    b: &mut Branch<C>,
     si: &SurfaceInteraction,
-    wi: Vec3,
+    v: &VertexFrame,
     bs: &BsdfSample,
+    value: &C::Value,
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
 ) -> bool {
-    if b.path.cross(si, wi, bs).is_none() {
+    let Some(wo_world) = b.path.cross(si, &v.frame, v.wi, bs) else {
         return false;
-    }
+    };
     if bs.terminate_secondary && !wl.secondary_terminated() {
         wl.terminate_secondary();
+        count(Counter::SecondaryTerminations, 1);
     }
-    b.throughput *= bs.weight;
+    b.carrier.scatter(value, v, wo_world);
     if wl.secondary_terminated() {
-        b.throughput = Spec::new(b.throughput.x, 0.0, 0.0, 0.0);
+        b.carrier.keep_hero_only();
     }
-    let max = b.throughput.max_element();
-    match b.path.roulette(scene.settings.rr_depth, max, sampler) {
+    let max = b.carrier.max_component();
+    match b.path.roulette(scene.settings().rr_depth, max, sampler) {
         None => false,
         Some(q) => {
             if q != 1.0 {
-                b.throughput /= q;
+                b.carrier.divide(q);
             }
             true
         }

@@ -756,6 +756,17 @@ impl Light {
         matches!(self, Light::Env(_) | Light::Constant(_))
     }
 
+    /// Radiance emitted towards a ray along `dir` that hit this light's shape where the
+    /// geometric normal is `ng`: area lights emit from their front face only (Mitsuba).
+    /// None where nothing is emitted.
+    #[inline]
+    pub fn emitted(&self, ng: Vec3, dir: Vec3, wl: &SampledWavelengths) -> Option<Spec> {
+        match self {
+            Light::Area { radiance, .. } if ng.dot(-dir) > 0.0 => Some(radiance.eval(wl)),
+            _ => None,
+        }
+    }
+
     /// Radiance of an infinite light along world direction `dir`.
     #[inline]
     pub fn eval_env(&self, dir: Vec3, wl: &SampledWavelengths) -> Spec {

@@ -23,10 +23,10 @@ pub fn lambdas(wl: &SampledWavelengths) -> Vec4 {
 #[derive(Debug, Clone)]
 pub enum Spectrum {
     Constant(f32),
-    /// Bounded RGB reflectance (sigmoid polynomial).
-    Albedo(RgbSigmoidPolynomial),
-    /// RGB emitter: scale · polynomial · normalised D65.
-    Illuminant(RgbIlluminantSpectrum),
+    /// Bounded RGB reflectance (sigmoid polynomial), and the linear sRGB it came from.
+    Albedo(RgbSigmoidPolynomial, [f32; 3]),
+    /// RGB emitter: scale · polynomial · normalised D65, and the linear sRGB it came from.
+    Illuminant(RgbIlluminantSpectrum, [f32; 3]),
     /// Piecewise-linear (λ nm ascending, value), held constant beyond its ends.
     Tabulated(Arc<[(f32, f32)]>),
     /// Normalised D65 times a scale.
@@ -41,7 +41,7 @@ impl Spectrum {
             SpectrumDesc::Rgb(rgb) if rgb[0] == rgb[1] && rgb[1] == rgb[2] => {
                 Spectrum::Constant(rgb[0])
             }
-            SpectrumDesc::Rgb(rgb) => Spectrum::Albedo(srgb_reflectance(*rgb)),
+            SpectrumDesc::Rgb(rgb) => Spectrum::Albedo(srgb_reflectance(*rgb), *rgb),
             SpectrumDesc::Tabulated(t) => Spectrum::Tabulated(t.clone().into()),
             SpectrumDesc::D65 { scale } => Spectrum::D65(*scale),
         }
@@ -50,7 +50,7 @@ impl Spectrum {
     /// An emitter's radiance: RGB uses Mitsuba's `srgb_d65`.
     pub fn illuminant(desc: &SpectrumDesc) -> Self {
         match desc {
-            SpectrumDesc::Rgb(rgb) => Spectrum::Illuminant(RgbIlluminantSpectrum::new(*rgb)),
+            SpectrumDesc::Rgb(rgb) => Spectrum::Illuminant(RgbIlluminantSpectrum::new(*rgb), *rgb),
             other => Spectrum::reflectance(other),
         }
     }
@@ -59,8 +59,8 @@ impl Spectrum {
     pub fn eval(&self, wl: &SampledWavelengths) -> Spec {
         match self {
             Spectrum::Constant(v) => Spec::splat(*v),
-            Spectrum::Albedo(p) => Spec::from_array(wl.lambda.map(|l| p.eval(l))),
-            Spectrum::Illuminant(s) => Spec::from_array(wl.lambda.map(|l| s.eval(l))),
+            Spectrum::Albedo(p, _) => Spec::from_array(wl.lambda.map(|l| p.eval(l))),
+            Spectrum::Illuminant(s, _) => Spec::from_array(wl.lambda.map(|l| s.eval(l))),
             Spectrum::Tabulated(t) => Spec::from_array(wl.lambda.map(|l| tabulated(t, l))),
             Spectrum::D65(scale) => {
                 // RGB (1,1,1) as an illuminant is the normalised D65 curve (scale 2, flat 0.5).
@@ -74,11 +74,11 @@ impl Spectrum {
     pub fn mean_hint(&self) -> f32 {
         match self {
             Spectrum::Constant(v) => *v,
-            Spectrum::Albedo(p) => {
+            Spectrum::Albedo(p, _) => {
                 let s: f32 = (0..16).map(|i| p.eval(400.0 + 20.0 * i as f32)).sum();
                 s / 16.0
             }
-            Spectrum::Illuminant(s) => s.scale,
+            Spectrum::Illuminant(s, _) => s.scale,
             Spectrum::Tabulated(t) => t.iter().map(|p| p.1).sum::<f32>() / t.len().max(1) as f32,
             Spectrum::D65(s) => *s,
         }
@@ -87,6 +87,17 @@ impl Spectrum {
     /// Whether the value is the same at every wavelength.
     pub fn is_constant(&self) -> bool {
         matches!(self, Spectrum::Constant(_))
+    }
+
+    /// The description it was made from (an RGB emitter's as its colour).
+    pub fn desc(&self) -> SpectrumDesc {
+        match self {
+            Spectrum::Constant(v) => SpectrumDesc::Constant(*v),
+            Spectrum::Albedo(_, rgb) => SpectrumDesc::Rgb(*rgb),
+            Spectrum::Illuminant(_, rgb) => SpectrumDesc::Rgb(*rgb),
+            Spectrum::Tabulated(t) => SpectrumDesc::Tabulated(t.to_vec()),
+            Spectrum::D65(scale) => SpectrumDesc::D65 { scale: *scale },
+        }
     }
 }
 
@@ -199,6 +210,23 @@ impl Texture {
                     color1.mean_hint()
                 }
             }
+        }
+    }
+
+    /// The description it was made from ([`Texture::new`]'s argument).
+    pub fn desc(&self) -> TextureDesc {
+        match self {
+            Texture::Value(s) => TextureDesc::Value(s.desc()),
+            Texture::Bitmap(b) => TextureDesc::Bitmap(b.clone()),
+            Texture::Checkerboard {
+                color0,
+                color1,
+                to_uv,
+            } => TextureDesc::Checkerboard {
+                color0: color0.desc(),
+                color1: color1.desc(),
+                to_uv: *to_uv,
+            },
         }
     }
 

@@ -7,18 +7,18 @@
 //!   same as Mitsuba's bitmap convention, so no flip). Point/line primitives are skipped
 //!   with a warning.
 //! - **Materials** (metallic-roughness), GGX α = roughness² (the glTF convention):
-//!   1. `KHR_materials_iridescence` with `iridescenceFactor` ≥ 0.5 → [`BsdfDesc::ThinFilm`]:
+//!   1. `KHR_materials_iridescence` with `iridescenceFactor` ≥ 0.5 → [`ThinFilmBsdf`]:
 //!      film index `iridescenceIor` (default 1.3), thickness `iridescenceThicknessMaximum`
 //!      (default 400 nm) or, with `iridescenceThicknessTexture`, its **G channel** v ∈ [0,1]
 //!      mapped through `value_range = (min, max)` (defaults 100, 400 nm); substrate index
 //!      from `KHR_materials_ior` (default 1.5), k = 0. The factor is treated as on/off (the
 //!      thin-film BSDF does not blend with the base layer); factors in (0, 0.5) are ignored
 //!      with a warning.
-//!   2. `KHR_materials_transmission` factor ≥ 0.5 → [`BsdfDesc::Dielectric`] (ior, α).
-//!   3. metallic ≥ 0.5 → [`BsdfDesc::Conductor`] with a grey complex index that reproduces
+//!   2. `KHR_materials_transmission` factor ≥ 0.5 → [`Dielectric`] (ior; rough transmission is refused).
+//!   3. metallic ≥ 0.5 → [`Conductor`] with a grey complex index that reproduces
 //!      the normal-incidence reflectance F0 = luminance(baseColor): n = 1, k = 2·√(F0/(1−F0))
 //!      (from R = ((n−1)² + k²)/((n+1)² + k²)). The hue of coloured metals is lost.
-//!   4. otherwise → [`BsdfDesc::Plastic`]: diffuse = baseColor (factor × sRGB-decoded
+//!   4. otherwise → [`Plastic`]: diffuse = baseColor (factor × sRGB-decoded
 //!      texture), int_ior = `KHR_materials_ior` (default 1.5), α = roughness².
 //!
 //!   Emissive factor × `KHR_materials_emissive_strength` > 0 → area emission (linear RGB).
@@ -29,12 +29,14 @@
 //! - **Lighting**: glTF has no environment; the studio environment is always added.
 
 use super::{
-    default_camera, default_environment, shapes_bounds, BitmapTexture, BsdfDesc, Camera,
-    FilmSettings, FovAxis, Geometry, IntegratorSettings, ReconstructionFilter, Scene, Shape,
-    SpectrumDesc, TextureDesc, TextureFilter, TriangleMesh, WrapMode, DEFAULT_RESOLUTION,
-    DEFAULT_SPP,
+    default_camera, default_environment, shapes_bounds, BitmapTexture, Camera, FilmSettings,
+    FovAxis, Geometry, IntegratorSettings, ReconstructionFilter, Scene, Shape, SpectrumDesc,
+    TextureDesc, TextureFilter, TriangleMesh, WrapMode, DEFAULT_RESOLUTION, DEFAULT_SPP,
 };
 use crate::optics::{Complex64, Ior};
+use crate::render::bsdf::{
+    conductor::Conductor, dielectric::Dielectric, plastic::Plastic, thinfilm::ThinFilmBsdf, Bsdf,
+};
 use anyhow::{anyhow, bail, Context, Result};
 use glam::{Mat4, Vec2, Vec3};
 use gltf::image::Format;
@@ -104,7 +106,7 @@ struct Loader<'a> {
     images: &'a [gltf::image::Data],
     file: String,
     materials: HashMap<Option<usize>, (usize, Option<SpectrumDesc>)>,
-    bsdfs: Vec<BsdfDesc>,
+    bsdfs: Vec<Bsdf>,
 }
 
 /// The grey conductor n = 1 + ik whose normal-incidence reflectance is the luminance F0 of
@@ -210,12 +212,9 @@ impl Loader<'_> {
         let bsdf = if let Some((film_n, thickness_nm)) =
             iridescent_film(m, self.doc, self.images, &what)?
         {
-            BsdfDesc::ThinFilm {
-                film_ior: Ior::real(film_n),
-                thickness_nm,
-                substrate_ior: Ior::real(ior),
-                alpha,
-            }
+            ThinFilmBsdf::new(Ior::real(film_n), &thickness_nm, Ior::real(ior), alpha)
+                .with_context(|| what.clone())?
+                .into()
         } else {
             let transmission = m
                 .transmission()
@@ -223,17 +222,14 @@ impl Loader<'_> {
                 .unwrap_or(0.0);
             let base = pbr.base_color_factor();
             if transmission >= 0.5 {
-                BsdfDesc::Dielectric {
-                    int_ior: Ior::real(ior),
-                    ext_ior: Ior::real(1.0),
-                    alpha,
+                if alpha > 0.0 {
+                    bail!("{what}: rough transmission (roughness {roughness}) is not supported: only smooth glass");
                 }
+                Dielectric::new(Ior::real(ior), Ior::real(1.0)).into()
             } else if pbr.metallic_factor() >= 0.5 {
-                BsdfDesc::Conductor {
-                    eta: grey_conductor(base[0], base[1], base[2]),
-                    alpha_u: alpha,
-                    alpha_v: alpha,
-                }
+                Conductor::new(grey_conductor(base[0], base[1], base[2]), alpha, alpha)
+                    .with_context(|| what.clone())?
+                    .into()
             } else {
                 let diffuse = match pbr.base_color_texture() {
                     None => TextureDesc::Value(SpectrumDesc::Rgb([base[0], base[1], base[2]])),
@@ -258,13 +254,9 @@ impl Loader<'_> {
                         TextureDesc::Bitmap(Arc::new(b))
                     }
                 };
-                BsdfDesc::Plastic {
-                    diffuse_reflectance: diffuse,
-                    int_ior: ior as f32,
-                    ext_ior: 1.0,
-                    alpha,
-                    nonlinear: false,
-                }
+                Plastic::new(&diffuse, ior as f32, 1.0, false, alpha)
+                    .with_context(|| what.clone())?
+                    .into()
             }
         };
         let strength = m.emissive_strength().unwrap_or(1.0);
@@ -405,7 +397,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
     }
     let mut bsdfs = std::mem::take(&mut loader.bsdfs);
     if bsdfs.is_empty() {
-        bsdfs.push(BsdfDesc::default_diffuse());
+        bsdfs.push(Bsdf::default_diffuse());
     }
     let (camera, film) = match camera {
         Some((c, aspect)) => {

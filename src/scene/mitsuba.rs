@@ -1,4 +1,5 @@
-//! Mitsuba 3 XML scene subset (see design.md §2 "Scenes" and issue 6).
+//! Mitsuba 3 XML scene subset: the XML mechanics (values, references, transforms,
+//! parameters) and the plugins other than BSDFs.
 //!
 //! Supported: `<scene version>`, `<default>` / `$param` substitution (with `-D` overrides),
 //! `id` / `<ref>`, transforms (`lookat`, `translate`, `rotate`, `scale`, `matrix`, composed in
@@ -9,10 +10,10 @@
 //! they do not change pixel values) and any sampler (`sample_count`, `seed`; `independent` → PCG, the stratified types → Owen-scrambled Sobol'), `path`
 //! integrator (`max_depth`, `rr_depth`, `hide_emitters`), shapes `obj`, `ply`, `sphere`,
 //! `rectangle`, `cube`, `disk` (`to_world`, `flip_normals`, `face_normals`), emitters
-//! `envmap`, `constant`, `area`, `point`, BSDFs `diffuse`, `conductor`, `roughconductor`,
-//! `dielectric`, `roughdielectric`, `plastic`, `roughplastic`, `twosided`, `thinfilm`,
-//! `polarizer` (constant `theta`), the sensor extension `<string name="polarizer"
-//! value="s|p|DEG"/>` (scenes/README.md),
+//! `envmap`, `constant`, `area`, `point`, the BSDFs registered in [`crate::render::bsdf`]
+//! (each built by its model's own builder from [`PluginParams`], the typed parameter access
+//! of [`params`]), the sensor extension `<string name="polarizer" value="s|p|DEG"/>`
+//! (scenes/README.md),
 //! textures `bitmap`, `checkerboard`, values `float`, `integer`, `boolean`, `string`, `rgb`,
 //! `spectrum`, `point`, `vector`.
 //!
@@ -24,12 +25,16 @@
 // `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod params;
+
+pub use params::{parse_layers, PluginParams, RealSpectrum};
+
 use super::{
-    look_at, shapes, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
+    look_at, shapes, BitmapTexture, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
     IntegratorSettings, Polarizer, ReconstructionFilter, SamplerKind, Scene, Shape, SpectrumDesc,
     TextureDesc, TextureFilter, WrapMode,
 };
-use crate::optics::{dispersion, Complex64, Ior};
+use crate::render::bsdf::{self, Bsdf};
 use anyhow::{anyhow, bail, Context, Result};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use roxmltree::{Document, Node};
@@ -141,7 +146,7 @@ enum Val {
     Transform(Mat4),
     Texture(TextureDesc),
     /// An inline BSDF.
-    Bsdf(BsdfDesc),
+    Bsdf(Bsdf),
     /// A reference to a BSDF already in the scene list.
     BsdfRef(usize),
     Emitter(Emitter),
@@ -202,7 +207,7 @@ struct Ctx<'a, 'i> {
     base_dir: PathBuf,
     params: HashMap<String, String>,
     ids: HashMap<String, Named>,
-    bsdfs: Vec<BsdfDesc>,
+    bsdfs: Vec<Bsdf>,
     shapes: Vec<Shape>,
     emitters: Vec<EmitterDesc>,
     sensor: Option<Sensor>,
@@ -841,496 +846,14 @@ impl<'a, 'i> Ctx<'a, 'i> {
         )
     }
 
-    fn build_bsdf(&mut self, p: &mut Props<'a, 'i>) -> Result<BsdfDesc> {
-        const KNOWN: &[&str] = &[
-            "diffuse",
-            "conductor",
-            "roughconductor",
-            "dielectric",
-            "roughdielectric",
-            "thindielectric",
-            "plastic",
-            "roughplastic",
-            "twosided",
-            "thinfilm",
-            "polarizer",
-            "thinfilm_bubble",
-            "coateddielectric",
-        ];
+    /// A BSDF, built by the registered model that claims the plugin.
+    fn build_bsdf(&self, p: &mut Props<'a, 'i>) -> Result<Bsdf> {
         let plugin = p.plugin.clone();
-        Ok(match plugin.as_str() {
-            "diffuse" => BsdfDesc::Diffuse {
-                reflectance: p.texture(self, "reflectance", 0.5)?,
-            },
-            "conductor" | "roughconductor" => {
-                let rough = plugin == "roughconductor";
-                let (alpha_u, alpha_v) = if rough {
-                    self.microfacet(p)?
-                } else {
-                    (0.0, 0.0)
-                };
-                let material = p.string(self, "material")?;
-                let eta = p.take("eta");
-                let k = p.take("k");
-                p.accept(
-                    &["specular_reflectance"],
-                    self,
-                    |v| matches!(v, Val::Float(x) if *x == 1.0),
-                )?;
-                let ior = match (material, eta, k) {
-                    (Some(_), Some(e), _) | (Some(_), None, Some(e)) => {
-                        return Err(
-                            self.err(e.node, "give either 'material' or 'eta'/'k', not both")
-                        )
-                    }
-                    (Some(m), None, None) => self.conductor_material(p.node, &m)?,
-                    (None, None, None) => self.conductor_material(p.node, "none")?,
-                    (None, eta, k) => {
-                        // Mitsuba's conductor defaults when eta/k are given: eta 0, k 1.
-                        let n = match eta {
-                            Some(e) => self.spectral(&e, "eta")?,
-                            None => Spectral::Const(0.0),
-                        };
-                        let kk = match k {
-                            Some(k) => self.spectral(&k, "k")?,
-                            None => Spectral::Const(1.0),
-                        };
-                        if !(n.min() >= 0.0 && kk.min() >= 0.0) {
-                            return Err(self.err(p.node, "eta and k must be ≥ 0"));
-                        }
-                        combine_ior(&format!("{} eta/k", self.loc(p.node)), &n, &kk)
-                    }
-                };
-                BsdfDesc::Conductor {
-                    eta: ior,
-                    alpha_u,
-                    alpha_v,
-                }
-            }
-            "dielectric" | "roughdielectric" | "thindielectric" => {
-                if plugin == "thindielectric" {
-                    return Err(self.unknown_plugin(
-                        p,
-                        KNOWN
-                            .iter()
-                            .filter(|k| **k != "thindielectric")
-                            .copied()
-                            .collect::<Vec<_>>()
-                            .as_slice(),
-                    ));
-                }
-                let alpha = if plugin == "roughdielectric" {
-                    let (au, av) = self.microfacet(p)?;
-                    if au != av {
-                        return Err(
-                            self.err(p.node, "anisotropic roughdielectric is not supported")
-                        );
-                    }
-                    au
-                } else {
-                    0.0
-                };
-                let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
-                let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
-                BsdfDesc::Dielectric {
-                    int_ior,
-                    ext_ior,
-                    alpha,
-                }
-            }
-            "plastic" | "roughplastic" => {
-                let alpha = if plugin == "roughplastic" {
-                    let (au, av) = self.microfacet(p)?;
-                    if au != av {
-                        return Err(self.err(p.node, "anisotropic roughplastic is not supported"));
-                    }
-                    au
-                } else {
-                    0.0
-                };
-                BsdfDesc::Plastic {
-                    diffuse_reflectance: p.texture(self, "diffuse_reflectance", 0.5)?,
-                    int_ior: p.ior_number(self, "int_ior", 1.49)? as f32,
-                    ext_ior: p.ior_number(self, "ext_ior", 1.000277)? as f32,
-                    alpha,
-                    nonlinear: p.bool(self, "nonlinear", false)?,
-                }
-            }
-            "polarizer" => {
-                // Mitsuba `polarizer`: `theta` in degrees (a constant here), `transmittance`.
-                let theta_deg = match p.take("theta") {
-                    None => 0.0,
-                    Some(q) => match q.val {
-                        Val::Float(v) if v.is_finite() => v as f32,
-                        Val::Spectrum(SpectrumDesc::Constant(v)) if v.is_finite() => v,
-                        _ => {
-                            return Err(self.err(
-                                q.node,
-                                "polarizer theta must be a finite constant angle in degrees",
-                            ))
-                        }
-                    },
-                };
-                p.accept(&["polarizing"], self, |v| matches!(v, Val::Bool(true)))?;
-                BsdfDesc::Polarizer {
-                    theta_deg,
-                    transmittance: p.texture(self, "transmittance", 1.0)?,
-                }
-            }
-            "twosided" => {
-                let mut inner = Vec::new();
-                p.list.retain(|q| {
-                    if matches!(q.val, Val::Bsdf(_) | Val::BsdfRef(_)) {
-                        inner.push((q.val.clone(), q.node));
-                        false
-                    } else {
-                        true
-                    }
-                });
-                let b = match inner.as_slice() {
-                    [(v, _)] => self.bsdf_value(v),
-                    [] => BsdfDesc::default_diffuse(),
-                    [_, (_, n), ..] => {
-                        return Err(self.err(
-                            *n,
-                            "twosided with two different BSDFs is not supported (give one)",
-                        ))
-                    }
-                };
-                BsdfDesc::TwoSided(Box::new(b))
-            }
-            "thinfilm" if p.list.iter().any(|q| q.name == "layers") => self.thinfilm_stack(p)?,
-            "coateddielectric" => {
-                let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
-                let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
-                let Some(q) = p.take("coating") else {
-                    return Err(self.err(
-                        p.node,
-                        "coateddielectric needs a <string name=\"coating\"> of layers, e.g. \"MgF2:99.6\"",
-                    ));
-                };
-                let Val::Str(text) = &q.val else {
-                    return Err(self.err(
-                        q.node,
-                        "coating must be a <string> of layers, e.g. \"MgF2:99.6\"",
-                    ));
-                };
-                let layers =
-                    parse_layers(text).map_err(|e| self.err(q.node, format!("coating: {e}")))?;
-                BsdfDesc::CoatedDielectric {
-                    layers,
-                    int_ior,
-                    ext_ior,
-                }
-            }
-            "thinfilm_bubble" => {
-                let film_ior = match p.take("film_ior") {
-                    None => Ior::real(1.33),
-                    Some(q) => self.named_or_real_ior(&q, "film_ior")?,
-                };
-                let thickness_nm = self.thickness(p, 400.0)?;
-                let ext_ior = match p.take("ext_ior") {
-                    None => Ior::real(1.0),
-                    Some(q) => {
-                        let ior = self.named_or_real_ior(&q, "ext_ior")?;
-                        if ior.is_dispersive() || ior.at(550.0).im != 0.0 {
-                            return Err(self.err(
-                                q.node,
-                                "ext_ior of thinfilm_bubble must be a constant real index",
-                            ));
-                        }
-                        ior
-                    }
-                };
-                BsdfDesc::Bubble {
-                    film_ior,
-                    thickness_nm,
-                    ext_ior,
-                }
-            }
-            "thinfilm" => {
-                let film_ior = match p.take("film_ior") {
-                    None => Ior::real(1.37),
-                    Some(q) => self.named_or_real_ior(&q, "film_ior")?,
-                };
-                let thickness_nm = self.thickness(p, 400.0)?;
-                let substrate = p.take("substrate_ior");
-                let substrate_k = match p.take("substrate_k") {
-                    None => None,
-                    Some(q) => {
-                        let k = self.spectral(&q, "substrate_k")?;
-                        if !(k.min() >= 0.0) {
-                            return Err(self.err(q.node, "substrate_k must be ≥ 0"));
-                        }
-                        Some((k, q.node))
-                    }
-                };
-                let substrate_ior = match (substrate, substrate_k) {
-                    (None, None) => Ior::real(1.64),
-                    (None, Some((k, _))) => combine_ior(
-                        &format!("{} substrate", self.loc(p.node)),
-                        &Spectral::Const(1.64),
-                        &k,
-                    ),
-                    (Some(q), None) => self.named_or_real_ior(&q, "substrate_ior")?,
-                    (Some(q), Some((k, knode))) => {
-                        if matches!(q.val, Val::Str(_)) {
-                            return Err(self.err(
-                                knode,
-                                "substrate_k cannot be combined with a named substrate material (its k is tabulated)",
-                            ));
-                        }
-                        let n = self.spectral(&q, "substrate_ior")?;
-                        if !(n.min() > 0.0) {
-                            return Err(self.err(q.node, "substrate_ior must be > 0"));
-                        }
-                        combine_ior(&format!("{} substrate", self.loc(q.node)), &n, &k)
-                    }
-                };
-                let alpha = p.float(self, "alpha", 0.0)? as f32;
-                if !(alpha >= 0.0) {
-                    return Err(self.err(p.node, "alpha must be ≥ 0"));
-                }
-                BsdfDesc::ThinFilm {
-                    film_ior,
-                    thickness_nm,
-                    substrate_ior,
-                    alpha,
-                }
-            }
-            _ => return Err(self.unknown_plugin(p, KNOWN)),
-        })
-    }
-
-    /// Film thickness in nm: a float ≥ 0 or a (single-channel) bitmap / checkerboard texture.
-    fn thickness(&mut self, p: &mut Props<'a, 'i>, default: f32) -> Result<TextureDesc> {
-        Ok(match p.take("thickness") {
-            None => TextureDesc::Value(SpectrumDesc::Constant(default)),
-            Some(q) => match q.val {
-                Val::Float(v) if v.is_finite() && v >= 0.0 => {
-                    TextureDesc::Value(SpectrumDesc::Constant(v as f32))
-                }
-                Val::Float(v) => {
-                    return Err(self.err(q.node, format!("thickness {v} nm must be ≥ 0")))
-                }
-                Val::Texture(TextureDesc::Bitmap(b)) => {
-                    TextureDesc::Bitmap(Arc::new(single_channel(&b)))
-                }
-                Val::Texture(t @ TextureDesc::Checkerboard { .. }) => t,
-                ref v => {
-                    return Err(self.err(
-                        q.node,
-                        format!(
-                            "thickness must be a float or a bitmap texture, not {}",
-                            v.kind()
-                        ),
-                    ))
-                }
-            },
-        })
-    }
-
-    /// `thinfilm` with a `layers` string: a multilayer coating on an opaque substrate.
-    fn thinfilm_stack(&mut self, p: &mut Props<'a, 'i>) -> Result<BsdfDesc> {
-        for conflicting in ["film_ior", "thickness"] {
-            if let Some(q) = p.take(conflicting) {
-                return Err(self.err(
-                    q.node,
-                    format!("'{conflicting}' cannot be combined with 'layers' (give each layer as material:thickness_nm)"),
-                ));
-            }
+        let mut params = PluginParams::new(p, self);
+        match bsdf::build_plugin(&plugin, &mut params) {
+            Some(b) => b,
+            None => Err(self.unknown_plugin(p, &bsdf::plugin_names())),
         }
-        let q = p.take("layers").expect("checked by the caller");
-        let Val::Str(text) = &q.val else {
-            return Err(self.err(
-                q.node,
-                "layers must be a <string>, e.g. \"MgF2:100, TiO2:50\"",
-            ));
-        };
-        let layers = parse_layers(text).map_err(|e| self.err(q.node, format!("layers: {e}")))?;
-        let substrate_ior = match p.take("substrate_ior") {
-            None => Ior::real(1.64),
-            Some(q) => self.named_or_real_ior(&q, "substrate_ior")?,
-        };
-        if let Some(q) = p.take("substrate_k") {
-            return Err(self.err(
-                q.node,
-                "with 'layers', give an absorbing substrate as substrate_ior=\"n+ki\" or a material name",
-            ));
-        }
-        let alpha = p.float(self, "alpha", 0.0)? as f32;
-        if !(alpha >= 0.0) {
-            return Err(self.err(p.node, "alpha must be ≥ 0"));
-        }
-        Ok(BsdfDesc::ThinFilmStack {
-            layers,
-            substrate_ior,
-            alpha,
-        })
-    }
-
-    /// A dielectric's `int_ior`/`ext_ior`: a float or a Mitsuba IOR name (constant, as in
-    /// Mitsuba — so `bk7` is 1.5046 everywhere Mitsuba renders the scene too); a dispersive
-    /// index from `material:NAME`, `cauchy:…`, `sellmeier:…` (see [`Ior`]'s parser), a name of
-    /// the dispersion library that is not in Mitsuba's table (e.g. `SiO2`), or a tabulated
-    /// `<spectrum>` of λ:n pairs.
-    fn dielectric_ior(&mut self, p: &mut Props<'a, 'i>, name: &str, default: f64) -> Result<Ior> {
-        let Some(q) = p.take(name) else {
-            return Ok(Ior::real(default));
-        };
-        let ior = match &q.val {
-            Val::Str(s) => {
-                if let Some(v) = mitsuba_ior(s) {
-                    Ior::real(v)
-                } else {
-                    s.parse::<Ior>().map_err(|e| {
-                        let names: Vec<_> = MITSUBA_IOR_TABLE.iter().map(|(n, _)| *n).collect();
-                        self.err(
-                            q.node,
-                            format!(
-                                "{name}: unknown IOR name \"{s}\" ({e}); Mitsuba IOR names: {}; dispersive: material:NAME, cauchy:A,B[,C], sellmeier:B1,C1,…",
-                                names.join(", ")
-                            ),
-                        )
-                    })?
-                }
-            }
-            _ => {
-                let n = self.spectral(&q, name)?;
-                if !(n.min() > 0.0) {
-                    return Err(self.err(q.node, format!("{name} must be > 0")));
-                }
-                combine_ior(
-                    &format!("{} {name}", self.loc(q.node)),
-                    &n,
-                    &Spectral::Const(0.0),
-                )
-            }
-        };
-        let c = ior.at(550.0);
-        if !(c.re > 0.0 && c.re.is_finite()) {
-            return Err(self.err(q.node, format!("{name} must be > 0")));
-        }
-        if c.im != 0.0 {
-            return Err(self.err(
-                q.node,
-                format!("{name} = {ior} absorbs (k > 0): a dielectric needs a real index (use conductor)"),
-            ));
-        }
-        Ok(ior)
-    }
-
-    fn bsdf_value(&self, v: &Val) -> BsdfDesc {
-        match v {
-            Val::Bsdf(b) => b.clone(),
-            Val::BsdfRef(i) => self.bsdfs[*i].clone(),
-            _ => BsdfDesc::default_diffuse(),
-        }
-    }
-
-    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`.
-    fn microfacet(&mut self, p: &mut Props<'a, 'i>) -> Result<(f32, f32)> {
-        let dist = p.string(self, "distribution")?;
-        match dist.as_deref() {
-            Some("ggx") => {}
-            Some("beckmann") | None => eprintln!(
-                "warning: {}: {} \"{}\" uses Mitsuba's default Beckmann distribution; rendering with GGX (add <string name=\"distribution\" value=\"ggx\"/> to match exactly)",
-                self.loc(p.node),
-                p.tag,
-                p.plugin
-            ),
-            Some(other) => {
-                return Err(self.err(p.node, format!("unknown distribution \"{other}\" (ggx, beckmann)")))
-            }
-        }
-        p.accept(&["sample_visible"], self, |v| matches!(v, Val::Bool(_)))?;
-        let alpha = p.float_opt(self, "alpha")?;
-        let au = p.float_opt(self, "alpha_u")?;
-        let av = p.float_opt(self, "alpha_v")?;
-        let (u, v) = match (alpha, au, av) {
-            (Some(a), None, None) => (a, a),
-            (None, Some(u), Some(v)) => (u, v),
-            (None, None, None) => (0.1, 0.1),
-            _ => {
-                return Err(self.err(
-                    p.node,
-                    "give either 'alpha' or both 'alpha_u' and 'alpha_v'",
-                ))
-            }
-        };
-        if !(u >= 0.0 && v >= 0.0) {
-            return Err(self.err(p.node, "roughness must be ≥ 0"));
-        }
-        Ok((u as f32, v as f32))
-    }
-
-    fn conductor_material(&self, node: Node, name: &str) -> Result<Ior> {
-        if name == "none" {
-            // Mitsuba's "none": a perfect mirror, eta = 0, k = 1 (|r| = 1 at every angle).
-            return Ok(Ior::Constant(Complex64::new(0.0, 1.0)));
-        }
-        dispersion::lookup(name).map(Ior::Material).ok_or_else(|| {
-            let names = dispersion::names();
-            self.err(
-                node,
-                format!(
-                    "unknown conductor material \"{name}\" (available: none{}{})",
-                    if names.is_empty() { "" } else { ", " },
-                    names.join(", ")
-                ),
-            )
-        })
-    }
-
-    /// A real value that may depend on wavelength: a number or a tabulated `<spectrum>`.
-    fn spectral(&self, q: &Prop, what: &str) -> Result<Spectral> {
-        match &q.val {
-            Val::Float(v) if v.is_finite() => Ok(Spectral::Const(*v)),
-            Val::Int(v) => Ok(Spectral::Const(*v as f64)),
-            Val::Spectrum(SpectrumDesc::Constant(v)) => Ok(Spectral::Const(*v as f64)),
-            Val::Spectrum(SpectrumDesc::Tabulated(t)) => Ok(Spectral::Table(t.clone())),
-            v => Err(self.err(
-                q.node,
-                format!(
-                    "{what} must be a number or a <spectrum> of λ:value pairs, not {} (RGB indices have no physical meaning)",
-                    v.kind()
-                ),
-            )),
-        }
-    }
-
-    /// A film/substrate index: a number, or a name from the dispersion library or
-    /// Mitsuba's IOR table.
-    fn named_or_real_ior(&self, q: &Prop, what: &str) -> Result<Ior> {
-        let ior = match &q.val {
-            Val::Str(s) => {
-                if let Some(m) = dispersion::lookup(s) {
-                    Ior::Material(m)
-                } else if let Some(v) = mitsuba_ior(s) {
-                    Ior::real(v)
-                } else {
-                    s.parse::<Ior>()
-                        .map_err(|e| self.err(q.node, format!("{what}: {e}")))?
-                }
-            }
-            _ => {
-                let n = self.spectral(q, what)?;
-                if !(n.min() > 0.0) {
-                    return Err(self.err(q.node, format!("{what} must be > 0")));
-                }
-                combine_ior(
-                    &format!("{} {what}", self.loc(q.node)),
-                    &n,
-                    &Spectral::Const(0.0),
-                )
-            }
-        };
-        if let Ior::Constant(c) = ior {
-            if !(c.re > 0.0 && c.re.is_finite()) {
-                return Err(self.err(q.node, format!("{what} must be > 0")));
-            }
-        }
-        Ok(ior)
     }
 
     fn build_texture(&mut self, p: &mut Props<'a, 'i>) -> Result<TextureDesc> {
@@ -1541,11 +1064,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 // when the shape is an emitter, so light falling on an area light's front is
                 // not reflected.
                 self.bsdfs.push(if emission.is_some() {
-                    BsdfDesc::Diffuse {
-                        reflectance: TextureDesc::Value(SpectrumDesc::Constant(0.0)),
-                    }
+                    bsdf::diffuse::Diffuse::constant(0.0).into()
                 } else {
-                    BsdfDesc::default_diffuse()
+                    Bsdf::default_diffuse()
                 });
                 self.bsdfs.len() - 1
             }
@@ -1760,167 +1281,6 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 }
 
-/// A real quantity that may depend on wavelength.
-#[derive(Debug, Clone)]
-enum Spectral {
-    Const(f64),
-    /// (λ nm, value), strictly increasing λ.
-    Table(Vec<(f32, f32)>),
-}
-
-impl Spectral {
-    /// Linear interpolation, constant beyond the ends (Mitsuba's `regular`/`irregular`
-    /// spectra clamp the same way for conductor data).
-    fn at(&self, lambda_nm: f64) -> f64 {
-        match self {
-            Spectral::Const(v) => *v,
-            Spectral::Table(t) => {
-                let l = lambda_nm as f32;
-                let i = t.partition_point(|p| p.0 < l);
-                let v = if i == 0 {
-                    t[0].1
-                } else if i == t.len() {
-                    t[t.len() - 1].1
-                } else {
-                    let (a, b) = (t[i - 1], t[i]);
-                    a.1 + (b.1 - a.1) * (l - a.0) / (b.0 - a.0)
-                };
-                v as f64
-            }
-        }
-    }
-
-    fn min(&self) -> f64 {
-        match self {
-            Spectral::Const(v) => *v,
-            Spectral::Table(t) => t.iter().map(|p| p.1 as f64).fold(f64::INFINITY, f64::min),
-        }
-    }
-}
-
-/// n + ik from two real spectra: a constant if both are constant, otherwise a tabulated
-/// material on the union of their wavelength grids. The material is leaked to obtain the
-/// `&'static` that [`Ior::Material`] holds: a few hundred bytes per spectral index per loaded
-/// scene.
-fn combine_ior(label: &str, n: &Spectral, k: &Spectral) -> Ior {
-    if let (Spectral::Const(n), Spectral::Const(k)) = (n, k) {
-        return Ior::Constant(Complex64::new(*n, *k));
-    }
-    let mut grid: Vec<f32> = [n, k]
-        .iter()
-        .flat_map(|s| match s {
-            Spectral::Table(t) => t.iter().map(|p| p.0).collect(),
-            Spectral::Const(_) => Vec::new(),
-        })
-        .collect();
-    grid.sort_by(f32::total_cmp);
-    grid.dedup();
-    let rows: Vec<(f64, f64, f64)> = grid
-        .iter()
-        .map(|&l| (l as f64, n.at(l as f64), k.at(l as f64)))
-        .collect();
-    let range = (rows[0].0, rows[rows.len() - 1].0);
-    let material = dispersion::Material {
-        name: Box::leak(label.to_string().into_boxed_str()),
-        aliases: Vec::new(),
-        source: "tabulated in the scene file",
-        valid_range_nm: range,
-        model: dispersion::Model::Table(rows),
-    };
-    Ior::Material(Box::leak(Box::new(material)))
-}
-
-/// Parses a `layers` string: comma- or semicolon-separated `index:thickness_nm` items, top
-/// (ambient side) first. The index is a number (`1.38`), `n+ki` (`2.0+0.1i`) or a material
-/// of the dispersion library (`MgF2`, `TiO2`, `SiO2`, …). A group in parentheses followed by
-/// `xN` repeats N times: `(TiO2:52, SiO2:94)x6, TiO2:52` is a 13-layer quarter-wave mirror.
-pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> {
-    fn items(text: &str) -> std::result::Result<Vec<&str>, String> {
-        let mut out = Vec::new();
-        let (mut depth, mut start) = (0i32, 0);
-        for (i, ch) in text.char_indices() {
-            match ch {
-                '(' => depth += 1,
-                ')' => {
-                    depth -= 1;
-                    if depth < 0 {
-                        return Err(format!("unbalanced ')' in \"{text}\""));
-                    }
-                }
-                ',' | ';' if depth == 0 => {
-                    out.push(text[start..i].trim());
-                    start = i + 1;
-                }
-                _ => {}
-            }
-        }
-        if depth != 0 {
-            return Err(format!("unbalanced '(' in \"{text}\""));
-        }
-        out.push(text[start..].trim());
-        Ok(out)
-    }
-    fn parse(
-        text: &str,
-        out: &mut Vec<(Ior, f64)>,
-        level: usize,
-    ) -> std::result::Result<(), String> {
-        for item in items(text)? {
-            if item.is_empty() {
-                return Err(format!("empty layer in \"{text}\""));
-            }
-            if let Some(body) = item.strip_prefix('(') {
-                let close = body
-                    .rfind(')')
-                    .ok_or_else(|| format!("'{item}': missing ')'"))?;
-                let count = body[close + 1..].trim();
-                let count = count
-                    .strip_prefix(['x', 'X', '*'])
-                    .and_then(|c| c.trim().parse::<usize>().ok())
-                    .filter(|&n| (1..=1000).contains(&n))
-                    .ok_or_else(|| {
-                        format!("'{item}': a group must end in xN with 1 ≤ N ≤ 1000, e.g. (TiO2:52, SiO2:94)x6")
-                    })?;
-                if level > 4 {
-                    return Err("groups nested too deeply".into());
-                }
-                let mut group = Vec::new();
-                parse(&body[..close], &mut group, level + 1)?;
-                for _ in 0..count {
-                    out.extend(group.iter().cloned());
-                }
-                continue;
-            }
-            let (material, thickness) = item.rsplit_once(':').ok_or_else(|| {
-                format!("layer '{item}' must be index:thickness_nm, e.g. MgF2:100")
-            })?;
-            let d: f64 = thickness.trim().parse().map_err(|_| {
-                format!(
-                    "layer '{item}': thickness '{}' is not a number (nm)",
-                    thickness.trim()
-                )
-            })?;
-            if !(d.is_finite() && d >= 0.0) {
-                return Err(format!(
-                    "layer '{item}': thickness must be finite and ≥ 0 nm"
-                ));
-            }
-            let ior: Ior = material
-                .trim()
-                .parse()
-                .map_err(|e| format!("layer '{item}': {e}"))?;
-            out.push((ior, d));
-            if out.len() > 10_000 {
-                return Err("more than 10000 layers".into());
-            }
-        }
-        Ok(())
-    }
-    let mut out = Vec::new();
-    parse(text, &mut out, 0)?;
-    Ok(out)
-}
-
 /// True when `$name` occurs as a whole parameter reference somewhere in the text.
 fn text_mentions_param(text: &str, name: &str) -> bool {
     let pat = format!("${name}");
@@ -1931,23 +1291,6 @@ fn text_mentions_param(text: &str, name: &str) -> bool {
             .next()
             .is_some_and(|c| c.is_ascii_alphanumeric() || c == '_')
     })
-}
-
-/// A thickness texture must be scalar: RGB images are reduced to their mean.
-fn single_channel(b: &BitmapTexture) -> BitmapTexture {
-    if b.channels == 1 {
-        return b.clone();
-    }
-    let data = b
-        .data
-        .chunks_exact(b.channels)
-        .map(|c| c.iter().sum::<f32>() / c.len() as f32)
-        .collect();
-    BitmapTexture {
-        channels: 1,
-        data,
-        ..b.clone()
-    }
 }
 
 /// Parses a `<spectrum value>`: one number, or "λ:v, λ:v, …" pairs (increasing λ in nm).

@@ -2,11 +2,12 @@
 //! Loaders (Mitsuba XML subset, glTF, OBJ, PLY) produce a [`Scene`]; the renderer consumes it.
 //!
 //! CONTRACT between the scene loaders and the renderer. Geometry is in world space.
-//! Conventions are Mitsuba 3's (see shared/docs/conventions.md): the camera looks along +Z of
-//! its `to_world` frame with +Y up; environment maps use Mitsuba's lat-long mapping.
+//! Conventions are Mitsuba 3's (`docs/conventions.md`): the camera looks along +Z of its
+//! `to_world` frame with +Y up; environment maps use Mitsuba's lat-long mapping. BSDFs are
+//! the renderer's models ([`crate::render::bsdf`]), each built from a file by its own builder.
 
 use crate::image_io::RgbImage;
-use crate::optics::Ior;
+use crate::render::bsdf::Bsdf;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -58,7 +59,8 @@ pub struct Scene {
     /// Which sequence the samples come from (the sampler's plugin type).
     pub sampler: SamplerKind,
     pub shapes: Vec<Shape>,
-    pub bsdfs: Vec<BsdfDesc>,
+    /// The BSDFs shapes refer to (built and validated by their models' builders).
+    pub bsdfs: Vec<Bsdf>,
     pub emitters: Vec<EmitterDesc>,
     /// Linear polariser in front of the sensor, if the scene asks for one.
     pub polarizer: Option<Polarizer>,
@@ -181,7 +183,7 @@ pub enum SpectrumDesc {
 }
 
 /// A texture or a constant.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum TextureDesc {
     Value(SpectrumDesc),
     Bitmap(Arc<BitmapTexture>),
@@ -208,7 +210,7 @@ pub enum WrapMode {
 /// An image texture. `data` is row-major, top row first, `channels` floats per texel
 /// (1 or 3), already linear (sRGB 8-bit inputs decoded unless `raw`). A `thickness` bitmap
 /// holds nanometres.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct BitmapTexture {
     pub width: usize,
     pub height: usize,
@@ -221,82 +223,6 @@ pub struct BitmapTexture {
     /// For a thickness map given as [0,1] data (glTF G channel): thickness = lerp(min, max, v).
     pub value_range: Option<(f32, f32)>,
     pub path: Option<PathBuf>,
-}
-
-/// Surface scattering models. Roughness `alpha` is the GGX α; 0 means perfectly smooth.
-#[derive(Debug, Clone)]
-pub enum BsdfDesc {
-    Diffuse {
-        reflectance: TextureDesc,
-    },
-    Conductor {
-        eta: Ior,
-        alpha_u: f32,
-        alpha_v: f32,
-    },
-    Dielectric {
-        int_ior: Ior,
-        ext_ior: Ior,
-        alpha: f32,
-    },
-    Plastic {
-        diffuse_reflectance: TextureDesc,
-        int_ior: f32,
-        ext_ior: f32,
-        alpha: f32,
-        nonlinear: bool,
-    },
-    TwoSided(Box<BsdfDesc>),
-    /// Opaque thin film on a substrate (design.md): Airy Fresnel term, optional GGX roughness.
-    ThinFilm {
-        film_ior: Ior,
-        thickness_nm: TextureDesc,
-        substrate_ior: Ior,
-        alpha: f32,
-    },
-    /// Ideal linear polariser sheet (Mitsuba 3.9 `polarizer`): light passes straight
-    /// through. The absorbing axis is sin θ·u + cos θ·v in the surface's tangent plane
-    /// (u = dp/du, v = n × u), so at θ = 0 it transmits along u; seen from the side the
-    /// normal points to, a positive θ turns the transmission axis from u away from v
-    /// (clockwise). Unpolarised renders see a neutral filter of transmittance / 2.
-    Polarizer {
-        theta_deg: f32,
-        transmittance: TextureDesc,
-    },
-    /// Multilayer coating on an opaque substrate (`thinfilm` with a `layers` string): the
-    /// Fresnel term is the transfer-matrix reflectance of the stack (top layer first).
-    ThinFilmStack {
-        /// (index, physical thickness in nm), from the ambient side down to the substrate.
-        layers: Vec<(Ior, f64)>,
-        substrate_ior: Ior,
-        alpha: f32,
-    },
-    /// Smooth dielectric interface with a multilayer coating on its outside
-    /// (`coateddielectric` with a `coating` string, e.g. an anti-reflection coated lens): the stack's R and T replace the
-    /// Fresnel terms; refraction follows Snell between `ext_ior` and `int_ior`.
-    CoatedDielectric {
-        /// (index, thickness nm) from the outside (ext_ior side) inwards.
-        layers: Vec<(Ior, f64)>,
-        int_ior: Ior,
-        ext_ior: Ior,
-    },
-    /// Free-standing film between two identical ambient media (`thinfilm_bubble`: a soap
-    /// bubble): coherent Airy reflection and transmission, two-sided, transmission straight
-    /// through.
-    Bubble {
-        film_ior: Ior,
-        thickness_nm: TextureDesc,
-        ext_ior: Ior,
-    },
-}
-
-impl BsdfDesc {
-    /// The default BSDF (Mitsuba: diffuse, reflectance 0.5).
-    pub fn default_diffuse() -> Self {
-        BsdfDesc::Diffuse {
-            reflectance: TextureDesc::Value(SpectrumDesc::Constant(0.5)),
-        }
-    }
 }
 
 #[derive(Debug, Clone)]
@@ -472,7 +398,7 @@ fn scene_for_mesh(mut mesh: TriangleMesh, path: &Path) -> Result<Scene> {
             emission: None,
             name,
         }],
-        bsdfs: vec![BsdfDesc::default_diffuse()],
+        bsdfs: vec![Bsdf::default_diffuse()],
         emitters: vec![default_environment()],
         polarizer: None,
         source: Some(path.to_path_buf()),

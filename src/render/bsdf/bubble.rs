@@ -1,8 +1,8 @@
 //! Free-standing thin film (scene type `thinfilm_bubble`): a soap bubble or any lossless or
 //! absorbing film of index n_f and thickness d with the same ambient medium n_a on both
-//! sides. Reflection and transmission are the coherent Airy sums of design.md §1 with
-//! n1 = n3 = n_a (seed eq. 4 for r; t = t12 t23 e^{iβ} / (1 + r12 r23 e^{2iβ})), averaged over
-//! s and p (unpolarised light).
+//! sides. Reflection and transmission are the coherent Airy sums (`docs/conventions.md`,
+//! "Thin-film optics") with n1 = n3 = n_a (seed eq. 4 for r;
+//! t = t12 t23 e^{iβ} / (1 + r12 r23 e^{2iβ})), averaged over s and p (unpolarised light).
 //!
 //! Geometry: the film is far thinner than anything the renderer resolves, so the transmitted
 //! ray leaves in the incident direction (the lateral shift n_a → n_f → n_a is ~d, nanometres)
@@ -14,11 +14,14 @@
 //! are R / P_R and T / (1 − P_R) per wavelength. For a lossless film R + T = 1 at every
 //! wavelength, so a bubble in a white furnace is invisible (tested in `tests/render_films.rs`).
 
-use super::{BsdfSample, Counters, ShadingCtx};
+use super::{BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, PolarizedBsdf, ShadingCtx};
 use crate::optics::film_f32::ThinFilmX4;
 use crate::optics::Ior;
+use crate::render::counters::{count, Counter};
 use crate::render::texture::{Spec, Texture};
-use glam::Vec3;
+use crate::scene::mitsuba::PluginParams;
+use crate::scene::TextureDesc;
+use glam::{Vec2, Vec3};
 use num_complex::Complex32;
 
 #[derive(Debug, Clone)]
@@ -26,24 +29,37 @@ pub struct BubbleBsdf {
     pub film_ior: Ior,
     /// Film thickness in nm (a value or a bitmap).
     pub thickness_nm: Texture,
-    /// Ambient medium on both sides (real part used; must be lossless).
+    /// Ambient medium on both sides (real, lossless).
     pub ext_ior: f32,
 }
 
 impl BubbleBsdf {
-    /// Unpolarised (R, T) at the four path wavelengths for |cos θ| at the film. Negative, NaN
-    /// or infinite thickness counts as 0 (no film: R = 0, T = 1), so a texture hole never
-    /// poisons the image.
+    /// A film of index `film_ior` (n > 0, k ≥ 0) and thickness `thickness_nm` in the
+    /// constant, real ambient index `ext_ior`.
+    pub fn new(film_ior: Ior, thickness_nm: &TextureDesc, ext_ior: &Ior) -> anyhow::Result<Self> {
+        let ext = ext_ior.at(550.0);
+        if ext_ior.is_dispersive() || ext.im != 0.0 || !(ext.re > 0.0 && ext.re.is_finite()) {
+            anyhow::bail!(
+                "thinfilm_bubble: ext_ior must be a constant real index > 0, got {ext_ior}"
+            );
+        }
+        let n = film_ior.at(550.0);
+        if !(n.re > 0.0 && n.re.is_finite() && n.im >= 0.0) {
+            anyhow::bail!("thinfilm_bubble: film_ior must have n > 0 and k ≥ 0, got {film_ior}");
+        }
+        Ok(BubbleBsdf {
+            film_ior,
+            thickness_nm: Texture::new(thickness_nm),
+            ext_ior: ext.re as f32,
+        })
+    }
+
+    /// Unpolarised (R, T) at the four path wavelengths for |cos θ| at the film. A texture
+    /// hole (negative, NaN or infinite thickness) counts as no film: R = 0, T = 1.
     #[inline]
-    pub fn reflect_transmit(
-        &self,
-        ctx: &ShadingCtx,
-        cos_theta: f32,
-        counters: &mut Counters,
-    ) -> (Spec, Spec) {
-        counters.film_evals += 1;
-        let d = self.thickness_nm.eval_scalar(ctx.uv);
-        let d = if d.is_finite() && d > 0.0 { d } else { 0.0 };
+    pub fn reflect_transmit(&self, ctx: &ShadingCtx, cos_theta: f32) -> (Spec, Spec) {
+        count(Counter::FilmEvals, 1);
+        let d = super::thinfilm::usable_thickness(self.thickness_nm.eval_scalar(ctx.uv));
         let c32 = |z: crate::optics::Complex64| Complex32::new(z.re as f32, z.im as f32);
         let ambient = Complex32::new(self.ext_ior, 0.0);
         let film = ThinFilmX4 {
@@ -90,48 +106,108 @@ impl BubbleBsdf {
         }
     }
 
-    pub fn sample(
+    /// The lobes of [`BsdfModel::sample`] for film values (R, T) already evaluated.
+    #[inline]
+    fn lobes_of(wi: Vec3, r: Spec, t: Spec) -> [Option<BsdfSample>; 2] {
+        let delta = |wo, v, lobe| BsdfSample::delta(wo, v, 1.0, lobe);
+        [
+            (r.max_element() > 0.0).then(|| {
+                delta(
+                    Vec3::new(-wi.x, -wi.y, wi.z),
+                    r,
+                    BsdfFlags::DELTA_REFLECTION,
+                )
+            }),
+            (t.max_element() > 0.0).then(|| delta(-wi, t, BsdfFlags::DELTA_TRANSMISSION)),
+        ]
+    }
+}
+
+impl BsdfPlugin for BubbleBsdf {
+    const PLUGINS: &'static [&'static str] = &["thinfilm_bubble"];
+
+    /// `film_ior` (default 1.33), `thickness` (nm, a number or a texture; default 400),
+    /// `ext_ior` (a constant real index; default 1).
+    fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
+        let film_ior = p.index("film_ior", Ior::real(1.33))?;
+        let thickness_nm = p.film_thickness(400.0)?;
+        let ext_ior = p.index("ext_ior", Ior::real(1.0))?;
+        BubbleBsdf::new(film_ior, &thickness_nm, &ext_ior).map_err(|e| p.error_at("ext_ior", e))
+    }
+}
+
+impl BsdfModel for BubbleBsdf {
+    fn flags(&self) -> BsdfFlags {
+        (BsdfFlags::DELTA_REFLECTION
+            | BsdfFlags::DELTA_TRANSMISSION
+            | BsdfFlags::TWO_SIDED
+            | BsdfFlags::INTERFERENCE)
+            .with(BsdfFlags::THICKNESS_MAP, self.thickness_nm.is_varying())
+    }
+
+    fn describe(&self) -> String {
+        format!("thinfilm_bubble n={} in n={}", self.film_ior, self.ext_ior)
+    }
+
+    fn eval(&self, _ctx: &ShadingCtx, _wi: Vec3, _wo: Vec3) -> Spec {
+        Spec::ZERO
+    }
+
+    fn pdf(&self, _ctx: &ShadingCtx, _wi: Vec3, _wo: Vec3) -> f32 {
+        0.0
+    }
+
+    fn sample(
         &self,
         ctx: &ShadingCtx,
         wi: Vec3,
         u1: f32,
-        counters: &mut Counters,
+        _u2: Vec2,
+        lobes: Lobes,
     ) -> Option<BsdfSample> {
         if wi.z == 0.0 || !wi.is_finite() {
             return None;
         }
-        let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
+        let (r, t) = self.reflect_transmit(ctx, wi.z);
+        let [reflected, transmitted] = Self::lobes_of(wi, r, t);
+        match (lobes.reflection(), lobes.transmission()) {
+            (true, true) => {}
+            (true, false) => return reflected,
+            (false, true) => return transmitted,
+            (false, false) => return None,
+        }
         let p_r = Self::reflect_probability(ctx, r, t, Self::MIN_LOBE_PROBABILITY);
-        let mut s = if u1 < p_r {
-            let mut s = BsdfSample::delta(Vec3::new(-wi.x, -wi.y, wi.z), r / p_r);
-            s.pdf = p_r;
-            s
+        let s = if u1 < p_r {
+            BsdfSample::delta(
+                Vec3::new(-wi.x, -wi.y, wi.z),
+                r / p_r,
+                p_r,
+                BsdfFlags::DELTA_REFLECTION,
+            )
         } else {
             let p_t = 1.0 - p_r;
-            let mut s = BsdfSample::delta(-wi, t / p_t);
-            s.pdf = p_t;
-            s
+            BsdfSample::delta(-wi, t / p_t, p_t, BsdfFlags::DELTA_TRANSMISSION)
         };
-        // Same medium on both sides: no η² radiance scaling.
-        s.eta = 1.0;
+        // Same medium on both sides: no η² radiance scaling (eta stays 1).
         (s.pdf > 0.0).then_some(s)
     }
 
-    /// [reflection, transmission] with weights R and T (Fresnel splitting, see
-    /// [`super::Bsdf::split`]): one film evaluation for both lobes.
-    pub fn split(
+    /// One film evaluation for both lobes.
+    fn sample_split(
         &self,
         ctx: &ShadingCtx,
         wi: Vec3,
-        counters: &mut Counters,
+        _u1: f32,
+        _u2: Vec2,
     ) -> [Option<BsdfSample>; 2] {
         if wi.z == 0.0 || !wi.is_finite() {
             return [None, None];
         }
-        let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
-        [
-            (r.max_element() > 0.0).then(|| BsdfSample::delta(Vec3::new(-wi.x, -wi.y, wi.z), r)),
-            (t.max_element() > 0.0).then(|| BsdfSample::delta(-wi, t)),
-        ]
+        let (r, t) = self.reflect_transmit(ctx, wi.z);
+        Self::lobes_of(wi, r, t)
+    }
+
+    fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
+        Err("the free-standing film's Mueller matrices (coherent r and t of s and p through the film) are not implemented")
     }
 }

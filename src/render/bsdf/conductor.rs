@@ -1,12 +1,22 @@
 //! Smooth and rough (GGX) conductors (Mitsuba `conductor`, `roughconductor`), one-sided.
-//! The complex index comes from [`crate::optics::Ior`] (constant or a named metal).
+//! The complex index comes from [`crate::optics::Ior`] (constant, a named metal, or `eta`/`k`
+//! spectra). Polarised: Mitsuba's `specular_reflection` Mueller matrix of the complex
+//! Fresnel amplitudes at the (micro)facet.
 
-use super::fresnel::fresnel_conductor;
-use super::microfacet::{reflection_eval, reflection_lobe_pdf, reflection_sample, Ggx};
-use super::{BsdfSample, ShadingCtx};
-use crate::optics::Ior;
+use super::microfacet::{
+    reflection_eval, reflection_eval_mueller, reflection_lobe, reflection_lobe_pdf,
+    reflection_sample, reflection_sample_mueller, Ggx,
+};
+use super::{
+    fresnel::fresnel_conductor, BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, MuellerValue,
+    PolarizedBsdf, ShadingCtx,
+};
+use crate::optics::{Complex64, Ior};
+use crate::render::polarization::{specular_reflection_conductor, Mueller};
 use crate::render::texture::Spec;
+use crate::scene::mitsuba::{PluginParams, RealSpectrum};
 use glam::{Vec2, Vec3};
+use num_complex::Complex32;
 
 #[derive(Debug, Clone)]
 pub struct Conductor {
@@ -15,7 +25,26 @@ pub struct Conductor {
     pub ggx: Option<Ggx>,
 }
 
+/// Roughness must be finite and ≥ 0 (0: smooth).
+pub(super) fn check_alpha(alpha: f32, what: &str) -> anyhow::Result<()> {
+    if alpha.is_finite() && alpha >= 0.0 {
+        Ok(())
+    } else {
+        anyhow::bail!("{what} must be finite and ≥ 0, got {alpha}")
+    }
+}
+
 impl Conductor {
+    /// A conductor of complex index `eta`; GGX roughness (α_u, α_v), (0, 0) = smooth.
+    pub fn new(eta: Ior, alpha_u: f32, alpha_v: f32) -> anyhow::Result<Self> {
+        check_alpha(alpha_u, "conductor alpha_u")?;
+        check_alpha(alpha_v, "conductor alpha_v")?;
+        Ok(Conductor {
+            eta,
+            ggx: (alpha_u > 0.0 || alpha_v > 0.0).then(|| Ggx::new(alpha_u, alpha_v)),
+        })
+    }
+
     #[inline]
     fn fresnel(&self, ctx: &ShadingCtx, cos_i: f32) -> Spec {
         Spec::from_array(ctx.wl.lambda.map(|l| {
@@ -24,15 +53,114 @@ impl Conductor {
         }))
     }
 
-    pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
-        reflection_eval(self.ggx, wi, wo, |c| self.fresnel(ctx, c))
+    #[inline]
+    fn fresnel_mueller(&self, ctx: &ShadingCtx, cos_i: f32) -> [Mueller; 4] {
+        ctx.wl.lambda.map(|l| {
+            let n = self.eta.at(l as f64);
+            specular_reflection_conductor(cos_i, Complex32::new(n.re as f32, n.im as f32))
+        })
+    }
+}
+
+impl BsdfPlugin for Conductor {
+    const PLUGINS: &'static [&'static str] = &["conductor", "roughconductor"];
+
+    /// Mitsuba's parameters: `material` (a metal of the dispersion library, or `none`: a
+    /// perfect mirror) or `eta`/`k` (numbers or spectra; Mitsuba's defaults 0 and 1), and for
+    /// `roughconductor` the microfacet roughness.
+    fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
+        let (alpha_u, alpha_v) = if p.plugin() == "roughconductor" {
+            p.microfacet()?
+        } else {
+            (0.0, 0.0)
+        };
+        let material = p.string("material")?;
+        let (eta, k) = (p.real_spectrum("eta")?, p.real_spectrum("k")?);
+        p.accept_float("specular_reflectance", |v| v == 1.0)?;
+        let ior = match (material, eta, k) {
+            (Some(_), Some(_), _) | (Some(_), None, Some(_)) => {
+                return Err(p.error("give either 'material' or 'eta'/'k', not both"))
+            }
+            (Some(m), None, None) => p.conductor_material(&m)?,
+            (None, None, None) => p.conductor_material("none")?,
+            (None, eta, k) => {
+                let n = eta.unwrap_or(RealSpectrum::Const(0.0));
+                let k = k.unwrap_or(RealSpectrum::Const(1.0));
+                if !(n.min() >= 0.0 && k.min() >= 0.0) {
+                    return Err(p.error("eta and k must be ≥ 0"));
+                }
+                p.complex_index(&n, &k, "eta/k")
+            }
+        };
+        Conductor::new(ior, alpha_u, alpha_v).map_err(|e| p.error(e))
+    }
+}
+
+/// A perfect mirror: n = 0, k = 1 (Mitsuba's `material="none"`).
+pub fn perfect_mirror() -> Ior {
+    Ior::Constant(Complex64::new(0.0, 1.0))
+}
+
+impl BsdfModel for Conductor {
+    fn flags(&self) -> BsdfFlags {
+        reflection_lobe(self.ggx)
     }
 
-    pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
+    fn describe(&self) -> String {
+        match self.ggx {
+            None => format!("conductor {}", self.eta),
+            Some(g) => format!(
+                "roughconductor {} α=({}, {})",
+                self.eta, g.alpha_u, g.alpha_v
+            ),
+        }
+    }
+
+    fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
+        let fresnel = |c| self.fresnel(ctx, c);
+        reflection_eval(self.ggx, wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
+    }
+
+    fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
         reflection_lobe_pdf(self.ggx, wi, wo)
     }
 
-    pub fn sample(&self, ctx: &ShadingCtx, wi: Vec3, u: Vec2) -> Option<BsdfSample> {
-        reflection_sample(self.ggx, wi, u, |c| self.fresnel(ctx, c))
+    fn sample(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        _u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
+    ) -> Option<BsdfSample> {
+        if !lobes.reflection() {
+            return None;
+        }
+        let s = reflection_sample(self.ggx, wi, u2, |c| self.fresnel(ctx, c), |f, g| f * g)?;
+        Some(s.into_sample(self.ggx))
+    }
+
+    fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
+        Ok(self)
+    }
+}
+
+impl PolarizedBsdf for Conductor {
+    fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
+        reflection_eval_mueller(self.ggx, wi, wo, |c| self.fresnel_mueller(ctx, c))
+    }
+
+    fn sample_mueller(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        _u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
+    ) -> Option<(BsdfSample, MuellerValue)> {
+        if !lobes.reflection() {
+            return None;
+        }
+        reflection_sample_mueller(self.ggx, wi, u2, |c| self.fresnel_mueller(ctx, c))
     }
 }

@@ -3,7 +3,8 @@
 //! separable Smith shadowing term G = G1(wi) G1(wo) that Mitsuba 3 uses.
 
 use super::fresnel::{reflect, reflect_local};
-use super::BsdfSample;
+use super::{BsdfFlags, BsdfSample, MuellerValue};
+use crate::render::polarization::Mueller;
 use crate::render::texture::Spec;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -131,19 +132,20 @@ impl Ggx {
 }
 
 /// The lobe of an opaque reflector (conductor, thin film, layer stack): a mirror when `ggx`
-/// is None, else a GGX lobe; `fresnel(cos θ)` is the reflectance at the (micro)facet angle.
-/// f·|cos θo| at (wi, wo); zero for the mirror (a delta lobe).
+/// is None, else a GGX lobe; `fresnel(cos θ)` is the reflectance at the (micro)facet angle —
+/// a spectrum, or per-wavelength Mueller matrices for polarised transport
+/// ([`super::MuellerValue`]). f·|cos θo| at (wi, wo) with the microfacet normal; None for
+/// the mirror (a delta lobe) and where the pair cannot reflect.
 #[inline]
-pub fn reflection_eval(
+pub fn reflection_eval<V>(
     ggx: Option<Ggx>,
     wi: Vec3,
     wo: Vec3,
-    fresnel: impl FnOnce(f32) -> Spec,
-) -> Spec {
-    match ggx.and_then(|ggx| ggx.reflection(wi, wo)) {
-        Some((m, weight)) => fresnel(wi.dot(m)) * weight,
-        None => Spec::ZERO,
-    }
+    fresnel: impl FnOnce(f32) -> V,
+    scale: impl FnOnce(V, f32) -> V,
+) -> Option<(Vec3, V)> {
+    let (m, weight) = ggx?.reflection(wi, wo)?;
+    Some((m, scale(fresnel(wi.dot(m)), weight)))
 }
 
 /// Solid-angle pdf of [`reflection_sample`] (zero for the mirror).
@@ -152,20 +154,95 @@ pub fn reflection_lobe_pdf(ggx: Option<Ggx>, wi: Vec3, wo: Vec3) -> f32 {
     ggx.map_or(0.0, |ggx| ggx.reflection_pdf(wi, wo))
 }
 
-/// Samples the opaque reflector's lobe: the mirror direction, or a visible GGX normal
-/// (weight eval / pdf = F · G1(wo), separable Smith G). None below the surface.
+/// A sampled direction of an opaque reflector's lobe.
+#[derive(Debug, Clone, Copy)]
+pub struct ReflectionSample<V> {
+    pub wo: Vec3,
+    /// The (micro)facet normal it reflects about.
+    pub normal: Vec3,
+    /// eval / pdf: F·G1(wo) (separable Smith G), or F for the mirror.
+    pub weight: V,
+    /// Solid-angle pdf, 1 for the mirror.
+    pub pdf: f32,
+}
+
+impl<V> ReflectionSample<V> {
+    /// As a [`BsdfSample`] of the mirror (no `ggx`) or the glossy lobe, of unpolarised
+    /// weight `weight`.
+    #[inline]
+    pub fn bsdf_sample(&self, weight: Spec, ggx: Option<Ggx>) -> BsdfSample {
+        match ggx {
+            None => BsdfSample::delta(self.wo, weight, 1.0, BsdfFlags::DELTA_REFLECTION),
+            Some(_) => BsdfSample::smooth(self.wo, weight, self.pdf, BsdfFlags::GLOSSY_REFLECTION),
+        }
+    }
+}
+
+impl ReflectionSample<Spec> {
+    /// As a [`BsdfSample`].
+    #[inline]
+    pub fn into_sample(self, ggx: Option<Ggx>) -> BsdfSample {
+        self.bsdf_sample(self.weight, ggx)
+    }
+}
+
+/// [`reflection_eval`] with a Mueller Fresnel term (per wavelength), in the facet's natural
+/// bases ([`MuellerValue::specular`]).
 #[inline]
-pub fn reflection_sample(
+pub fn reflection_eval_mueller(
+    ggx: Option<Ggx>,
+    wi: Vec3,
+    wo: Vec3,
+    fresnel: impl FnOnce(f32) -> [Mueller; 4],
+) -> MuellerValue {
+    match reflection_eval(ggx, wi, wo, fresnel, scale4) {
+        Some((m, v)) => MuellerValue::specular(v, m, wi, wo),
+        None => MuellerValue::ZERO,
+    }
+}
+
+/// [`reflection_sample`] with a Mueller Fresnel term: the same direction, pdf and random
+/// numbers as the unpolarised sample; the sample's weight is the Mueller value's response
+/// to unpolarised light.
+#[inline]
+pub fn reflection_sample_mueller(
     ggx: Option<Ggx>,
     wi: Vec3,
     u: Vec2,
-    fresnel: impl FnOnce(f32) -> Spec,
-) -> Option<BsdfSample> {
+    fresnel: impl FnOnce(f32) -> [Mueller; 4],
+) -> Option<(BsdfSample, MuellerValue)> {
+    let s = reflection_sample(ggx, wi, u, fresnel, scale4)?;
+    let value = MuellerValue::specular(s.weight, s.normal, wi, s.wo);
+    Some((s.bsdf_sample(value.unpolarized(), ggx), value))
+}
+
+/// Scales per-wavelength Mueller matrices.
+#[inline]
+fn scale4(m: [Mueller; 4], f: f32) -> [Mueller; 4] {
+    m.map(|x| x.scale(f))
+}
+
+/// Samples the opaque reflector's lobe: the mirror direction, or a visible GGX normal
+/// (weight F · G1(wo)); `scale(v, g)` multiplies a Fresnel value by a number. None below the
+/// surface.
+#[inline]
+pub fn reflection_sample<V>(
+    ggx: Option<Ggx>,
+    wi: Vec3,
+    u: Vec2,
+    fresnel: impl FnOnce(f32) -> V,
+    scale: impl FnOnce(V, f32) -> V,
+) -> Option<ReflectionSample<V>> {
     if wi.z <= 0.0 {
         return None;
     }
     match ggx {
-        None => Some(BsdfSample::delta(reflect_local(wi), fresnel(wi.z))),
+        None => Some(ReflectionSample {
+            wo: reflect_local(wi),
+            normal: Vec3::Z,
+            weight: fresnel(wi.z),
+            pdf: 1.0,
+        }),
         Some(ggx) => {
             let m = ggx.sample_visible(wi, u);
             let wo = reflect(wi, m);
@@ -176,9 +253,23 @@ pub fn reflection_sample(
             if !(pdf > 0.0 && pdf.is_finite()) {
                 return None;
             }
-            let weight = fresnel(wi.dot(m)) * ggx.g1(wo, m);
-            Some(BsdfSample::smooth(wo, weight, pdf))
+            let weight = scale(fresnel(wi.dot(m)), ggx.g1(wo, m));
+            Some(ReflectionSample {
+                wo,
+                normal: m,
+                weight,
+                pdf,
+            })
         }
+    }
+}
+
+/// The lobe flag of an opaque reflector: mirror or glossy.
+#[inline]
+pub fn reflection_lobe(ggx: Option<Ggx>) -> BsdfFlags {
+    match ggx {
+        None => BsdfFlags::DELTA_REFLECTION,
+        Some(_) => BsdfFlags::GLOSSY_REFLECTION,
     }
 }
 

@@ -1,5 +1,15 @@
-//! Surface scattering models, one file per model, dispatched through the [`Bsdf`] enum (no
-//! trait objects on the hot path).
+//! Surface scattering models. Each model lives in its own module and owns its behaviour:
+//! its parameters and the builder that reads them from a Mitsuba plugin (validating them,
+//! once: a built model is always renderable), its [`BsdfFlags`], `eval` / `pdf` / `sample`
+//! with a lobe mask ([`Lobes`], as pbrt-v4's `BxDFReflTransFlags`), and its polarised form
+//! (Mueller matrices) or the reason it has none. The integrator sees models only through
+//! [`Bsdf`]'s methods, and effect analysis only through their flags.
+//!
+//! **Adding a model** (`docs/adding-a-bsdf.md`): a module implementing [`BsdfModel`] and
+//! [`BsdfPlugin`], one line in [`bsdf_models!`] below, and its tests (χ² of the sampled
+//! directions against `pdf`, `eval`/`pdf`/`sample` agreement, white furnace, a Mitsuba
+//! reference). [`Bsdf`]'s dispatch has no wildcard arm: a model that does not implement a
+//! method — its polarised form included — does not compile.
 //!
 //! Conventions follow Mitsuba 3: directions are in the local shading frame (normal = +z),
 //! `wi` points towards the previous path vertex (the camera side), `wo` is the sampled or
@@ -7,61 +17,34 @@
 //! eval / pdf (for delta lobes: the lobe's value divided by its selection probability).
 
 pub mod bubble;
+pub mod coated;
 pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
+mod flags;
 pub mod fresnel;
 pub mod microfacet;
+mod mueller;
 pub mod plastic;
 pub mod polarizer;
 pub mod stack;
 pub mod thinfilm;
+pub mod twosided;
 
-use super::texture::{Spec, Texture};
-use crate::scene::BsdfDesc;
+pub use flags::{BsdfFlags, Lobes};
+pub use mueller::{MuellerValue, PolarizedLobe};
+
+use super::geometry::{Frame, SurfaceInteraction};
+use super::texture::Spec;
+use crate::scene::mitsuba::PluginParams;
 use crate::spectrum::SampledWavelengths;
 use glam::{Vec2, Vec3};
-use microfacet::Ggx;
 
-pub use bubble::BubbleBsdf;
-pub use conductor::Conductor;
-pub use dielectric::Dielectric;
-pub use diffuse::Diffuse;
-pub use plastic::Plastic;
-pub use polarizer::PolarizerBsdf;
-pub use stack::{CoatedDielectric, StackBsdf};
-pub use thinfilm::ThinFilmBsdf;
-
-/// What a BSDF needs to know about the shading point besides directions.
+/// What a BSDF may know about the shading point besides the directions: the path's
+/// wavelengths and the surface's texture coordinates (for textured parameters).
 pub struct ShadingCtx<'a> {
     pub wl: &'a SampledWavelengths,
     pub uv: Vec2,
-}
-
-/// Per-thread work counters (summed into the render statistics).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Counters {
-    /// Airy thin-film evaluations (each covers 4 wavelengths).
-    pub film_evals: u64,
-    /// Closest-hit rays traced.
-    pub rays: u64,
-    /// Shadow (occlusion) rays traced.
-    pub shadow_rays: u64,
-    /// Samples whose estimate was NaN/inf and was discarded.
-    pub invalid_samples: u64,
-    /// Paths whose secondary wavelengths were terminated at a dispersive interface (0 in a
-    /// scene without dispersion: the proof that the 4-wavelength fast path is kept).
-    pub secondary_terminations: u64,
-}
-
-impl Counters {
-    pub fn add(&mut self, o: &Counters) {
-        self.film_evals += o.film_evals;
-        self.rays += o.rays;
-        self.shadow_rays += o.shadow_rays;
-        self.invalid_samples += o.invalid_samples;
-        self.secondary_terminations += o.secondary_terminations;
-    }
 }
 
 /// A sampled direction.
@@ -72,8 +55,8 @@ pub struct BsdfSample {
     pub weight: Spec,
     /// Solid-angle pdf (for delta lobes: the discrete selection probability).
     pub pdf: f32,
-    /// Sampled from a Dirac lobe (no MIS with light sampling).
-    pub delta: bool,
+    /// The lobe sampled: one of the lobe flags of [`BsdfFlags`].
+    pub lobe: BsdfFlags,
     /// Relative index crossed (1 for reflection), for Russian roulette's η².
     pub eta: f32,
     /// The direction is valid only for the hero wavelength (dispersion).
@@ -81,364 +64,294 @@ pub struct BsdfSample {
 }
 
 impl BsdfSample {
+    /// A sample of a non-delta `lobe`.
     #[inline]
-    pub fn smooth(wo: Vec3, weight: Spec, pdf: f32) -> Self {
+    pub fn smooth(wo: Vec3, weight: Spec, pdf: f32, lobe: BsdfFlags) -> Self {
         BsdfSample {
             wo,
             weight,
             pdf,
-            delta: false,
+            lobe,
             eta: 1.0,
             terminate_secondary: false,
         }
     }
+
+    /// A sample of the Dirac `lobe` with selection probability `pdf`.
     #[inline]
-    pub fn delta(wo: Vec3, weight: Spec) -> Self {
+    pub fn delta(wo: Vec3, weight: Spec, pdf: f32, lobe: BsdfFlags) -> Self {
         BsdfSample {
             wo,
             weight,
-            pdf: 1.0,
-            delta: true,
+            pdf,
+            lobe,
             eta: 1.0,
             terminate_secondary: false,
         }
     }
+
+    /// Sampled from a Dirac lobe (no MIS with light sampling).
+    #[inline]
+    pub fn is_delta(&self) -> bool {
+        self.lobe.intersects(BsdfFlags::DELTA)
+    }
 }
 
-/// A prepared BSDF.
-#[derive(Debug, Clone)]
-pub enum Bsdf {
-    Diffuse(Diffuse),
-    Conductor(Conductor),
-    Dielectric(Dielectric),
-    Plastic(Plastic),
-    ThinFilm(ThinFilmBsdf),
-    /// Multilayer coating (`thinfilm` with `layers`).
-    Stack(StackBsdf),
-    /// Free-standing film (`thinfilm_bubble`), two-sided.
-    Bubble(BubbleBsdf),
-    /// Dielectric interface under a multilayer coating (`coateddielectric`).
-    CoatedDielectric(CoatedDielectric),
-    /// Mitsuba `twosided`: the back face behaves like the front.
-    TwoSided(Box<Bsdf>),
-    /// Mitsuba `polarizer`: null pass-through (see [`polarizer`]).
-    Polarizer(PolarizerBsdf),
-}
+/// A scattering model's behaviour. Every method is required: the compiler names each model
+/// that lacks one (there is no default that would, say, make a model silently depolarise).
+pub trait BsdfModel {
+    /// Lobes and properties; effect analysis and the integrator decide from these alone.
+    fn flags(&self) -> BsdfFlags;
 
-impl Bsdf {
-    /// Prepares a scene BSDF. Errors name what is unsupported.
-    pub fn from_desc(desc: &BsdfDesc) -> anyhow::Result<Self> {
-        Ok(match desc {
-            BsdfDesc::Diffuse { reflectance } => Bsdf::Diffuse(Diffuse {
-                reflectance: Texture::new(reflectance),
-            }),
-            BsdfDesc::Conductor {
-                eta,
-                alpha_u,
-                alpha_v,
-            } => {
-                check_alpha(*alpha_u, "conductor alpha_u")?;
-                check_alpha(*alpha_v, "conductor alpha_v")?;
-                Bsdf::Conductor(Conductor {
-                    eta: eta.clone(),
-                    ggx: (*alpha_u > 0.0 || *alpha_v > 0.0).then(|| Ggx::new(*alpha_u, *alpha_v)),
-                })
-            }
-            BsdfDesc::Dielectric {
-                int_ior,
-                ext_ior,
-                alpha,
-            } => {
-                if *alpha > 0.0 {
-                    anyhow::bail!("bsdf 'roughdielectric' (dielectric with alpha = {alpha}) is not supported by the renderer");
-                }
-                Bsdf::Dielectric(Dielectric {
-                    int_ior: int_ior.clone(),
-                    ext_ior: ext_ior.clone(),
-                    dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
-                })
-            }
-            BsdfDesc::Plastic {
-                diffuse_reflectance,
-                int_ior,
-                ext_ior,
-                alpha,
-                nonlinear,
-            } => {
-                check_alpha(*alpha, "plastic alpha")?;
-                let eta = int_ior / ext_ior;
-                if !(eta.is_finite() && eta > 0.0) {
-                    anyhow::bail!("plastic: int_ior/ext_ior must be positive and finite, got {int_ior}/{ext_ior}");
-                }
-                Bsdf::Plastic(Plastic::new(
-                    Texture::new(diffuse_reflectance),
-                    eta,
-                    *nonlinear,
-                    *alpha,
-                ))
-            }
-            BsdfDesc::TwoSided(inner) => Bsdf::TwoSided(Box::new(Bsdf::from_desc(inner)?)),
-            BsdfDesc::Polarizer {
-                theta_deg,
-                transmittance,
-            } => Bsdf::Polarizer(PolarizerBsdf {
-                theta: theta_deg.to_radians(),
-                transmittance: Texture::new(transmittance),
-            }),
-            BsdfDesc::ThinFilm {
-                film_ior,
-                thickness_nm,
-                substrate_ior,
-                alpha,
-            } => {
-                check_alpha(*alpha, "thinfilm alpha")?;
-                Bsdf::ThinFilm(ThinFilmBsdf {
-                    film_ior: film_ior.clone(),
-                    thickness_nm: Texture::new(thickness_nm),
-                    substrate_ior: substrate_ior.clone(),
-                    ggx: (*alpha > 0.0).then(|| Ggx::new(*alpha, *alpha)),
-                })
-            }
-            BsdfDesc::ThinFilmStack {
-                layers,
-                substrate_ior,
-                alpha,
-            } => {
-                check_alpha(*alpha, "thinfilm alpha")?;
-                let b = StackBsdf {
-                    layers: layers.clone(),
-                    substrate_ior: substrate_ior.clone(),
-                    ggx: (*alpha > 0.0).then(|| Ggx::new(*alpha, *alpha)),
-                };
-                // Indices and thicknesses once, at a mid-visible wavelength: the hot path
-                // does not validate.
-                b.stack_at(550.0)
-                    .validate()
-                    .map_err(|e| anyhow::anyhow!("thinfilm layers: {e}"))?;
-                Bsdf::Stack(b)
-            }
-            BsdfDesc::CoatedDielectric {
-                layers,
-                int_ior,
-                ext_ior,
-            } => {
-                let b = CoatedDielectric {
-                    layers: layers.clone(),
-                    int_ior: int_ior.clone(),
-                    ext_ior: ext_ior.clone(),
-                    dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
-                };
-                for inside in [false, true] {
-                    b.stack_at(550.0, inside)
-                        .validate()
-                        .map_err(|e| anyhow::anyhow!("dielectric coating: {e}"))?;
-                }
-                for (what, n) in [("int_ior", int_ior), ("ext_ior", ext_ior)] {
-                    if n.at(550.0).im != 0.0 {
-                        anyhow::bail!("coated dielectric: {what} must be real, got {n}");
-                    }
-                }
-                Bsdf::CoatedDielectric(b)
-            }
-            BsdfDesc::Bubble {
-                film_ior,
-                thickness_nm,
-                ext_ior,
-            } => {
-                let ext = ext_ior.at(550.0);
-                if ext_ior.is_dispersive() || ext.im != 0.0 || !(ext.re > 0.0 && ext.re.is_finite())
-                {
-                    anyhow::bail!(
-                        "thinfilm_bubble: ext_ior must be a constant real index > 0, got {ext_ior}"
-                    );
-                }
-                let n = film_ior.at(550.0);
-                if !(n.re > 0.0 && n.re.is_finite() && n.im >= 0.0) {
-                    anyhow::bail!(
-                        "thinfilm_bubble: film_ior must have n > 0 and k ≥ 0, got {film_ior}"
-                    );
-                }
-                Bsdf::Bubble(BubbleBsdf {
-                    film_ior: film_ior.clone(),
-                    thickness_nm: Texture::new(thickness_nm),
-                    ext_ior: ext.re as f32,
-                })
-            }
-        })
-    }
+    /// The model and its parameters in a few words, for the effect log
+    /// (e.g. "thinfilm n=1.37 d=400 nm on 1.64").
+    fn describe(&self) -> String;
 
-    /// f·|cos θo| at the four wavelengths.
-    pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3, c: &mut Counters) -> Spec {
-        match self {
-            Bsdf::Diffuse(b) => b.eval(ctx, wi, wo),
-            Bsdf::Conductor(b) => b.eval(ctx, wi, wo),
-            Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => Spec::ZERO,
-            Bsdf::Plastic(b) => b.eval(ctx, wi, wo),
-            Bsdf::ThinFilm(b) => b.eval(ctx, wi, wo, c),
-            Bsdf::Stack(b) => b.eval(ctx, wi, wo, c),
-            Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_) => Spec::ZERO,
-            Bsdf::TwoSided(b) => {
-                let (wi, wo) = two_sided_flip(wi, wo);
-                b.eval(ctx, wi, wo, c)
-            }
-        }
-    }
+    /// f(wi, wo)·|cos θo| at the path's wavelengths (zero for delta lobes).
+    fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec;
 
-    /// Solid-angle pdf of sampling `wo` (non-delta components only).
-    pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
-        match self {
-            Bsdf::Diffuse(b) => b.pdf(wi, wo),
-            Bsdf::Conductor(b) => b.pdf(wi, wo),
-            Bsdf::Dielectric(_) | Bsdf::Polarizer(_) => 0.0,
-            Bsdf::Plastic(b) => b.pdf(wi, wo),
-            Bsdf::ThinFilm(b) => b.pdf(wi, wo),
-            Bsdf::Stack(b) => b.pdf(wi, wo),
-            Bsdf::Bubble(_) | Bsdf::CoatedDielectric(_) => 0.0,
-            Bsdf::TwoSided(b) => {
-                let (wi, wo) = two_sided_flip(wi, wo);
-                b.pdf(wi, wo)
-            }
-        }
-    }
+    /// Solid-angle pdf with which [`sample`](Self::sample) (all lobes) draws `wo` (non-delta
+    /// lobes only).
+    fn pdf(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32;
 
-    /// Samples `wo` from `wi` using `u1` (lobe choice) and `u2` (direction).
-    pub fn sample(
+    /// Samples `wo` from `wi` using `u1` (lobe choice) and `u2` (direction), from the lobes
+    /// in `lobes` only: with one of a reflection/transmission pair masked out, the other is
+    /// chosen with probability 1 and carries its full value (Fresnel splitting follows both
+    /// that way). None if nothing is sampled.
+    fn sample(
         &self,
         ctx: &ShadingCtx,
         wi: Vec3,
         u1: f32,
         u2: Vec2,
-        c: &mut Counters,
-    ) -> Option<BsdfSample> {
-        let s = match self {
-            Bsdf::Diffuse(b) => b.sample(ctx, wi, u2),
-            Bsdf::Conductor(b) => b.sample(ctx, wi, u2),
-            Bsdf::Dielectric(b) => {
-                let s = b.sample(ctx, wi, u1);
-                if matches!(s, Some(s) if s.terminate_secondary) && !ctx.wl.secondary_terminated() {
-                    c.secondary_terminations += 1;
-                }
-                s
-            }
-            Bsdf::Plastic(b) => b.sample(ctx, wi, u1, u2),
-            Bsdf::ThinFilm(b) => b.sample(ctx, wi, u2, c),
-            Bsdf::Polarizer(b) => b.sample(ctx, wi),
-            Bsdf::Stack(b) => b.sample(ctx, wi, u2, c),
-            Bsdf::Bubble(b) => b.sample(ctx, wi, u1, c),
-            Bsdf::CoatedDielectric(b) => {
-                let s = b.sample(ctx, wi, u1, c);
-                if matches!(s, Some(s) if s.terminate_secondary) && !ctx.wl.secondary_terminated() {
-                    c.secondary_terminations += 1;
-                }
-                s
-            }
-            Bsdf::TwoSided(b) => {
-                if wi.z < 0.0 {
-                    let mut s = b.sample(ctx, Vec3::new(wi.x, wi.y, -wi.z), u1, u2, c)?;
-                    s.wo.z = -s.wo.z;
-                    Some(s)
-                } else {
-                    b.sample(ctx, wi, u1, u2, c)
-                }
-            }
-        }?;
-        (s.pdf > 0.0 && s.weight.is_finite() && s.wo.is_finite()).then_some(s)
+        lobes: Lobes,
+    ) -> Option<BsdfSample>;
+
+    /// The reflected and the transmitted lobe, each as [`sample`](Self::sample) with only
+    /// that lobe unmasked (Fresnel splitting). Models whose two lobes share an expensive
+    /// evaluation (a film's coherent R and T) override this to evaluate it once.
+    fn sample_split(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        u1: f32,
+        u2: Vec2,
+    ) -> [Option<BsdfSample>; 2] {
+        [
+            self.sample(ctx, wi, u1, u2, Lobes::REFLECTION),
+            self.sample(ctx, wi, u1, u2, Lobes::TRANSMISSION),
+        ]
     }
 
-    /// Whether the BSDF is a pair of Dirac lobes, mirror reflection and transmission, chosen
-    /// by `u1` (Fresnel-weighted) and leaving in the same directions at all four wavelengths:
-    /// then both can be followed at once ([`Bsdf::split`]). Dispersive interfaces are not
-    /// (their refraction direction is the hero wavelength's).
-    pub fn is_fresnel_pair(&self) -> bool {
-        match self {
-            Bsdf::Dielectric(b) => !b.dispersive,
-            Bsdf::CoatedDielectric(b) => !b.dispersive,
-            Bsdf::Bubble(_) => true,
-            Bsdf::TwoSided(b) => b.is_fresnel_pair(),
-            _ => false,
-        }
-    }
+    /// The model's polarised form, or why it has none: a scene that asks for polarisation
+    /// and uses this model is then refused with that reason.
+    fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str>;
 
-    /// Both lobes of a [`Bsdf::is_fresnel_pair`] BSDF — [reflection, transmission] — each with
-    /// its full value as weight (R, resp. T·η_ti²) and selection probability 1: "splitting"
-    /// instead of choosing one lobe at random. Sampling forced to each lobe (u1 = 0 picks the
-    /// reflection, u1 = 1 the transmission) and the selection probability multiplied back
-    /// in, so the lobes are exactly those of [`Bsdf::sample`]. A lobe that does not exist
-    /// (R = 0, or total internal reflection for T) is None.
-    pub fn split(&self, ctx: &ShadingCtx, wi: Vec3, c: &mut Counters) -> [Option<BsdfSample>; 2] {
-        let lobes = match self {
-            // The film models evaluate R and T once for both lobes.
-            Bsdf::Bubble(b) => b.split(ctx, wi, c),
-            Bsdf::CoatedDielectric(b) => b.split(ctx, wi, c),
-            Bsdf::TwoSided(b) if wi.z < 0.0 => {
-                let flip = |v: Vec3| Vec3::new(v.x, v.y, -v.z);
-                b.split(ctx, flip(wi), c).map(|s| {
-                    s.map(|mut s| {
-                        s.wo = flip(s.wo);
-                        s
-                    })
-                })
-            }
-            Bsdf::TwoSided(b) => b.split(ctx, wi, c),
-            _ => {
-                let mut lobe = |u1: f32, reflection: bool| {
-                    let mut s = self.sample(ctx, wi, u1, Vec2::ZERO, c)?;
-                    if (s.wo.z * wi.z > 0.0) != reflection {
-                        return None;
-                    }
-                    s.weight *= s.pdf;
-                    s.pdf = 1.0;
-                    Some(s)
-                };
-                [lobe(0.0, true), lobe(1.0, false)]
-            }
-        };
-        lobes.map(|s| s.filter(|s| s.weight.is_finite() && s.wo.is_finite()))
-    }
-
-    /// Whether the BSDF has a non-delta component (worth light sampling).
-    pub fn has_smooth_component(&self) -> bool {
-        match self {
-            Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
-            Bsdf::Conductor(b) => b.ggx.is_some(),
-            Bsdf::ThinFilm(b) => b.ggx.is_some(),
-            Bsdf::Stack(b) => b.ggx.is_some(),
-            Bsdf::Dielectric(_)
-            | Bsdf::Bubble(_)
-            | Bsdf::CoatedDielectric(_)
-            | Bsdf::Polarizer(_) => false,
-            Bsdf::TwoSided(b) => b.has_smooth_component(),
-        }
-    }
-
-    /// Whether the BSDF scatters only on the front side of its shading normal.
-    pub fn is_one_sided(&self) -> bool {
-        !matches!(
-            self,
-            Bsdf::Dielectric(_)
-                | Bsdf::TwoSided(_)
-                | Bsdf::Bubble(_)
-                | Bsdf::CoatedDielectric(_)
-                | Bsdf::Polarizer(_)
-        )
+    /// The frame the model scatters in, at `si` (the hook for tangents and perturbed
+    /// normals): the interpolated-normal frame unless overridden; a model that needs a
+    /// tangent (a polariser's axis, an anisotropic roughness, a normal or bump map) builds
+    /// it from `si.dpdu` and `si.uv`.
+    fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
+        si.shading
     }
 }
 
-fn check_alpha(alpha: f32, what: &str) -> anyhow::Result<()> {
-    if alpha.is_finite() && alpha >= 0.0 {
-        Ok(())
-    } else {
-        anyhow::bail!("{what} must be finite and ≥ 0, got {alpha}")
+/// A model's polarised form: the Mueller-matrix versions of `eval` and `sample`, with the same
+/// sampling decisions (directions, pdfs, lobe choices, random numbers) as the unpolarised
+/// ones, following Mitsuba 3's polarised BSDFs ([`MuellerValue`]).
+pub trait PolarizedBsdf {
+    /// f(wi, wo)·|cos θo| as a Mueller operator.
+    fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue;
+
+    /// [`BsdfModel::sample`] with the Mueller weight (value / pdf) of the sampled direction.
+    fn sample_mueller(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
+    ) -> Option<(BsdfSample, MuellerValue)>;
+}
+
+/// How a model is made from a scene file's plugin element.
+pub trait BsdfPlugin: Sized {
+    /// Mitsuba plugin names (`type="…"`) this model is built from.
+    const PLUGINS: &'static [&'static str];
+
+    /// Whether this model builds plugin `plugin` given its parameters (`thinfilm` with a
+    /// `layers` string is a multilayer stack, without one a single film).
+    fn claims(plugin: &str, params: &PluginParams) -> bool {
+        let _ = params;
+        Self::PLUGINS.contains(&plugin)
+    }
+
+    /// Reads and validates the parameters (errors name the element and the parameter).
+    fn build(params: &mut PluginParams) -> anyhow::Result<Self>;
+}
+
+/// Registers the models: one line each, `Variant(module::Type)`. Generates [`Bsdf`], its
+/// dispatch (no wildcard arms) and the plugin table of the scene parser.
+macro_rules! bsdf_models {
+    ($($(#[$doc:meta])* $variant:ident($ty:ty),)*) => {
+        /// A BSDF of a scene: one of the registered models.
+        #[derive(Debug, Clone)]
+        pub enum Bsdf {
+            $($(#[$doc])* $variant($ty),)*
+        }
+
+        $(impl From<$ty> for Bsdf {
+            fn from(b: $ty) -> Self {
+                Bsdf::$variant(b)
+            }
+        })*
+
+        impl Bsdf {
+            /// The model as a trait object (for the rarely called methods).
+            fn model(&self) -> &dyn BsdfModel {
+                match self {
+                    $(Bsdf::$variant(b) => b,)*
+                }
+            }
+
+            /// Lobes and properties.
+            #[inline]
+            pub fn flags(&self) -> BsdfFlags {
+                match self {
+                    $(Bsdf::$variant(b) => b.flags(),)*
+                }
+            }
+
+            /// f·|cos θo| at the four wavelengths.
+            #[inline]
+            pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
+                match self {
+                    $(Bsdf::$variant(b) => b.eval(ctx, wi, wo),)*
+                }
+            }
+
+            /// Solid-angle pdf of sampling `wo` (non-delta lobes).
+            #[inline]
+            pub fn pdf(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
+                match self {
+                    $(Bsdf::$variant(b) => b.pdf(ctx, wi, wo),)*
+                }
+            }
+
+            /// Samples `wo` from the unmasked `lobes`; None unless the sample is usable
+            /// (positive pdf, finite weight and direction).
+            #[inline]
+            pub fn sample(
+                &self,
+                ctx: &ShadingCtx,
+                wi: Vec3,
+                u1: f32,
+                u2: Vec2,
+                lobes: Lobes,
+            ) -> Option<BsdfSample> {
+                let s = match self {
+                    $(Bsdf::$variant(b) => b.sample(ctx, wi, u1, u2, lobes),)*
+                }?;
+                usable(&s).then_some(s)
+            }
+
+            /// [reflection, transmission] at full weight (Fresnel splitting).
+            #[inline]
+            pub fn sample_split(
+                &self,
+                ctx: &ShadingCtx,
+                wi: Vec3,
+                u1: f32,
+                u2: Vec2,
+            ) -> [Option<BsdfSample>; 2] {
+                let lobes = match self {
+                    $(Bsdf::$variant(b) => b.sample_split(ctx, wi, u1, u2),)*
+                };
+                lobes.map(|s| s.filter(usable))
+            }
+
+            /// The polarised form, or why there is none.
+            #[inline]
+            pub fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
+                match self {
+                    $(Bsdf::$variant(b) => b.polarized(),)*
+                }
+            }
+
+            /// The frame the model scatters in at `si`.
+            #[inline]
+            pub fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
+                match self {
+                    $(Bsdf::$variant(b) => b.shading_frame(si),)*
+                }
+            }
+
+            /// The model in a few words, for logs.
+            pub fn describe(&self) -> String {
+                self.model().describe()
+            }
+        }
+
+        /// Builds the model that claims Mitsuba plugin `plugin`; None if no model does.
+        pub fn build_plugin(
+            plugin: &str,
+            params: &mut PluginParams,
+        ) -> Option<anyhow::Result<Bsdf>> {
+            $(if <$ty as BsdfPlugin>::claims(plugin, params) {
+                return Some(<$ty as BsdfPlugin>::build(params).map(Bsdf::$variant));
+            })*
+            None
+        }
+
+        /// Every plugin name a model is registered for, for messages.
+        pub fn plugin_names() -> Vec<&'static str> {
+            let mut names: Vec<&'static str> = Vec::new();
+            $(names.extend(<$ty as BsdfPlugin>::PLUGINS);)*
+            names.dedup();
+            names
+        }
+    };
+}
+
+bsdf_models! {
+    Diffuse(diffuse::Diffuse),
+    Conductor(conductor::Conductor),
+    Dielectric(dielectric::Dielectric),
+    Plastic(plastic::Plastic),
+    ThinFilm(thinfilm::ThinFilmBsdf),
+    Stack(stack::StackBsdf),
+    Bubble(bubble::BubbleBsdf),
+    CoatedDielectric(coated::CoatedDielectric),
+    TwoSided(twosided::TwoSided),
+    Polarizer(polarizer::PolarizerBsdf),
+}
+
+impl Bsdf {
+    /// The default BSDF (Mitsuba: diffuse, reflectance 0.5).
+    pub fn default_diffuse() -> Self {
+        diffuse::Diffuse::constant(0.5).into()
+    }
+
+    /// Whether the BSDF has a non-delta lobe (worth light sampling).
+    #[inline]
+    pub fn has_smooth_lobe(&self) -> bool {
+        self.flags().intersects(BsdfFlags::SMOOTH)
+    }
+
+    /// Whether the BSDF is exactly a pair of Dirac lobes, mirror reflection and transmission,
+    /// leaving in the same directions at all four wavelengths (no dispersion): then both can
+    /// be followed at once ([`Bsdf::sample_split`]).
+    #[inline]
+    pub fn is_fresnel_pair(&self) -> bool {
+        let f = self.flags();
+        f.lobes() == BsdfFlags::DELTA_REFLECTION | BsdfFlags::DELTA_TRANSMISSION
+            && !f.contains(BsdfFlags::DISPERSIVE)
     }
 }
 
 #[inline]
-fn two_sided_flip(mut wi: Vec3, mut wo: Vec3) -> (Vec3, Vec3) {
-    if wi.z < 0.0 {
-        wi.z = -wi.z;
-        wo.z = -wo.z;
-    }
-    (wi, wo)
+fn usable(s: &BsdfSample) -> bool {
+    s.pdf > 0.0 && s.weight.is_finite() && s.wo.is_finite()
 }
 
 #[cfg(test)]

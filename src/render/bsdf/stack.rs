@@ -5,19 +5,24 @@
 //! `tests/optics_tmm.rs`), evaluated in f64 at each of the path's four wavelengths with each
 //! layer's index at that wavelength (named dispersive materials). Ambient n = 1, like
 //! `thinfilm`. Smooth: a mirror lobe weighted by R; rough (α > 0): a GGX lobe with R at the
-//! microfacet angle, exactly as [`super::ThinFilmBsdf`]. What the stack transmits into the
-//! substrate is absorbed. One-sided.
-//!
-//! [`CoatedDielectric`] (scene type `coateddielectric`) puts the same stack on a transparent
-//! dielectric: the stack's R and T (from whichever side the light arrives) replace the Fresnel
-//! terms of a smooth glass interface.
+//! microfacet angle, exactly as [`super::thinfilm::ThinFilmBsdf`]. What the stack transmits
+//! into the substrate is absorbed. One-sided. Polarised: the Mueller matrix of the stack's
+//! complex amplitudes r_s, r_p.
 
-use super::fresnel::reflect_local;
-use super::microfacet::{reflection_eval, reflection_lobe_pdf, reflection_sample, Ggx};
-use super::{BsdfSample, Counters, ShadingCtx};
+use super::microfacet::{
+    reflection_eval, reflection_eval_mueller, reflection_lobe, reflection_lobe_pdf,
+    reflection_sample, reflection_sample_mueller, Ggx,
+};
+use super::{
+    BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, MuellerValue, PolarizedBsdf, ShadingCtx,
+};
 use crate::optics::{Ior, Layer, Stack};
+use crate::render::counters::{count, Counter};
+use crate::render::polarization::{film_reflection, Mueller};
 use crate::render::texture::Spec;
+use crate::scene::mitsuba::PluginParams;
 use glam::{Vec2, Vec3};
+use num_complex::Complex32;
 
 #[derive(Debug, Clone)]
 pub struct StackBsdf {
@@ -28,7 +33,33 @@ pub struct StackBsdf {
     pub ggx: Option<Ggx>,
 }
 
+/// "MgF2:100, TiO2:50" (the first six layers, then a count).
+pub(super) fn describe_layers(layers: &[(Ior, f64)]) -> String {
+    let names: Vec<String> = layers.iter().map(|(n, d)| format!("{n}:{d}")).collect();
+    if names.len() > 6 {
+        format!("{} … ({} layers)", names[..6].join(", "), names.len())
+    } else {
+        names.join(", ")
+    }
+}
+
 impl StackBsdf {
+    /// A stack of `layers` (top first) on `substrate_ior`, GGX roughness `alpha`. Indices and
+    /// thicknesses are checked once, at a mid-visible wavelength: the hot path does not
+    /// validate.
+    pub fn new(layers: Vec<(Ior, f64)>, substrate_ior: Ior, alpha: f32) -> anyhow::Result<Self> {
+        super::conductor::check_alpha(alpha, "thinfilm alpha")?;
+        let b = StackBsdf {
+            layers,
+            substrate_ior,
+            ggx: (alpha > 0.0).then(|| Ggx::new(alpha, alpha)),
+        };
+        b.stack_at(550.0)
+            .validate()
+            .map_err(|e| anyhow::anyhow!("thinfilm layers: {e}"))?;
+        Ok(b)
+    }
+
     /// The stack at one wavelength (all layers coherent).
     pub fn stack_at(&self, lambda_nm: f64) -> Stack {
         Stack {
@@ -44,8 +75,8 @@ impl StackBsdf {
 
     /// Unpolarised TMM reflectance at the four path wavelengths for `cos θ` in the ambient.
     #[inline]
-    pub fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32, counters: &mut Counters) -> Spec {
-        counters.film_evals += 1;
+    pub fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32) -> Spec {
+        count(Counter::FilmEvals, 1);
         let cos = (cos_theta as f64).clamp(0.0, 1.0);
         let r = ctx.wl.lambda.map(|l| {
             let v = self.stack_at(l as f64).response(l as f64, cos).r() as f32;
@@ -58,154 +89,119 @@ impl StackBsdf {
         Spec::from_array(r)
     }
 
-    pub fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3, counters: &mut Counters) -> Spec {
-        reflection_eval(self.ggx, wi, wo, |c| self.reflectance(ctx, c, counters))
+    /// The stack's reflection Mueller matrices at the four path wavelengths.
+    fn reflectance_mueller(&self, ctx: &ShadingCtx, cos_theta: f32) -> [Mueller; 4] {
+        count(Counter::FilmEvals, 1);
+        let cos = (cos_theta as f64).clamp(0.0, 1.0);
+        let c32 = |z: crate::optics::Complex64| Complex32::new(z.re as f32, z.im as f32);
+        ctx.wl.lambda.map(|l| {
+            let a = self.stack_at(l as f64).amplitudes(l as f64, cos);
+            let m = film_reflection(c32(a.r_s), c32(a.r_p));
+            if m.is_finite() {
+                m
+            } else {
+                Mueller::ZERO
+            }
+        })
+    }
+}
+
+impl BsdfPlugin for StackBsdf {
+    const PLUGINS: &'static [&'static str] = &["thinfilm"];
+
+    /// `thinfilm` with a `layers` string.
+    fn claims(plugin: &str, params: &PluginParams) -> bool {
+        plugin == "thinfilm" && params.has("layers")
     }
 
-    pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
+    /// `layers` ("MgF2:100, TiO2:50", top first; `(A:d, B:d)xN` repeats), `substrate_ior`
+    /// (a number, `n+ki` or a material name; default 1.64), `alpha` (default 0).
+    fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
+        for conflicting in ["film_ior", "thickness"] {
+            if p.has(conflicting) {
+                return Err(p.error_at(
+                    conflicting,
+                    format!("'{conflicting}' cannot be combined with 'layers' (give each layer as material:thickness_nm)"),
+                ));
+            }
+        }
+        let layers = p
+            .layers("layers")?
+            .expect("claimed only with a `layers` parameter");
+        let substrate_ior = p.index("substrate_ior", Ior::real(1.64))?;
+        if p.has("substrate_k") {
+            return Err(p.error_at(
+                "substrate_k",
+                "with 'layers', give an absorbing substrate as substrate_ior=\"n+ki\" or a material name",
+            ));
+        }
+        let alpha = p.float("alpha", 0.0)? as f32;
+        StackBsdf::new(layers, substrate_ior, alpha).map_err(|e| p.error_at("alpha", e))
+    }
+}
+
+impl BsdfModel for StackBsdf {
+    fn flags(&self) -> BsdfFlags {
+        reflection_lobe(self.ggx) | BsdfFlags::MULTILAYER
+    }
+
+    fn describe(&self) -> String {
+        let rough = self
+            .ggx
+            .map(|g| format!(" α={}", g.alpha_u))
+            .unwrap_or_default();
+        format!(
+            "layered thinfilm [{}] on {}{rough}",
+            describe_layers(&self.layers),
+            self.substrate_ior
+        )
+    }
+
+    fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
+        let fresnel = |c| self.reflectance(ctx, c);
+        reflection_eval(self.ggx, wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
+    }
+
+    fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
         reflection_lobe_pdf(self.ggx, wi, wo)
     }
 
-    pub fn sample(
+    fn sample(
         &self,
         ctx: &ShadingCtx,
         wi: Vec3,
-        u: Vec2,
-        counters: &mut Counters,
+        _u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
     ) -> Option<BsdfSample> {
-        reflection_sample(self.ggx, wi, u, |c| self.reflectance(ctx, c, counters))
+        if !lobes.reflection() {
+            return None;
+        }
+        let s = reflection_sample(self.ggx, wi, u2, |c| self.reflectance(ctx, c), |f, g| f * g)?;
+        Some(s.into_sample(self.ggx))
+    }
+
+    fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
+        Ok(self)
     }
 }
 
-/// Smooth dielectric interface under a multilayer coating (scene type
-/// `coateddielectric` with a `coating` string), e.g. an anti-reflection coated lens. The coating is on the outside
-/// (`ext_ior` side). R and T are the transfer-matrix powers of the stack seen from the side
-/// the light arrives on — ext | layers | int from outside, int | reversed layers | ext from
-/// inside (total internal reflection gives T = 0 through the evanescent exit medium) — at
-/// each path wavelength. The layers are parallel, so the refracted direction is Snell's
-/// between the two bulk media, as for the uncoated [`super::Dielectric`].
-///
-/// Sampling picks reflection with probability P_R = R̄/(R̄ + T̄) over the live wavelengths;
-/// weights R/P_R and T/(1 − P_R)·η_ti² (radiance compression, Veach 1997 §5.2, as in
-/// Mitsuba's `dielectric`). With a dispersive bulk index the refracted direction is the hero
-/// wavelength's and the secondary wavelengths are terminated (only on refraction: the
-/// reflected direction does not depend on wavelength).
-#[derive(Debug, Clone)]
-pub struct CoatedDielectric {
-    /// (index, thickness nm), outside first.
-    pub layers: Vec<(Ior, f64)>,
-    pub int_ior: Ior,
-    pub ext_ior: Ior,
-    /// Either bulk index depends on wavelength.
-    pub dispersive: bool,
-}
-
-impl CoatedDielectric {
-    /// The stack seen from outside (`inside` = false) or from inside the object.
-    pub fn stack_at(&self, lambda_nm: f64, inside: bool) -> Stack {
-        let ext = self.ext_ior.at(lambda_nm);
-        let int = self.int_ior.at(lambda_nm);
-        let layer = |(n, d): &(Ior, f64)| Layer::coherent(n.at(lambda_nm), *d);
-        if inside {
-            Stack {
-                ambient_ior: int.re,
-                layers: self.layers.iter().rev().map(layer).collect(),
-                substrate_ior: ext,
-            }
-        } else {
-            Stack {
-                ambient_ior: ext.re,
-                layers: self.layers.iter().map(layer).collect(),
-                substrate_ior: int,
-            }
-        }
+impl PolarizedBsdf for StackBsdf {
+    fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
+        reflection_eval_mueller(self.ggx, wi, wo, |c| self.reflectance_mueller(ctx, c))
     }
 
-    /// Unpolarised (R, T) at the four path wavelengths for `cos θ` (signed: < 0 = inside).
-    pub fn reflect_transmit(
-        &self,
-        ctx: &ShadingCtx,
-        cos_theta: f32,
-        counters: &mut Counters,
-    ) -> (Spec, Spec) {
-        counters.film_evals += 1;
-        let inside = cos_theta < 0.0;
-        let cos = (cos_theta.abs() as f64).min(1.0);
-        let clean = |v: f64| {
-            if v.is_finite() {
-                (v as f32).clamp(0.0, 1.0)
-            } else {
-                0.0
-            }
-        };
-        let mut r = [0.0f32; 4];
-        let mut t = [0.0f32; 4];
-        for k in 0..4 {
-            let l = ctx.wl.lambda[k] as f64;
-            let resp = self.stack_at(l, inside).response(l, cos);
-            r[k] = clean(resp.r());
-            t[k] = clean(resp.t());
-        }
-        (Spec::from_array(r), Spec::from_array(t))
-    }
-
-    pub fn sample(
+    fn sample_mueller(
         &self,
         ctx: &ShadingCtx,
         wi: Vec3,
-        u1: f32,
-        counters: &mut Counters,
-    ) -> Option<BsdfSample> {
-        if wi.z == 0.0 || !wi.is_finite() {
+        _u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
+    ) -> Option<(BsdfSample, MuellerValue)> {
+        if !lobes.reflection() {
             return None;
         }
-        let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
-        let p_r = super::BubbleBsdf::reflect_probability(ctx, r, t, 0.0);
-        if u1 < p_r {
-            let mut s = BsdfSample::delta(reflect_local(wi), r / p_r);
-            s.pdf = p_r;
-            return Some(s);
-        }
-        let p_t = 1.0 - p_r;
-        let mut s = self.refraction(ctx, wi, t / p_t)?;
-        s.pdf = p_t;
-        (s.pdf > 0.0).then_some(s)
-    }
-
-    /// The refracted lobe with `weight`·η_ti² (Snell's direction at the hero wavelength's
-    /// bulk index); None under total internal reflection at the hero wavelength, which the
-    /// stack can miss when only a secondary wavelength's index lets light through.
-    fn refraction(&self, ctx: &ShadingCtx, wi: Vec3, weight: Spec) -> Option<BsdfSample> {
-        let lambda = ctx.wl.lambda[0] as f64;
-        let eta = (self.int_ior.at(lambda).re / self.ext_ior.at(lambda).re) as f32;
-        let (_, cos_t, eta_it, eta_ti) = super::fresnel::fresnel_dielectric(wi.z, eta);
-        if cos_t == 0.0 {
-            return None;
-        }
-        let wo = Vec3::new(-eta_ti * wi.x, -eta_ti * wi.y, cos_t);
-        let mut s = BsdfSample::delta(wo, weight * (eta_ti * eta_ti));
-        s.eta = eta_it;
-        s.terminate_secondary = self.dispersive;
-        s.wo.is_finite().then_some(s)
-    }
-
-    /// [reflection, transmission] with weights R and T·η_ti² (Fresnel splitting, see
-    /// [`super::Bsdf::split`]): one transfer-matrix evaluation for both lobes.
-    pub fn split(
-        &self,
-        ctx: &ShadingCtx,
-        wi: Vec3,
-        counters: &mut Counters,
-    ) -> [Option<BsdfSample>; 2] {
-        if wi.z == 0.0 || !wi.is_finite() {
-            return [None, None];
-        }
-        let (r, t) = self.reflect_transmit(ctx, wi.z, counters);
-        [
-            (r.max_element() > 0.0).then(|| BsdfSample::delta(reflect_local(wi), r)),
-            (t.max_element() > 0.0)
-                .then(|| self.refraction(ctx, wi, t))
-                .flatten(),
-        ]
+        reflection_sample_mueller(self.ggx, wi, u2, |c| self.reflectance_mueller(ctx, c))
     }
 }

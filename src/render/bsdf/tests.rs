@@ -5,9 +5,11 @@
 
 use super::*;
 use crate::optics::Ior;
+use crate::render::counters;
 use crate::render::sampler::Sampler;
 use crate::render::texture::{Spectrum, Texture};
-use crate::scene::{BsdfDesc, SpectrumDesc, TextureDesc};
+use crate::scene::{SpectrumDesc, TextureDesc};
+use bubble::BubbleBsdf;
 use std::f64::consts::PI;
 
 fn wl() -> SampledWavelengths {
@@ -27,102 +29,71 @@ fn constant(v: f32) -> TextureDesc {
 }
 
 fn thin_film(alpha: f32, thickness: f32) -> Bsdf {
-    Bsdf::from_desc(&BsdfDesc::ThinFilm {
-        film_ior: Ior::real(1.37),
-        thickness_nm: constant(thickness),
-        substrate_ior: Ior::real(1.64),
-        alpha,
-    })
-    .unwrap()
+    let t = constant(thickness);
+    thinfilm::ThinFilmBsdf::new(Ior::real(1.37), &t, Ior::real(1.64), alpha)
+        .unwrap()
+        .into()
 }
 
 /// A multilayer coating from the scene syntax (`layers`, substrate).
 fn stack(layers: &str, substrate: &str, alpha: f32) -> Bsdf {
-    Bsdf::from_desc(&BsdfDesc::ThinFilmStack {
-        layers: crate::scene::mitsuba::parse_layers(layers).unwrap(),
-        substrate_ior: substrate.parse().unwrap(),
-        alpha,
-    })
-    .unwrap()
+    let layers = crate::scene::mitsuba::parse_layers(layers).unwrap();
+    stack::StackBsdf::new(layers, substrate.parse().unwrap(), alpha)
+        .unwrap()
+        .into()
 }
 
 /// A dielectric interface under a coating (`coateddielectric`), air outside.
 fn coated(layers: &str, int_ior: &str) -> Bsdf {
-    Bsdf::from_desc(&BsdfDesc::CoatedDielectric {
-        layers: crate::scene::mitsuba::parse_layers(layers).unwrap(),
-        int_ior: int_ior.parse().unwrap(),
-        ext_ior: Ior::real(1.0),
-    })
-    .unwrap()
+    let layers = crate::scene::mitsuba::parse_layers(layers).unwrap();
+    coated::CoatedDielectric::new(layers, int_ior.parse().unwrap(), Ior::real(1.0))
+        .unwrap()
+        .into()
 }
 
 /// A free-standing film (soap bubble) of constant thickness.
 fn bubble(film_ior: &str, thickness: f32) -> Bsdf {
-    Bsdf::from_desc(&BsdfDesc::Bubble {
-        film_ior: film_ior.parse().unwrap(),
-        thickness_nm: constant(thickness),
-        ext_ior: Ior::real(1.0),
-    })
+    bubble::BubbleBsdf::new(
+        film_ior.parse().unwrap(),
+        &constant(thickness),
+        &Ior::real(1.0),
+    )
     .unwrap()
+    .into()
+}
+
+fn conductor(eta: &str, alpha_u: f32, alpha_v: f32) -> Bsdf {
+    conductor::Conductor::new(eta.parse().unwrap(), alpha_u, alpha_v)
+        .unwrap()
+        .into()
+}
+
+fn dielectric(int_ior: &str) -> Bsdf {
+    dielectric::Dielectric::new(int_ior.parse().unwrap(), Ior::real(1.0)).into()
+}
+
+fn diffuse(reflectance: f32) -> Bsdf {
+    diffuse::Diffuse::constant(reflectance).into()
+}
+
+fn plastic(alpha: f32, nonlinear: bool) -> Bsdf {
+    plastic::Plastic::new(&constant(0.5), 1.49, 1.0, nonlinear, alpha)
+        .unwrap()
+        .into()
 }
 
 fn test_bsdfs() -> Vec<(&'static str, Bsdf)> {
     vec![
-        (
-            "diffuse",
-            Bsdf::from_desc(&BsdfDesc::Diffuse {
-                reflectance: constant(0.7),
-            })
-            .unwrap(),
-        ),
-        (
-            "roughconductor",
-            Bsdf::from_desc(&BsdfDesc::Conductor {
-                eta: "0.2+3.9i".parse().unwrap(),
-                alpha_u: 0.3,
-                alpha_v: 0.3,
-            })
-            .unwrap(),
-        ),
-        (
-            "roughconductor-aniso",
-            Bsdf::from_desc(&BsdfDesc::Conductor {
-                eta: "0.2+3.9i".parse().unwrap(),
-                alpha_u: 0.1,
-                alpha_v: 0.5,
-            })
-            .unwrap(),
-        ),
-        (
-            "roughplastic",
-            Bsdf::from_desc(&BsdfDesc::Plastic {
-                diffuse_reflectance: constant(0.5),
-                int_ior: 1.49,
-                ext_ior: 1.0,
-                alpha: 0.2,
-                nonlinear: false,
-            })
-            .unwrap(),
-        ),
-        (
-            "plastic",
-            Bsdf::from_desc(&BsdfDesc::Plastic {
-                diffuse_reflectance: constant(0.5),
-                int_ior: 1.49,
-                ext_ior: 1.0,
-                alpha: 0.0,
-                nonlinear: true,
-            })
-            .unwrap(),
-        ),
+        ("diffuse", diffuse(0.7)),
+        ("roughconductor", conductor("0.2+3.9i", 0.3, 0.3)),
+        ("roughconductor-aniso", conductor("0.2+3.9i", 0.1, 0.5)),
+        ("roughplastic", plastic(0.2, false)),
+        ("plastic", plastic(0.0, true)),
         ("roughthinfilm", thin_film(0.25, 400.0)),
         ("roughstack", stack("MgF2:100, TiO2:50", "BK7", 0.2)),
         (
             "twosided-diffuse",
-            Bsdf::from_desc(&BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse {
-                reflectance: constant(0.9),
-            })))
-            .unwrap(),
+            twosided::TwoSided::new(diffuse(0.9)).unwrap().into(),
         ),
     ]
 }
@@ -209,14 +180,13 @@ fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) -> f64 {
         wl: &wl,
         uv: Vec2::ZERO,
     };
-    let mut counters = Counters::default();
     let mut observed = vec![0.0f64; THETA_BINS * PHI_BINS];
     let mut sampler = Sampler::from_seed(seed);
     for _ in 0..n_samples {
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
-        if let Some(s) = bsdf.sample(&ctx, wi, u1, u2, &mut counters) {
-            if !s.delta {
+        if let Some(s) = bsdf.sample(&ctx, wi, u1, u2, Lobes::ALL) {
+            if !s.is_delta() {
                 observed[cell_of(s.wo)] += 1.0;
             }
         }
@@ -238,7 +208,7 @@ fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) -> f64 {
                         (theta.sin() * phi.sin()) as f32,
                         theta.cos() as f32,
                     );
-                    sum += bsdf.pdf(wi, w) as f64 * theta.sin();
+                    sum += bsdf.pdf(&ctx, wi, w) as f64 * theta.sin();
                 }
             }
             let area = (PI / THETA_BINS as f64) * (2.0 * PI / PHI_BINS as f64) / (sub * sub) as f64;
@@ -301,16 +271,8 @@ fn chi2_sampled_directions_match_pdf() {
 #[test]
 fn chi2_rejects_a_wrong_pdf() {
     // Sample a rough conductor but histogram against a diffuse pdf.
-    let rough = Bsdf::from_desc(&BsdfDesc::Conductor {
-        eta: Ior::real(1.5),
-        alpha_u: 0.2,
-        alpha_v: 0.2,
-    })
-    .unwrap();
-    let diffuse = Bsdf::from_desc(&BsdfDesc::Diffuse {
-        reflectance: constant(1.0),
-    })
-    .unwrap();
+    let rough = conductor("1.5", 0.2, 0.2);
+    let diffuse = diffuse(1.0);
     // Build the mixture by hand: use chi2 of diffuse samples against the conductor's pdf.
     struct Swap;
     let _ = Swap;
@@ -320,14 +282,14 @@ fn chi2_rejects_a_wrong_pdf() {
         wl: &wl,
         uv: Vec2::ZERO,
     };
-    let mut c = Counters::default();
+    counters::take();
     let mut s = Sampler::from_seed(1);
     let mut in_lobe = 0;
     for _ in 0..10_000 {
         let smp = diffuse
-            .sample(&ctx, wi, s.next_1d(), s.next_2d(), &mut c)
+            .sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL)
             .unwrap();
-        if rough.pdf(wi, smp.wo) > 1.0 {
+        if rough.pdf(&ctx, wi, smp.wo) > 1.0 {
             in_lobe += 1;
         }
     }
@@ -343,19 +305,19 @@ fn eval_pdf_sample_agree() {
         wl: &wl,
         uv: Vec2::ZERO,
     };
-    let mut c = Counters::default();
+    counters::take();
     for (name, b) in test_bsdfs() {
         let mut s = Sampler::from_seed(11);
         for k in 0..2000 {
             let wi = dir(5.0 + 80.0 * s.next_1d(), 360.0 * s.next_1d());
-            let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), &mut c) else {
+            let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) else {
                 continue;
             };
-            if smp.delta {
+            if smp.is_delta() {
                 continue;
             }
-            let pdf = b.pdf(wi, smp.wo);
-            let f = b.eval(&ctx, wi, smp.wo, &mut c);
+            let pdf = b.pdf(&ctx, wi, smp.wo);
+            let f = b.eval(&ctx, wi, smp.wo);
             assert!(
                 (pdf - smp.pdf).abs() <= 2e-3 * pdf.max(1.0),
                 "{name} #{k}: pdf {pdf} vs sampled {}",
@@ -381,7 +343,7 @@ fn thin_film_conserves_energy_when_lossless() {
     let Bsdf::ThinFilm(film) = thin_film(0.0, 0.0) else {
         unreachable!()
     };
-    let mut c = Counters::default();
+    counters::take();
     for d in [0.0f32, 1.0, 120.0, 400.0, 612.5, 5000.0] {
         let mut f = film.clone();
         f.thickness_nm = Texture::Value(Spectrum::Constant(d));
@@ -395,7 +357,7 @@ fn thin_film_conserves_energy_when_lossless() {
                 uv: Vec2::ZERO,
             };
             for cos in [1.0f32, 0.8, 0.5, 0.2, 0.05, 1e-3] {
-                let (r, t) = f.reflect_transmit(&ctx, cos, &mut c);
+                let (r, t) = f.reflect_transmit(&ctx, cos);
                 let sum = r + t;
                 for k in 0..4 {
                     assert!(
@@ -407,7 +369,7 @@ fn thin_film_conserves_energy_when_lossless() {
             }
         }
     }
-    assert!(c.film_evals > 0);
+    assert!(counters::take().film_evals > 0);
 }
 
 /// Zero thickness is the bare ambient|substrate Fresnel term.
@@ -421,9 +383,9 @@ fn zero_thickness_film_is_bare_substrate() {
         wl: &wl,
         uv: Vec2::ZERO,
     };
-    let mut c = Counters::default();
+    counters::take();
     for cos in [1.0f32, 0.6, 0.1] {
-        let (r, _) = film.reflect_transmit(&ctx, cos, &mut c);
+        let (r, _) = film.reflect_transmit(&ctx, cos);
         let bare = fresnel::fresnel_dielectric(cos, 1.64).0;
         assert!((r.x - bare).abs() < 1e-5, "{} vs {bare}", r.x);
     }
@@ -438,7 +400,7 @@ fn finite_at_grazing_and_degenerate_inputs() {
         wl: &wl,
         uv: Vec2::ZERO,
     };
-    let mut c = Counters::default();
+    counters::take();
     let mut all = test_bsdfs();
     all.push(("film-d0", thin_film(0.0, 0.0)));
     all.push(("film-negative", thin_film(0.1, -5.0)));
@@ -452,24 +414,8 @@ fn finite_at_grazing_and_degenerate_inputs() {
     all.push(("stack-empty-metal", stack("SiO2:0", "Au", 0.3)));
     all.push(("coated-glass", coated("MgF2:99.6", "1.5168")));
     all.push(("coated-glass-d0", coated("MgF2:0", "material:BK7")));
-    all.push((
-        "conductor",
-        Bsdf::from_desc(&BsdfDesc::Conductor {
-            eta: "0.2+3.9i".parse().unwrap(),
-            alpha_u: 0.0,
-            alpha_v: 0.0,
-        })
-        .unwrap(),
-    ));
-    all.push((
-        "dielectric",
-        Bsdf::from_desc(&BsdfDesc::Dielectric {
-            int_ior: Ior::real(1.5),
-            ext_ior: Ior::real(1.0),
-            alpha: 0.0,
-        })
-        .unwrap(),
-    ));
+    all.push(("conductor", conductor("0.2+3.9i", 0.0, 0.0)));
+    all.push(("dielectric", dielectric("1.5")));
     let dirs = [
         Vec3::Z,
         Vec3::new(1.0, 0.0, 1e-7).normalize(),
@@ -481,15 +427,15 @@ fn finite_at_grazing_and_degenerate_inputs() {
     for (name, b) in &all {
         for wi in dirs {
             for wo in dirs {
-                let f = b.eval(&ctx, wi, wo, &mut c);
-                let p = b.pdf(wi, wo);
+                let f = b.eval(&ctx, wi, wo);
+                let p = b.pdf(&ctx, wi, wo);
                 assert!(
                     f.is_finite() && p.is_finite() && f.min_element() >= 0.0,
                     "{name}: {wi} {wo} → {f} {p}"
                 );
             }
             for _ in 0..64 {
-                if let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), &mut c) {
+                if let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) {
                     assert!(
                         smp.weight.is_finite() && smp.wo.is_finite() && smp.pdf.is_finite(),
                         "{name}: {wi} → {smp:?}"
@@ -504,20 +450,15 @@ fn finite_at_grazing_and_degenerate_inputs() {
 /// Smooth dielectric: radiance weights for reflection 1 and refraction 1/η²; TIR from inside.
 #[test]
 fn dielectric_sampling() {
-    let b = Bsdf::from_desc(&BsdfDesc::Dielectric {
-        int_ior: Ior::real(1.5),
-        ext_ior: Ior::real(1.0),
-        alpha: 0.0,
-    })
-    .unwrap();
+    let b = dielectric("1.5");
     let wl = wl();
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
     };
-    let mut c = Counters::default();
+    counters::take();
     let wi = dir(30.0, 0.0);
-    let t = b.sample(&ctx, wi, 0.99, Vec2::ZERO, &mut c).unwrap();
+    let t = b.sample(&ctx, wi, 0.99, Vec2::ZERO, Lobes::ALL).unwrap();
     assert!(t.wo.z < 0.0);
     assert!((t.weight.x - 1.0 / 2.25).abs() < 1e-5);
     // Snell: sinθt = sinθi / 1.5.
@@ -525,27 +466,26 @@ fn dielectric_sampling() {
     assert!((sin_t - 0.5 / 1.5).abs() < 1e-5);
     // From inside beyond the critical angle (41.8°): always reflected.
     let inside = Vec3::new(dir(60.0, 0.0).x, 0.0, -dir(60.0, 0.0).z);
-    let r = b.sample(&ctx, inside, 0.999, Vec2::ZERO, &mut c).unwrap();
+    let r = b
+        .sample(&ctx, inside, 0.999, Vec2::ZERO, Lobes::ALL)
+        .unwrap();
     assert!(r.wo.z < 0.0 && (r.weight.x - 1.0).abs() < 1e-6);
 }
 
 /// Diffuse albedo 1: every sample weight is exactly 1 (white furnace inside the BSDF).
 #[test]
 fn diffuse_white_furnace_weights() {
-    let b = Bsdf::from_desc(&BsdfDesc::Diffuse {
-        reflectance: constant(1.0),
-    })
-    .unwrap();
+    let b = diffuse(1.0);
     let wl = wl();
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
     };
-    let mut c = Counters::default();
+    counters::take();
     let mut s = Sampler::from_seed(2);
     for _ in 0..1000 {
         let smp = b
-            .sample(&ctx, dir(40.0, 10.0), s.next_1d(), s.next_2d(), &mut c)
+            .sample(&ctx, dir(40.0, 10.0), s.next_1d(), s.next_2d(), Lobes::ALL)
             .unwrap();
         assert_eq!(smp.weight, Spec::ONE);
     }
@@ -561,7 +501,7 @@ fn ctx_of(wl: &SampledWavelengths) -> ShadingCtx<'_> {
 /// both sides; zero thickness is no film at all (R = 0, T = 1).
 #[test]
 fn bubble_conserves_energy_when_lossless() {
-    let mut c = Counters::default();
+    counters::take();
     for d in [0.0f32, 1.0, 80.0, 300.0, 612.5, 1500.0, 5000.0] {
         let Bsdf::Bubble(b) = bubble("water", d) else {
             unreachable!()
@@ -572,7 +512,7 @@ fn bubble_conserves_energy_when_lossless() {
                 pdf: [1.0; 4],
             };
             for cos in [1.0f32, 0.8, 0.5, 0.2, 0.05, 1e-3, -0.3, -1.0] {
-                let (r, t) = b.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+                let (r, t) = b.reflect_transmit(&ctx_of(&wl), cos);
                 for k in 0..4 {
                     assert!(
                         (r[k] + t[k] - 1.0).abs() < 2e-5,
@@ -594,12 +534,12 @@ fn bubble_conserves_energy_when_lossless() {
 #[test]
 fn bubble_matches_airy_and_absorbs_when_lossy() {
     let wl = wl();
-    let mut c = Counters::default();
+    counters::take();
     let Bsdf::Bubble(b) = bubble("1.33", 350.0) else {
         unreachable!()
     };
     for cos in [1.0f32, 0.7, 0.3, 0.02] {
-        let (r, t) = b.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        let (r, t) = b.reflect_transmit(&ctx_of(&wl), cos);
         for k in 0..4 {
             let f = crate::optics::ThinFilm {
                 ambient_ior: 1.0,
@@ -623,12 +563,12 @@ fn bubble_matches_airy_and_absorbs_when_lossy() {
         }
     }
     // Colour: a 350 nm water film reflects very differently across the visible.
-    let (r, _) = b.reflect_transmit(&ctx_of(&wl), 1.0, &mut c);
+    let (r, _) = b.reflect_transmit(&ctx_of(&wl), 1.0);
     assert!(r.max_element() - r.min_element() > 0.05, "{r}");
     let Bsdf::Bubble(lossy) = bubble("1.5+0.2i", 250.0) else {
         unreachable!()
     };
-    let (r, t) = lossy.reflect_transmit(&ctx_of(&wl), 0.8, &mut c);
+    let (r, t) = lossy.reflect_transmit(&ctx_of(&wl), 0.8);
     assert!((r + t).max_element() < 0.99, "{r} {t}");
 }
 
@@ -639,7 +579,7 @@ fn bubble_matches_airy_and_absorbs_when_lossy() {
 fn bubble_sampling_frequencies_and_weights() {
     let wl = wl();
     let ctx = ctx_of(&wl);
-    let mut c = Counters::default();
+    counters::take();
     let Bsdf::Bubble(inner) = bubble("water", 420.0) else {
         unreachable!()
     };
@@ -649,7 +589,7 @@ fn bubble_sampling_frequencies_and_weights() {
         if back {
             wi.z = -wi.z;
         }
-        let (r, t) = inner.reflect_transmit(&ctx, wi.z, &mut c);
+        let (r, t) = inner.reflect_transmit(&ctx, wi.z);
         let p_r = (r.element_sum() / (r.element_sum() + t.element_sum())).clamp(
             BubbleBsdf::MIN_LOBE_PROBABILITY,
             1.0 - BubbleBsdf::MIN_LOBE_PROBABILITY,
@@ -659,9 +599,9 @@ fn bubble_sampling_frequencies_and_weights() {
         let mut s = Sampler::from_seed(17);
         for _ in 0..n {
             let smp = b
-                .sample(&ctx, wi, s.next_1d(), s.next_2d(), &mut c)
+                .sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL)
                 .unwrap();
-            assert!(smp.delta && smp.eta == 1.0);
+            assert!(smp.is_delta() && smp.eta == 1.0);
             if smp.wo.z * wi.z > 0.0 {
                 n_r += 1;
                 assert!((smp.wo - Vec3::new(-wi.x, -wi.y, wi.z)).length() < 1e-6);
@@ -693,7 +633,7 @@ fn bubble_sampling_frequencies_and_weights() {
     // Once secondaries are terminated only the hero decides the lobe.
     let mut hero = wl;
     hero.terminate_secondary();
-    let (r, t) = inner.reflect_transmit(&ctx_of(&hero), 0.9, &mut c);
+    let (r, t) = inner.reflect_transmit(&ctx_of(&hero), 0.9);
     let p = BubbleBsdf::reflect_probability(&ctx_of(&hero), r, t, 0.0);
     assert!((p - r.x / (r.x + t.x)).abs() < 1e-6);
 }
@@ -707,10 +647,10 @@ fn stack_reflectance_equals_tmm() {
         unreachable!()
     };
     let wl = wl();
-    let mut c = Counters::default();
+    counters::take();
     let n = |name: &str, l: f32| dispersion::lookup(name).unwrap().nk(l as f64);
     for cos in [1.0f32, 0.75, 0.4, 0.1, 0.0] {
-        let r = b.reflectance(&ctx_of(&wl), cos, &mut c);
+        let r = b.reflectance(&ctx_of(&wl), cos);
         for k in 0..4 {
             let l = wl.lambda[k];
             let reference = Stack {
@@ -736,8 +676,8 @@ fn stack_reflectance_equals_tmm() {
         unreachable!()
     };
     for cos in [1.0f32, 0.5, 0.05] {
-        let a = one.reflectance(&ctx_of(&wl), cos, &mut c);
-        let (b, _) = airy.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        let a = one.reflectance(&ctx_of(&wl), cos);
+        let (b, _) = airy.reflect_transmit(&ctx_of(&wl), cos);
         assert!((a - b).abs().max_element() < 2e-5, "{a} vs {b}");
     }
 }
@@ -753,7 +693,7 @@ fn ar_coating_and_dielectric_mirror() {
             lambda: [l; 4],
             pdf: [1.0; 4],
         };
-        b.reflectance(&ctx_of(&wl), 1.0, &mut Counters::default()).x
+        b.reflectance(&ctx_of(&wl), 1.0).x
     };
     let bare = stack("MgF2:0", "BK7", 0.0);
     let ar = stack("MgF2:99.6", "BK7", 0.0);
@@ -770,38 +710,28 @@ fn ar_coating_and_dielectric_mirror() {
     assert!(at(&mirror, 780.0) < 0.5, "{}", at(&mirror, 780.0));
 }
 
-/// A dispersive dielectric asks for secondary termination (and the dispatcher counts it); a
-/// constant-index one never does.
+/// A dispersive dielectric asks for secondary termination; a constant-index one never does.
 #[test]
 fn dispersion_terminates_only_when_declared() {
     let wl = wl();
     let ctx = ctx_of(&wl);
-    let glass = |ior: &str| {
-        Bsdf::from_desc(&BsdfDesc::Dielectric {
-            int_ior: ior.parse().unwrap(),
-            ext_ior: Ior::real(1.0),
-            alpha: 0.0,
-        })
-        .unwrap()
-    };
-    let mut c = Counters::default();
+    let glass = dielectric;
+    counters::take();
     let constant = glass("1.5046");
     let mut s = Sampler::from_seed(3);
     for _ in 0..1000 {
         let smp = constant
-            .sample(&ctx, dir(40.0, 0.0), s.next_1d(), s.next_2d(), &mut c)
+            .sample(&ctx, dir(40.0, 0.0), s.next_1d(), s.next_2d(), Lobes::ALL)
             .unwrap();
         assert!(!smp.terminate_secondary);
     }
-    assert_eq!(c.secondary_terminations, 0);
     for spec in ["cauchy:1.5046,4200", "material:BK7"] {
-        let mut c = Counters::default();
+        counters::take();
         let g = glass(spec);
         let smp = g
-            .sample(&ctx, dir(40.0, 0.0), 0.99, Vec2::ZERO, &mut c)
+            .sample(&ctx, dir(40.0, 0.0), 0.99, Vec2::ZERO, Lobes::ALL)
             .unwrap();
         assert!(smp.terminate_secondary && smp.wo.z < 0.0, "{spec}");
-        assert_eq!(c.secondary_terminations, 1);
         // Refraction uses the hero wavelength's index (420 nm): Snell with n(420).
         let n420 = spec.parse::<Ior>().unwrap().at(420.0).re as f32;
         let sin_t = (smp.wo.x * smp.wo.x + smp.wo.y * smp.wo.y).sqrt();
@@ -815,12 +745,12 @@ fn dispersion_terminates_only_when_declared() {
 #[test]
 fn coated_dielectric_limits_and_energy() {
     let wl = wl();
-    let mut c = Counters::default();
+    counters::take();
     let Bsdf::CoatedDielectric(bare) = coated("MgF2:0", "1.5") else {
         unreachable!()
     };
     for cos in [1.0f32, 0.7, 0.2, 0.01, -1.0, -0.8, -0.5, -0.2] {
-        let (r, t) = bare.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        let (r, t) = bare.reflect_transmit(&ctx_of(&wl), cos);
         let fresnel = fresnel::fresnel_dielectric(cos, 1.5).0;
         assert!(
             (r.x - fresnel).abs() < 1e-5,
@@ -836,15 +766,15 @@ fn coated_dielectric_limits_and_energy() {
         unreachable!()
     };
     for cos in [1.0f32, 0.5, 0.05, -1.0, -0.9, -0.75, -0.3] {
-        let (r, t) = ar.reflect_transmit(&ctx_of(&wl), cos, &mut c);
+        let (r, t) = ar.reflect_transmit(&ctx_of(&wl), cos);
         assert!(
             (r + t - Spec::ONE).abs().max_element() < 1e-5,
             "cos {cos}: {r} {t}"
         );
     }
     let green = SampledWavelengths::new([550.0; 4], [1.0; 4]);
-    let (r_ar, _) = ar.reflect_transmit(&ctx_of(&green), 1.0, &mut c);
-    let (r_bare, _) = bare.reflect_transmit(&ctx_of(&green), 1.0, &mut c);
+    let (r_ar, _) = ar.reflect_transmit(&ctx_of(&green), 1.0);
+    let (r_bare, _) = bare.reflect_transmit(&ctx_of(&green), 1.0);
     assert!(r_ar.x < 0.014 && r_bare.x > 0.035, "{r_ar} {r_bare}");
     // Sampling: refraction obeys Snell with the η² radiance factor; dispersive glass
     // terminates secondaries on refraction only.
@@ -852,9 +782,11 @@ fn coated_dielectric_limits_and_energy() {
         unreachable!()
     };
     let wi = dir(30.0, 0.0);
-    let (r, t) = disp.reflect_transmit(&ctx_of(&wl), wi.z, &mut c);
+    let (r, t) = disp.reflect_transmit(&ctx_of(&wl), wi.z);
     let p_r = r.element_sum() / (r + t).element_sum();
-    let refr = disp.sample(&ctx_of(&wl), wi, 0.999, &mut c).unwrap();
+    let refr = disp
+        .sample(&ctx_of(&wl), wi, 0.999, Vec2::ZERO, Lobes::ALL)
+        .unwrap();
     let n420 = 1.5046 + 4200.0 / (420.0f32 * 420.0);
     let sin_t = (refr.wo.x * refr.wo.x + refr.wo.y * refr.wo.y).sqrt();
     assert!(refr.wo.z < 0.0 && (sin_t - 0.5 / n420).abs() < 1e-5);
@@ -865,7 +797,9 @@ fn coated_dielectric_limits_and_energy() {
         "{} vs {w}",
         refr.weight
     );
-    let refl = disp.sample(&ctx_of(&wl), wi, 0.0, &mut c).unwrap();
+    let refl = disp
+        .sample(&ctx_of(&wl), wi, 0.0, Vec2::ZERO, Lobes::ALL)
+        .unwrap();
     assert!(refl.wo.z > 0.0 && !refl.terminate_secondary);
     assert!((refl.weight - r / p_r).abs().max_element() < 1e-5);
 }
@@ -875,12 +809,7 @@ fn coated_dielectric_limits_and_energy() {
 /// bubble, from both sides, at normal, oblique, total-internal-reflection and grazing angles.
 #[test]
 fn split_lobes_are_the_sampled_lobes_at_full_weight() {
-    let glass = Bsdf::from_desc(&BsdfDesc::Dielectric {
-        int_ior: Ior::real(1.5),
-        ext_ior: Ior::real(1.0),
-        alpha: 0.0,
-    })
-    .unwrap();
+    let glass = dielectric("1.5");
     let cases = [
         ("glass", glass),
         ("coated", coated("MgF2:99.6", "1.5168")),
@@ -888,7 +817,7 @@ fn split_lobes_are_the_sampled_lobes_at_full_weight() {
     ];
     let w = wl();
     let ctx = ctx_of(&w);
-    let mut c = Counters::default();
+    counters::take();
     for (name, b) in &cases {
         assert!(b.is_fresnel_pair(), "{name}");
         for theta in [0.0f32, 30.0, 60.0, 85.0, 89.9] {
@@ -897,21 +826,19 @@ fn split_lobes_are_the_sampled_lobes_at_full_weight() {
                 if inside {
                     wi.z = -wi.z;
                 }
-                let [r, t] = b.split(&ctx, wi, &mut c);
+                let [r, t] = b.sample_split(&ctx, wi, 0.5, Vec2::ZERO);
                 // The lobes sample() picks with u1 = 0 (reflection) and u1 → 1 (transmission).
-                let forced = |u1: f32, reflection: bool, c: &mut Counters| {
-                    b.sample(&ctx, wi, u1, Vec2::ZERO, c)
+                let forced = |u1: f32, reflection: bool| {
+                    b.sample(&ctx, wi, u1, Vec2::ZERO, Lobes::ALL)
                         .filter(|s| (s.wo.z * wi.z > 0.0) == reflection)
                 };
-                for (what, got, want) in [
-                    ("R", r, forced(0.0, true, &mut c)),
-                    ("T", t, forced(1.0, false, &mut c)),
-                ] {
+                for (what, got, want) in [("R", r, forced(0.0, true)), ("T", t, forced(1.0, false))]
+                {
                     let at = format!("{name} θ={theta} inside={inside} {what}");
                     match (got, want) {
                         (Some(g), Some(s)) => {
                             assert!((g.wo - s.wo).abs().max_element() < 1e-6, "{at}");
-                            assert_eq!((g.pdf, g.eta, g.delta), (1.0, s.eta, true), "{at}");
+                            assert_eq!((g.pdf, g.eta, g.is_delta()), (1.0, s.eta, true), "{at}");
                             let full = s.weight * s.pdf;
                             let err = (g.weight - full).abs().max_element();
                             assert!(
@@ -933,6 +860,101 @@ fn split_lobes_are_the_sampled_lobes_at_full_weight() {
                     assert!(
                         (rt - 1.0).abs() < 1e-5,
                         "{name} θ={theta} inside={inside}: R+T {rt}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Every polarised form agrees with its model: for unpolarised light a Mueller value's S0
+/// response is the unpolarised value (`eval`, and `sample`'s weight), and `sample_mueller`
+/// samples what `sample` samples (direction, pdf, lobe) from the same random numbers.
+#[test]
+fn mueller_forms_agree_with_the_unpolarised_models() {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let mut all = test_bsdfs();
+    all.push(("film", thin_film(0.0, 400.0)));
+    all.push(("stack", stack("MgF2:100, TiO2:50", "BK7", 0.0)));
+    all.push(("conductor", conductor("0.2+3.9i", 0.0, 0.0)));
+    all.push(("dielectric", dielectric("1.5")));
+    all.push((
+        "twosided-film",
+        twosided::TwoSided::new(thin_film(0.2, 300.0))
+            .unwrap()
+            .into(),
+    ));
+    let close =
+        |a: Spec, b: Spec| (a - b).abs().max_element() <= 1e-4 * b.abs().max_element().max(1.0);
+    let mut s = Sampler::from_seed(23);
+    for (name, b) in &all {
+        let m = b.polarized().unwrap_or_else(|e| panic!("{name}: {e}"));
+        for k in 0..300 {
+            let mut wi = dir(2.0 + 85.0 * s.next_1d(), 360.0 * s.next_1d());
+            if k % 3 == 0 && b.flags().contains(BsdfFlags::TWO_SIDED) {
+                wi.z = -wi.z;
+            }
+            let wo = dir(2.0 + 85.0 * s.next_1d(), 360.0 * s.next_1d());
+            let (f, fm) = (
+                b.eval(&ctx, wi, wo),
+                m.eval_mueller(&ctx, wi, wo).unpolarized(),
+            );
+            assert!(close(fm, f), "{name} #{k}: Mueller eval {fm} vs {f}");
+            let (u1, u2) = (s.next_1d(), s.next_2d());
+            let plain = b.sample(&ctx, wi, u1, u2, Lobes::ALL);
+            let pol = m.sample_mueller(&ctx, wi, u1, u2, Lobes::ALL);
+            match (plain, pol) {
+                (Some(a), Some((p, v))) => {
+                    assert!(
+                        (a.wo - p.wo).length() < 1e-5
+                            && (a.pdf - p.pdf).abs() <= 1e-5 * a.pdf.max(1.0),
+                        "{name} #{k}"
+                    );
+                    assert_eq!(a.lobe, p.lobe, "{name} #{k}");
+                    assert!(
+                        close(v.unpolarized(), a.weight),
+                        "{name} #{k}: {} vs {}",
+                        v.unpolarized(),
+                        a.weight
+                    );
+                }
+                (None, None) => {}
+                (a, p) => {
+                    // The unpolarised sample drops what is unusable (zero pdf, NaN).
+                    let kept = p.filter(|(p, _)| p.pdf > 0.0 && p.weight.max_element() > 0.0);
+                    assert!(
+                        a.is_none() && kept.is_none(),
+                        "{name} #{k}: {a:?} vs {kept:?}"
+                    );
+                }
+            }
+        }
+    }
+    // A one-layer stack and the single film: two codes, one Mueller matrix.
+    let (Bsdf::Stack(one), Bsdf::ThinFilm(film)) =
+        (stack("1.37:400", "1.64", 0.0), thin_film(0.0, 400.0))
+    else {
+        unreachable!()
+    };
+    for theta in [0.0f32, 40.0, 75.0] {
+        let wi = dir(theta, 30.0);
+        let (a, b) = (
+            one.sample_mueller(&ctx, wi, 0.5, Vec2::ZERO, Lobes::ALL)
+                .unwrap()
+                .1,
+            film.sample_mueller(&ctx, wi, 0.5, Vec2::ZERO, Lobes::ALL)
+                .unwrap()
+                .1,
+        );
+        let (a, b) = (a.polarized.unwrap(), b.polarized.unwrap());
+        for k in 0..4 {
+            for i in 0..4 {
+                for j in 0..4 {
+                    let (x, y) = (a.m[k].0[i][j], b.m[k].0[i][j]);
+                    assert!(
+                        (x - y).abs() < 2e-5,
+                        "θ {theta} λ{k} [{i}][{j}]: {x} vs {y}"
                     );
                 }
             }

@@ -143,15 +143,14 @@ mod tests {
     #[test]
     fn a_vanishing_film_leaves_the_schlick_base() {
         // d → 0 fades the film index to the outside index: what remains is Schlick's F of
-        // the base (up to the r123 clamp of 1e-5, which leaves a ≲ 0.5 % ripple).
+        // the base, plus the model's own floor: R12·R23 is clamped to ≥ 1e-5, so the first
+        // Fourier order keeps an amplitude of 2·√1e-5 ≈ 0.006 (0.047 instead of 0.04 for a
+        // dielectric at normal incidence — a small artefact of the viewers' model).
         for cos in [1.0, 0.7, 0.3] {
             let f = f_iridescence(1.0, 1.8, cos, 0.0, [0.04, 0.5, 0.9], OpdCosine::InsideFilm);
             for (c, &f0) in [0.04, 0.5, 0.9].iter().enumerate() {
                 let want = f_schlick(f0, cos);
-                assert!(
-                    (f[c] - want).abs() < 5e-3 * want.max(0.05),
-                    "{f:?} vs {want}"
-                );
+                assert!((f[c] - want).abs() < 0.01, "{f:?} vs {want}");
             }
         }
     }

@@ -12,23 +12,25 @@ use crate::scene::{SpectrumDesc, TextureDesc};
 use bubble::BubbleBsdf;
 use std::f64::consts::PI;
 
-fn wl() -> SampledWavelengths {
+/// Four visible wavelengths for the tests.
+pub(super) fn wl() -> SampledWavelengths {
     SampledWavelengths {
         lambda: [420.0, 510.0, 600.0, 690.0],
         pdf: [0.0025; 4],
     }
 }
 
-fn dir(theta_deg: f32, phi_deg: f32) -> Vec3 {
+/// The unit direction at polar angle `theta_deg` and azimuth `phi_deg`.
+pub(super) fn dir(theta_deg: f32, phi_deg: f32) -> Vec3 {
     let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
     Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
 }
 
-fn constant(v: f32) -> TextureDesc {
+pub(super) fn constant(v: f32) -> TextureDesc {
     TextureDesc::Value(SpectrumDesc::Constant(v))
 }
 
-fn thin_film(alpha: f32, thickness: f32) -> Bsdf {
+pub(super) fn thin_film(alpha: f32, thickness: f32) -> Bsdf {
     let t = constant(thickness);
     thinfilm::ThinFilmBsdf::new(Ior::real(1.37), &t, Ior::real(1.64), alpha)
         .unwrap()
@@ -36,7 +38,7 @@ fn thin_film(alpha: f32, thickness: f32) -> Bsdf {
 }
 
 /// A multilayer coating from the scene syntax (`layers`, substrate).
-fn stack(layers: &str, substrate: &str, alpha: f32) -> Bsdf {
+pub(super) fn stack(layers: &str, substrate: &str, alpha: f32) -> Bsdf {
     let layers = crate::scene::mitsuba::parse_layers(layers).unwrap();
     stack::StackBsdf::new(layers, substrate.parse().unwrap(), alpha)
         .unwrap()
@@ -44,7 +46,7 @@ fn stack(layers: &str, substrate: &str, alpha: f32) -> Bsdf {
 }
 
 /// A dielectric interface under a coating (`coateddielectric`), air outside.
-fn coated(layers: &str, int_ior: &str) -> Bsdf {
+pub(super) fn coated(layers: &str, int_ior: &str) -> Bsdf {
     let layers = crate::scene::mitsuba::parse_layers(layers).unwrap();
     coated::CoatedDielectric::new(layers, int_ior.parse().unwrap(), Ior::real(1.0))
         .unwrap()
@@ -52,7 +54,7 @@ fn coated(layers: &str, int_ior: &str) -> Bsdf {
 }
 
 /// A free-standing film (soap bubble) of constant thickness.
-fn bubble(film_ior: &str, thickness: f32) -> Bsdf {
+pub(super) fn bubble(film_ior: &str, thickness: f32) -> Bsdf {
     bubble::BubbleBsdf::new(
         film_ior.parse().unwrap(),
         &constant(thickness),
@@ -62,21 +64,21 @@ fn bubble(film_ior: &str, thickness: f32) -> Bsdf {
     .into()
 }
 
-fn conductor(eta: &str, alpha_u: f32, alpha_v: f32) -> Bsdf {
+pub(super) fn conductor(eta: &str, alpha_u: f32, alpha_v: f32) -> Bsdf {
     conductor::Conductor::new(eta.parse().unwrap(), alpha_u, alpha_v)
         .unwrap()
         .into()
 }
 
-fn dielectric(int_ior: &str) -> Bsdf {
+pub(super) fn dielectric(int_ior: &str) -> Bsdf {
     dielectric::Dielectric::new(int_ior.parse().unwrap(), Ior::real(1.0)).into()
 }
 
-fn diffuse(reflectance: f32) -> Bsdf {
+pub(super) fn diffuse(reflectance: f32) -> Bsdf {
     diffuse::Diffuse::constant(reflectance).into()
 }
 
-fn plastic(alpha: f32, nonlinear: bool) -> Bsdf {
+pub(super) fn plastic(alpha: f32, nonlinear: bool) -> Bsdf {
     plastic::Plastic::new(&constant(0.5), 1.49, 1.0, nonlinear, alpha)
         .unwrap()
         .into()
@@ -174,7 +176,7 @@ fn cell_of(w: Vec3) -> usize {
 }
 
 /// χ² test (pbrt-v4 `Chi2Test`): returns the p-value.
-fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) -> f64 {
+pub(super) fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) -> f64 {
     let wl = wl();
     let ctx = ShadingCtx {
         wl: &wl,
@@ -245,25 +247,36 @@ fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) -> f64 {
     1.0 - gamma_p((dof - 1) as f64 / 2.0, chsq / 2.0)
 }
 
+/// Incident directions of the sampling tests: near normal, oblique, grazing (the second one
+/// from below for two-sided models).
+pub(super) fn incidents(b: &Bsdf) -> [Vec3; 3] {
+    let mut out = [dir(10.0, 20.0), dir(45.0, 200.0), dir(80.0, 90.0)];
+    if b.flags().contains(BsdfFlags::TWO_SIDED) {
+        out[1].z = -out[1].z;
+    }
+    out
+}
+
+/// The χ² test of `b`'s sampled directions against its pdf at [`incidents`], each at
+/// significance `alpha` (Šidák-corrected by the caller).
+pub(super) fn assert_chi2(name: &str, b: &Bsdf, alpha: f64) {
+    for (k, wi) in incidents(b).into_iter().enumerate() {
+        let pv = chi2_pvalue(b, wi, 200_000, 7 + k as u64);
+        assert!(
+            pv > alpha,
+            "{name} at wi={wi}: χ² p-value {pv:e} < {alpha:e}"
+        );
+    }
+}
+
 #[test]
 fn chi2_sampled_directions_match_pdf() {
     let bsdfs = test_bsdfs();
-    let incidents = [(10.0, 20.0), (45.0, 200.0), (80.0, 90.0)];
-    let tests = bsdfs.len() * incidents.len();
+    let tests = bsdfs.len() * 3;
     // Šidák correction for the number of tests at overall significance 1 %.
     let threshold = 1.0 - (1.0 - 0.01f64).powf(1.0 / tests as f64);
     for (name, b) in &bsdfs {
-        for (k, &(t, p)) in incidents.iter().enumerate() {
-            let mut wi = dir(t, p);
-            if *name == "twosided-diffuse" && k == 1 {
-                wi.z = -wi.z; // back face
-            }
-            let pv = chi2_pvalue(b, wi, 200_000, 7 + k as u64);
-            assert!(
-                pv > threshold,
-                "{name} at θi={t}°: χ² p-value {pv:e} < {threshold:e}"
-            );
-        }
+        assert_chi2(name, b, threshold);
     }
 }
 
@@ -298,42 +311,58 @@ fn chi2_rejects_a_wrong_pdf() {
     assert!(chi2_pvalue(&rough, wi, 50_000, 3) > 1e-4);
 }
 
-#[test]
-fn eval_pdf_sample_agree() {
+/// `b`'s non-delta samples have the pdf `pdf` gives and the weight eval / pdf.
+pub(super) fn assert_eval_pdf_sample_agree(name: &str, b: &Bsdf) {
     let wl = wl();
-    let ctx = ShadingCtx {
-        wl: &wl,
-        uv: Vec2::ZERO,
-    };
-    counters::take();
-    for (name, b) in test_bsdfs() {
-        let mut s = Sampler::from_seed(11);
-        for k in 0..2000 {
-            let wi = dir(5.0 + 80.0 * s.next_1d(), 360.0 * s.next_1d());
-            let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) else {
-                continue;
-            };
-            if smp.is_delta() {
-                continue;
-            }
-            let pdf = b.pdf(&ctx, wi, smp.wo);
-            let f = b.eval(&ctx, wi, smp.wo);
+    let ctx = ctx_of(&wl);
+    let mut s = Sampler::from_seed(11);
+    for k in 0..2000 {
+        let wi = dir(5.0 + 80.0 * s.next_1d(), 360.0 * s.next_1d());
+        let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) else {
+            continue;
+        };
+        if smp.is_delta() {
+            continue;
+        }
+        let pdf = b.pdf(&ctx, wi, smp.wo);
+        let f = b.eval(&ctx, wi, smp.wo);
+        assert!(
+            (pdf - smp.pdf).abs() <= 2e-3 * pdf.max(1.0),
+            "{name} #{k}: pdf {pdf} vs sampled {}",
+            smp.pdf
+        );
+        let expect = f / smp.pdf;
+        for l in 0..4 {
             assert!(
-                (pdf - smp.pdf).abs() <= 2e-3 * pdf.max(1.0),
-                "{name} #{k}: pdf {pdf} vs sampled {}",
-                smp.pdf
+                (expect[l] - smp.weight[l]).abs() <= 2e-3 * expect[l].max(1.0),
+                "{name} #{k}: weight {} vs eval/pdf {}",
+                smp.weight[l],
+                expect[l]
             );
-            let expect = f / smp.pdf;
-            for l in 0..4 {
-                assert!(
-                    (expect[l] - smp.weight[l]).abs() <= 2e-3 * expect[l].max(1.0),
-                    "{name} #{k}: weight {} vs eval/pdf {}",
-                    smp.weight[l],
-                    expect[l]
-                );
-            }
         }
     }
+}
+
+#[test]
+fn eval_pdf_sample_agree() {
+    for (name, b) in test_bsdfs() {
+        assert_eval_pdf_sample_agree(name, &b);
+    }
+}
+
+/// The mean sample weight from `wi` over `n` samples per wavelength: the directional albedo
+/// (1 for a lossless BSDF in a white furnace).
+pub(super) fn albedo(b: &Bsdf, wi: Vec3, n: u32) -> Spec {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let mut s = Sampler::from_seed(29);
+    let mut sum = Spec::ZERO;
+    for _ in 0..n {
+        if let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) {
+            sum += smp.weight;
+        }
+    }
+    sum / n as f32
 }
 
 /// Lossless film on a lossless substrate: R + T = 1 inside the BSDF, for any angle,
@@ -489,11 +518,12 @@ fn diffuse_white_furnace_weights() {
             .unwrap();
         assert_eq!(smp.weight, Spec::ONE);
     }
+    assert_eq!(albedo(&b, dir(75.0, 0.0), 1000), Spec::ONE);
 }
 
 // ---- Free-standing films (thinfilm_bubble) and multilayer stacks (thinfilm + layers) ----
 
-fn ctx_of(wl: &SampledWavelengths) -> ShadingCtx<'_> {
+pub(super) fn ctx_of(wl: &SampledWavelengths) -> ShadingCtx<'_> {
     ShadingCtx { wl, uv: Vec2::ZERO }
 }
 
@@ -867,9 +897,58 @@ fn split_lobes_are_the_sampled_lobes_at_full_weight() {
     }
 }
 
-/// Every polarised form agrees with its model: for unpolarised light a Mueller value's S0
-/// response is the unpolarised value (`eval`, and `sample`'s weight), and `sample_mueller`
-/// samples what `sample` samples (direction, pdf, lobe) from the same random numbers.
+/// `b`'s polarised form agrees with it: for unpolarised light a Mueller value's S0 response
+/// is the unpolarised value (`eval`, and `sample`'s weight), and `sample_mueller` samples what
+/// `sample` samples (direction, pdf, lobe) from the same random numbers.
+pub(super) fn assert_mueller_agrees(name: &str, b: &Bsdf) {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let close =
+        |a: Spec, b: Spec| (a - b).abs().max_element() <= 1e-4 * b.abs().max_element().max(1.0);
+    let mut s = Sampler::from_seed(23);
+    let m = b.polarized().unwrap_or_else(|e| panic!("{name}: {e}"));
+    for k in 0..300 {
+        let mut wi = dir(2.0 + 85.0 * s.next_1d(), 360.0 * s.next_1d());
+        if k % 3 == 0 && b.flags().contains(BsdfFlags::TWO_SIDED) {
+            wi.z = -wi.z;
+        }
+        let wo = dir(2.0 + 85.0 * s.next_1d(), 360.0 * s.next_1d());
+        let (f, fm) = (
+            b.eval(&ctx, wi, wo),
+            m.eval_mueller(&ctx, wi, wo).unpolarized(),
+        );
+        assert!(close(fm, f), "{name} #{k}: Mueller eval {fm} vs {f}");
+        let (u1, u2) = (s.next_1d(), s.next_2d());
+        let plain = b.sample(&ctx, wi, u1, u2, Lobes::ALL);
+        let pol = m.sample_mueller(&ctx, wi, u1, u2, Lobes::ALL);
+        match (plain, pol) {
+            (Some(a), Some((p, v))) => {
+                assert!(
+                    (a.wo - p.wo).length() < 1e-5 && (a.pdf - p.pdf).abs() <= 1e-5 * a.pdf.max(1.0),
+                    "{name} #{k}"
+                );
+                assert_eq!(a.lobe, p.lobe, "{name} #{k}");
+                assert!(
+                    close(v.unpolarized(), a.weight),
+                    "{name} #{k}: {} vs {}",
+                    v.unpolarized(),
+                    a.weight
+                );
+            }
+            (None, None) => {}
+            (a, p) => {
+                // The unpolarised sample drops what is unusable (zero pdf, NaN).
+                let kept = p.filter(|(p, _)| p.pdf > 0.0 && p.weight.max_element() > 0.0);
+                assert!(
+                    a.is_none() && kept.is_none(),
+                    "{name} #{k}: {a:?} vs {kept:?}"
+                );
+            }
+        }
+    }
+}
+
+/// Every polarised form agrees with its model ([`assert_mueller_agrees`]).
 #[test]
 fn mueller_forms_agree_with_the_unpolarised_models() {
     let wl = wl();
@@ -879,57 +958,12 @@ fn mueller_forms_agree_with_the_unpolarised_models() {
     all.push(("stack", stack("MgF2:100, TiO2:50", "BK7", 0.0)));
     all.push(("conductor", conductor("0.2+3.9i", 0.0, 0.0)));
     all.push(("dielectric", dielectric("1.5")));
-    all.push((
-        "twosided-film",
-        twosided::TwoSided::new(thin_film(0.2, 300.0))
-            .unwrap()
-            .into(),
-    ));
-    let close =
-        |a: Spec, b: Spec| (a - b).abs().max_element() <= 1e-4 * b.abs().max_element().max(1.0);
-    let mut s = Sampler::from_seed(23);
+    let film: Bsdf = twosided::TwoSided::new(thin_film(0.2, 300.0))
+        .unwrap()
+        .into();
+    all.push(("twosided-film", film));
     for (name, b) in &all {
-        let m = b.polarized().unwrap_or_else(|e| panic!("{name}: {e}"));
-        for k in 0..300 {
-            let mut wi = dir(2.0 + 85.0 * s.next_1d(), 360.0 * s.next_1d());
-            if k % 3 == 0 && b.flags().contains(BsdfFlags::TWO_SIDED) {
-                wi.z = -wi.z;
-            }
-            let wo = dir(2.0 + 85.0 * s.next_1d(), 360.0 * s.next_1d());
-            let (f, fm) = (
-                b.eval(&ctx, wi, wo),
-                m.eval_mueller(&ctx, wi, wo).unpolarized(),
-            );
-            assert!(close(fm, f), "{name} #{k}: Mueller eval {fm} vs {f}");
-            let (u1, u2) = (s.next_1d(), s.next_2d());
-            let plain = b.sample(&ctx, wi, u1, u2, Lobes::ALL);
-            let pol = m.sample_mueller(&ctx, wi, u1, u2, Lobes::ALL);
-            match (plain, pol) {
-                (Some(a), Some((p, v))) => {
-                    assert!(
-                        (a.wo - p.wo).length() < 1e-5
-                            && (a.pdf - p.pdf).abs() <= 1e-5 * a.pdf.max(1.0),
-                        "{name} #{k}"
-                    );
-                    assert_eq!(a.lobe, p.lobe, "{name} #{k}");
-                    assert!(
-                        close(v.unpolarized(), a.weight),
-                        "{name} #{k}: {} vs {}",
-                        v.unpolarized(),
-                        a.weight
-                    );
-                }
-                (None, None) => {}
-                (a, p) => {
-                    // The unpolarised sample drops what is unusable (zero pdf, NaN).
-                    let kept = p.filter(|(p, _)| p.pdf > 0.0 && p.weight.max_element() > 0.0);
-                    assert!(
-                        a.is_none() && kept.is_none(),
-                        "{name} #{k}: {a:?} vs {kept:?}"
-                    );
-                }
-            }
-        }
+        assert_mueller_agrees(name, b);
     }
     // A one-layer stack and the single film: two codes, one Mueller matrix.
     let (Bsdf::Stack(one), Bsdf::ThinFilm(film)) =

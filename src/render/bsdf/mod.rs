@@ -16,20 +16,10 @@
 //! queried direction; `eval` returns f(wi, wo)·|cos θo| and `sample` returns the weight
 //! eval / pdf (for delta lobes: the lobe's value divided by its selection probability).
 
-pub mod bubble;
-pub mod coated;
-pub mod conductor;
-pub mod dielectric;
-pub mod diffuse;
 mod flags;
 pub mod fresnel;
 pub mod microfacet;
 mod mueller;
-pub mod plastic;
-pub mod polarizer;
-pub mod stack;
-pub mod thinfilm;
-pub mod twosided;
 
 pub use flags::{BsdfFlags, Lobes};
 pub use mueller::{MuellerValue, PolarizedLobe};
@@ -190,22 +180,32 @@ pub trait BsdfPlugin: Sized {
     fn build(params: &mut PluginParams) -> anyhow::Result<Self>;
 }
 
-/// Registers the models: one line each, `Variant(module::Type)`. Generates [`Bsdf`], its
-/// dispatch (no wildcard arms) and the plugin table of the scene parser.
+/// Registers the models: one line each, `Variant(module::Type)`. Declares each model's module
+/// and generates [`Bsdf`], its dispatch (no wildcard arms) and the plugin table of the scene
+/// parser.
 macro_rules! bsdf_models {
-    ($($(#[$doc:meta])* $variant:ident($ty:ty),)*) => {
+    ($($(#[$doc:meta])* $variant:ident($module:ident :: $model:ident),)*) => {
+        $(pub mod $module;)*
+
         /// A BSDF of a scene: one of the registered models.
         #[derive(Debug, Clone)]
         pub enum Bsdf {
-            $($(#[$doc])* $variant($ty),)*
+            $($(#[$doc])* $variant($module::$model),)*
         }
 
-        $(impl From<$ty> for Bsdf {
-            fn from(b: $ty) -> Self {
+        $(impl From<$module::$model> for Bsdf {
+            fn from(b: $module::$model) -> Self {
                 Bsdf::$variant(b)
             }
         })*
 
+        bsdf_dispatch!($($variant($module::$model),)*);
+    };
+}
+
+/// [`Bsdf`]'s methods and the plugin table, one match arm per registered model.
+macro_rules! bsdf_dispatch {
+    ($($variant:ident($ty:ty),)*) => {
         impl Bsdf {
             /// The model as a trait object (for the rarely called methods).
             fn model(&self) -> &dyn BsdfModel {

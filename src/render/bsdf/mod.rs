@@ -324,6 +324,7 @@ bsdf_models! {
     CoatedDielectric(coated::CoatedDielectric),
     TwoSided(twosided::TwoSided),
     Polarizer(polarizer::PolarizerBsdf),
+    Blend(blend::BlendBsdf),
 }
 
 impl Bsdf {

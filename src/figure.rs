@@ -90,8 +90,7 @@ impl FilmMaterial {
             .get("substrate_k")
             .and_then(|v| v.as_f64())
             .unwrap_or(0.0);
-        let (w, h, thickness_nm) =
-            image_io::read_exr_channel(&dir.join("thickness.exr"), "thickness")?;
+        let (w, h, thickness_nm) = image_io::read_exr_thickness(&dir.join("thickness.exr"))?;
         Ok(FilmMaterial {
             film_ior: Ior::real(film_ior),
             substrate_ior: Ior::Constant(num_complex::Complex64::new(substrate_n, substrate_k)),

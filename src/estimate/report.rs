@@ -107,6 +107,8 @@ pub fn mean_delta_e(
         .collect();
     let pixels = super::spread(&fitted, max_pixels);
     let nb = set.bands();
+    // Fit pixel p is capture pixel p + offset (a fit of rows A:B starts at row A).
+    let offset = fit.rows.0 * set.width;
     let lab = |s: &[f32]| {
         let mut xyz = [0.0; 3];
         for (w, &v) in wts.iter().zip(s) {
@@ -125,9 +127,10 @@ pub fn mean_delta_e(
                 || vec![0f32; nb],
                 |r, &p| {
                     let (mut sum, mut count) = (0.0, 0usize);
+                    let q = p + offset;
                     for (a, ang) in set.angles.iter().enumerate() {
-                        let y = &ang.reflectance[p * nb..(p + 1) * nb];
-                        if !ang.valid[p] || y.iter().any(|v| !v.is_finite()) {
+                        let y = &ang.reflectance[q * nb..(q + 1) * nb];
+                        if !ang.valid[q] || y.iter().any(|v| !v.is_finite()) {
                             continue;
                         }
                         model.spectrum(a, fit.thickness_nm[p] as f64, r);
@@ -211,6 +214,7 @@ pub fn fit_json(
         "bands": set.bands(),
         "width": fit.width,
         "height": fit.height,
+        "rows": [fit.rows.0, fit.rows.1],
         "thickness_nm": {
             "mean": st(|s| s.mean), "median": st(|s| s.median),
             "p5": st(|s| s.p5), "p95": st(|s| s.p95),
@@ -451,11 +455,12 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> R
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating output folder {}", out.display()))?;
     let (w, h) = (fit.width, fit.height);
-    crate::image_io::write_exr_channels(
+    crate::image_io::write_exr_channels_with_attributes(
         &out.join("thickness.exr"),
         w,
         h,
-        &[("thickness", &fit.thickness_nm)],
+        &[(crate::image_io::THICKNESS_CHANNEL, &fit.thickness_nm)],
+        &fit.provenance.attributes(),
     )
     .context("writing thickness.exr")?;
     write_colormap_png(
@@ -506,21 +511,24 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> R
     Ok(())
 }
 
-/// Ground-truth errors from a loaded [`GroundTruth`] (sizes must match).
+/// Ground-truth errors from a loaded [`GroundTruth`] (the capture's size; a fit of some
+/// rows is compared with those rows).
 pub fn truth_from_ground_truth(fit: &Fit, gt: &GroundTruth) -> Result<TruthErrors> {
-    if gt.width != fit.width || gt.height != fit.height {
+    let image_height = fit.provenance.image_height;
+    if gt.width != fit.width || gt.height != image_height {
         anyhow::bail!(
             "ground truth is {}×{} but the capture is {}×{}",
             gt.width,
             gt.height,
             fit.width,
-            fit.height
+            image_height
         );
     }
+    let (a, b) = fit.rows;
     Ok(truth_errors(
         fit,
         gt.film_ior.at(550.0).re,
-        &gt.thickness_nm,
+        &gt.thickness_nm[a * gt.width..b * gt.width],
     ))
 }
 

@@ -75,7 +75,7 @@ pub fn write_exr_channels(
 }
 
 /// Header attributes of an EXR: `(name, text value)` pairs (OpenEXR `string` attributes, shown
-/// by any EXR header tool). thinfilm's own are listed in `crate::provenance`.
+/// by any EXR header tool); thinfilm writes a render's or a fit's provenance in them.
 pub type Attributes = Vec<(String, String)>;
 
 /// [`write_exr_channels`] plus text attributes in the header.
@@ -188,40 +188,19 @@ pub fn read_exr(path: &Path) -> Result<ExrFile> {
     })
 }
 
-/// Reads one named channel (e.g. `R`).
+/// Reads one named channel (e.g. `thickness`).
 pub fn read_exr_channel(path: &Path, name: &str) -> Result<(usize, usize, Vec<f32>)> {
-    read_exr_channel_any(path, &[name])
-}
-
-/// Channel of a thickness map (nm, NaN where nothing was fitted): `Y`, the one-channel layout
-/// Mitsuba's `bitmap` texture accepts. [`read_exr_thickness`] also accepts `thickness`, the
-/// name earlier versions wrote.
-pub const THICKNESS_CHANNEL: &str = "Y";
-
-/// Reads a thickness map written by `thinfilm estimate` or `simulate` (channel `Y` or
-/// `thickness`): `(width, height, nm)`.
-pub fn read_exr_thickness(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
-    read_exr_channel_any(path, &[THICKNESS_CHANNEL, "thickness"])
-}
-
-/// Reads the first channel found among `names`.
-pub fn read_exr_channel_any(path: &Path, names: &[&str]) -> Result<(usize, usize, Vec<f32>)> {
-    let (w, h, mut channels) = read_exr_channels(path)?;
-    let found: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
-    let plane = names
-        .iter()
-        .find_map(|name| channels.iter().position(|(n, _)| n == name))
-        .map(|i| channels.swap_remove(i).1)
+    let (w, h, channels) = read_exr_channels(path)?;
+    let names: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
+    let plane = channels
+        .into_iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, p)| p)
         .with_context(|| {
             format!(
-                "{}: no channel named {} (channels: {})",
+                "{}: no channel named '{name}' (channels: {})",
                 path.display(),
-                names
-                    .iter()
-                    .map(|n| format!("'{n}'"))
-                    .collect::<Vec<_>>()
-                    .join(" or "),
-                found.join(", ")
+                names.join(", ")
             )
         })?;
     Ok((w, h, plane))

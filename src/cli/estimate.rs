@@ -92,7 +92,7 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         &opts,
         args.ground_truth.as_deref(),
     )?;
-    let stats = fit_report::thickness_stats(&fit.thickness_nm);
+    let stats = thinfilm::stats::Summary::of_finite(&fit.thickness_nm);
     report.text(format_args!(
         "{}: film index {:.4}{}, thickness mean {} nm, residual RMSE {}, ΔE*ab {} (written in {:.2} s to {})",
         fit.method,

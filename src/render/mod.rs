@@ -22,13 +22,16 @@ pub mod film;
 pub mod geometry;
 pub mod integrator;
 pub mod lights;
+pub mod passes;
 pub mod polarization;
 pub mod primary;
+pub mod provenance;
 pub mod sampler;
 pub mod stokes;
 pub mod texture;
 
 use crate::image_io::RgbImage;
+use crate::progress;
 use crate::scene::{IntegratorSettings, Scene};
 
 use anyhow::{bail, Context, Result};
@@ -60,11 +63,33 @@ pub struct RenderOptions {
     /// Fresnel splits per path (None: [`DEFAULT_FRESNEL_SPLITS`]; 0: always pick one lobe,
     /// like Mitsuba). Only used where effect analysis found smooth glass or bubbles.
     pub fresnel_splits: Option<u32>,
-    /// Draw a progress bar on stderr (only when it is a terminal).
+    /// Draw a progress bar on stderr (only when it is a terminal, after the first second).
     pub progress: bool,
     /// Trace with Stokes vectors even where no polariser asks for it (a check of the
     /// polarised transport: without a polariser it must give the unpolarised image).
     pub force_polarization: bool,
+    /// Asked before each row whether to stop (a Ctrl-C handler's flag); see
+    /// [`render_prepared`].
+    pub cancel: Option<Cancel>,
+}
+
+/// A question the render asks before every row: stop now? Cloning shares it.
+#[derive(Clone)]
+pub struct Cancel(pub std::sync::Arc<dyn Fn() -> bool + Send + Sync>);
+
+impl Cancel {
+    /// Stops once `flag` is raised (e.g. by a signal handler).
+    pub fn on_flag(flag: std::sync::Arc<std::sync::atomic::AtomicBool>) -> Self {
+        Cancel(std::sync::Arc::new(move || {
+            flag.load(std::sync::atomic::Ordering::Relaxed)
+        }))
+    }
+}
+
+impl std::fmt::Debug for Cancel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Cancel")
+    }
 }
 
 /// Fresnel splits per camera path by default: a path branches in two at its first
@@ -116,6 +141,13 @@ pub struct RenderOutput {
     pub effects: Effects,
     /// The global sample indices rendered.
     pub sample_range: (u32, u32),
+    /// The sample indices asked for (differs from `sample_range` when interrupted).
+    pub requested_range: (u32, u32),
+    /// Set when the render was cancelled and holds only a prefix of the asked-for samples.
+    pub interrupted: bool,
+    /// Per-pixel sum of reconstruction-filter weights (tent and Gaussian filters only; the
+    /// box filter's weight is the sample count). Needed to merge split renders exactly.
+    pub filter_weights: Option<Vec<f32>>,
 }
 
 /// A scene prepared for tracing. Read through its methods: a surface point's BSDF and
@@ -262,6 +294,11 @@ impl PreparedScene {
 
     pub fn height(&self) -> u32 {
         self.height
+    }
+
+    /// The global sample indices this render traces.
+    pub fn sample_range(&self) -> (u32, u32) {
+        self.sample_range
     }
 
     /// Fresnel splits per path (0 unless effect analysis switched splitting on).
@@ -511,7 +548,19 @@ fn finite_rgb(rgb: [f32; 3]) -> [f32; 3] {
     }
 }
 
-/// How a row's samples become pixels: with the box filter each pixel keeps its own samples
+/// Per-pixel film accumulator of a set of samples: `[Σ w·R, Σ w·G, Σ w·B, Σ w]` (box filter:
+/// w = 1 per sample, so the last entry is the sample count).
+type Accum = Vec<[f32; 4]>;
+
+fn add_accum(dst: &mut Accum, src: &Accum) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        for k in 0..4 {
+            d[k] += s[k];
+        }
+    }
+}
+
+/// How a pass's samples become pixels: with the box filter each pixel keeps its own samples
 /// (summed as a tree, see [`film`]); wider filters splat every sample onto the pixels of rows
 /// y − `reach` ..= y + `reach` within their radius.
 struct Accumulation {
@@ -520,8 +569,6 @@ struct Accumulation {
     reach: i64,
     width: usize,
     height: usize,
-    /// Samples per pixel.
-    n: usize,
 }
 
 impl Accumulation {
@@ -533,14 +580,12 @@ impl Accumulation {
         } else {
             radius.ceil() as i64
         };
-        let (s0, s1) = scene.sample_range;
         Accumulation {
             filter,
             radius,
             reach,
             width: scene.width as usize,
             height: scene.height as usize,
-            n: (s1 - s0) as usize,
         }
     }
 
@@ -572,21 +617,16 @@ impl Accumulation {
         }
     }
 
-    /// The image from the rows' buffers, merged in a fixed order (the result does not depend
-    /// on scheduling).
-    fn merge(&self, rows: &[Vec<[f32; 4]>]) -> RgbImage {
+    /// The pass's accumulator from the rows' buffers, merged in a fixed order (the result
+    /// does not depend on scheduling).
+    fn merge(&self, rows: &[Vec<[f32; 4]>]) -> Accum {
         let (w, h, reach) = (self.width, self.height, self.reach);
-        let mut image = RgbImage::new(w, h);
-        if reach == 0 {
-            for (y, row) in rows.iter().enumerate() {
-                for (dst, p) in image.pixels[y * w..(y + 1) * w].iter_mut().zip(row) {
-                    *dst = [p[0] / p[3], p[1] / p[3], p[2] / p[3]];
-                }
-            }
-            return image;
-        }
         let mut acc = vec![[0.0f32; 4]; w * h];
         for (y, row) in rows.iter().enumerate() {
+            if reach == 0 {
+                acc[y * w..(y + 1) * w].copy_from_slice(row);
+                continue;
+            }
             for r in 0..(2 * reach + 1) as usize {
                 let py = y as i64 - reach + r as i64;
                 if py < 0 || py >= h as i64 {
@@ -601,28 +641,22 @@ impl Accumulation {
                 }
             }
         }
-        for (i, p) in acc.iter().enumerate() {
-            image.pixels[i] = if p[3] > 0.0 {
-                [p[0] / p[3], p[1] / p[3], p[2] / p[3]]
-            } else {
-                [0.0; 3]
-            };
-        }
-        image
+        acc
     }
 }
 
-/// Row `y`: every sample of every pixel, [`BATCH`] at a time, carrying `C`. Returns the row's
-/// buffer ([`Accumulation`]) and this thread's work counters for it.
+/// Row `y`: samples `[p0, p1)` of every pixel, [`BATCH`] at a time, carrying `C`. Returns the
+/// row's buffer ([`Accumulation`]) and this thread's work counters for it.
 fn render_row<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
     acc: &Accumulation,
+    (p0, p1): (u32, u32),
     y: usize,
 ) -> (Vec<[f32; 4]>, Counters) {
     counters::take();
-    let (w, n, reach) = (acc.width, acc.n, acc.reach);
-    let (s0, s1) = scene.sample_range;
+    let (w, reach) = (acc.width, acc.reach);
+    let n = (p1 - p0) as usize;
     let mut samples = vec![[0.0f32; 3]; n];
     let rows = (2 * reach + 1) as usize;
     let mut buf = vec![[0.0f32; 4]; if reach == 0 { w } else { rows * w }];
@@ -630,7 +664,7 @@ fn render_row<C: Carrier>(
     let mut scratch = integrator::PathScratch::<C>::default();
     for x in 0..w {
         let pixel = sampler::PixelSampler::new(scene.sampler, x as u32, y as u32, scene.seed);
-        for (i, s) in (s0..s1).enumerate() {
+        for (i, s) in (p0..p1).enumerate() {
             let k = i % BATCH;
             if k == 0 {
                 let m = BATCH.min(n - i);
@@ -661,72 +695,188 @@ fn render_row<C: Carrier>(
     (buf, counters::take())
 }
 
-/// Every row, in parallel: one row per task. Rows cost very different amounts (background
-/// vs object), and rayon's adaptive splitting otherwise left one of two threads idle ~10 %
-/// of a teapot render (measured: 2-thread speed-up 1.77× → 1.94×).
-fn render_rows<C: Carrier>(
+/// Samples `[p0, p1)` of every pixel carrying `C`: the pass's accumulator and work counters,
+/// or None when `cancelled()` turned true before every row was done. One row per task: rows
+/// cost very different amounts (background vs object), and rayon's adaptive splitting
+/// otherwise left one of two threads idle ~10 % of a teapot render (measured: 2-thread
+/// speed-up 1.77× → 1.94×).
+fn render_pass<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
     acc: &Accumulation,
-    progress: &indicatif::ProgressBar,
-) -> Vec<(Vec<[f32; 4]>, Counters)> {
-    (0..acc.height)
+    pass: (u32, u32),
+    pb: &indicatif::ProgressBar,
+    cancelled: &(dyn Fn() -> bool + Sync),
+) -> Option<(Accum, Counters)> {
+    let rows: Vec<Option<(Vec<[f32; 4]>, Counters)>> = (0..acc.height)
         .into_par_iter()
         .with_max_len(1)
         .map(|y| {
-            let row = render_row::<C>(scene, setup, acc, y);
-            progress.inc(1);
-            row
+            if cancelled() {
+                return None;
+            }
+            let row = render_row::<C>(scene, setup, acc, pass, y);
+            pb.inc((pass.1 - pass.0) as u64);
+            Some(row)
         })
-        .collect()
+        .collect();
+    let mut counters = Counters::default();
+    let mut buffers = Vec::with_capacity(rows.len());
+    for row in rows {
+        let (buf, c) = row?;
+        counters.add(&c);
+        buffers.push(buf);
+    }
+    Some((acc.merge(&buffers), counters))
 }
 
-/// Renders a prepared scene.
+/// What the passes of a render produced: its blocks' sums, or the completed prefix of an
+/// interrupted render.
+struct Passes {
+    /// Completed blocks.
+    blocks: Vec<Accum>,
+    /// On interruption, the completed part of the first block and its end.
+    prefix: Option<(Accum, u32)>,
+    interrupted: bool,
+    counters: Counters,
+}
+
+/// Runs the passes of [`passes::plan`] in order, stopping between passes (and rows) when
+/// `cancelled()` turns true.
+fn run_passes(
+    scene: &PreparedScene,
+    plan: &[passes::Block],
+    pb: &indicatif::ProgressBar,
+    cancelled: &(dyn Fn() -> bool + Sync),
+    pool: Option<&rayon::ThreadPool>,
+) -> Passes {
+    let acc = Accumulation::of(scene);
+    let (s0, s1) = scene.sample_range;
+    let mut out = Passes {
+        blocks: Vec::new(),
+        prefix: None,
+        interrupted: false,
+        counters: Counters::default(),
+    };
+    'blocks: for block in plan {
+        let mut sum: Option<Accum> = None;
+        let mut done = block.range.0;
+        for &(p0, p1) in &block.passes {
+            pb.set_message(format!("{p0}:{p1} of {s0}:{s1}"));
+            let pass = || match scene.polarized() {
+                None => render_pass::<Spec>(scene, &(), &acc, (p0, p1), pb, cancelled),
+                Some(setup) => {
+                    render_pass::<stokes::StokesPath>(scene, setup, &acc, (p0, p1), pb, cancelled)
+                }
+            };
+            let result = match pool {
+                Some(pool) => pool.install(pass),
+                None => pass(),
+            };
+            let Some((pass_acc, c)) = result else {
+                out.interrupted = true;
+                if out.blocks.is_empty() {
+                    // The first block's running sum is the power-of-two prefix [s0, done).
+                    out.prefix = sum.map(|s| (s, done));
+                }
+                break 'blocks;
+            };
+            out.counters.add(&c);
+            match &mut sum {
+                None => sum = Some(pass_acc),
+                Some(s) => add_accum(s, &pass_acc),
+            }
+            done = p1;
+        }
+        out.blocks.extend(sum);
+        if cancelled() && block.range.1 < s1 {
+            out.interrupted = true;
+            break;
+        }
+    }
+    out
+}
+
+/// Renders a prepared scene, pass by pass ([`passes`]). When `options.cancel` is raised the
+/// render stops between rows, drops the unfinished pass and returns the longest completed
+/// power-of-two prefix of its samples (`interrupted` set, `sample_range` saying which), or an
+/// error when not even the first pass was complete.
 pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result<RenderOutput> {
     let start = Instant::now();
-    let acc = Accumulation::of(scene);
-    let pb = if options.progress {
-        let pb = indicatif::ProgressBar::new(acc.height as u64);
-        if let Ok(style) = indicatif::ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:40.cyan/blue} {pos}/{len} rows ({eta})",
-        ) {
-            pb.set_style(style);
-        }
-        pb
-    } else {
-        indicatif::ProgressBar::hidden()
+    let (w, h) = (scene.width as usize, scene.height as usize);
+    let (s0, s1) = scene.sample_range;
+    let total = (s1 - s0) as u64;
+    let pb = progress::bar(
+        options.progress,
+        h as u64 * total,
+        "{spinner} [{elapsed_precise}] {bar:40.cyan/blue} {percent:>3}% samples {msg} ({eta} left)",
+    );
+    let cancelled = || options.cancel.as_ref().is_some_and(|c| (c.0)());
+    let threads = match options.threads {
+        Some(0) => bail!("--threads must be ≥ 1"),
+        Some(t) => t,
+        None => rayon::current_num_threads(),
     };
-    let run = || match scene.polarized() {
-        None => render_rows::<Spec>(scene, &(), &acc, &pb),
-        Some(setup) => render_rows::<stokes::StokesPath>(scene, setup, &acc, &pb),
-    };
-    let (rows, threads) = match options.threads {
-        Some(t) => {
-            if t == 0 {
-                bail!("--threads must be ≥ 1");
-            }
-            let pool = rayon::ThreadPoolBuilder::new()
+    let pool = match options.threads {
+        Some(t) => Some(
+            rayon::ThreadPoolBuilder::new()
                 .num_threads(t)
                 .build()
-                .context("creating the thread pool")?;
-            (pool.install(run), t)
-        }
-        None => (run(), rayon::current_num_threads()),
+                .context("creating the thread pool")?,
+        ),
+        None => None,
     };
+    let plan = passes::plan(scene.sample_range);
+    let Passes {
+        mut blocks,
+        mut prefix,
+        interrupted,
+        counters,
+    } = run_passes(scene, &plan, &pb, &cancelled, pool.as_ref());
     pb.finish_and_clear();
-    let mut counters = Counters::default();
-    for (_, c) in &rows {
-        counters.add(c);
+    let (acc, range) = if interrupted {
+        if prefix.is_none() && !blocks.is_empty() {
+            let first = blocks.swap_remove(0);
+            prefix = Some((first, plan[0].range.1));
+        }
+        match prefix {
+            Some((acc, end)) => (acc, (s0, end)),
+            None => bail!(
+                "interrupted before the first sample pass ({s0}:{}) was complete; nothing to write",
+                plan[0].passes[0].1
+            ),
+        }
+    } else {
+        // Blocks combine right to left, like the film's summation tree.
+        let acc = blocks
+            .into_iter()
+            .rev()
+            .reduce(|mut acc, mut b| {
+                std::mem::swap(&mut acc, &mut b);
+                add_accum(&mut acc, &b);
+                acc
+            })
+            .context("no samples rendered")?;
+        (acc, (s0, s1))
+    };
+    let mut image = RgbImage::new(w, h);
+    for (dst, p) in image.pixels.iter_mut().zip(&acc) {
+        *dst = if p[3] > 0.0 {
+            [p[0] / p[3], p[1] / p[3], p[2] / p[3]]
+        } else {
+            [0.0; 3]
+        };
     }
-    let buffers: Vec<Vec<[f32; 4]>> = rows.into_iter().map(|(b, _)| b).collect();
-    let image = acc.merge(&buffers);
+    let filter_weights =
+        (!matches!(scene.filter, Filter::Box)).then(|| acc.iter().map(|p| p[3]).collect());
     let seconds = start.elapsed().as_secs_f64();
     Ok(RenderOutput {
         image,
+        filter_weights,
         stats: RenderStats {
             seconds,
             setup_seconds: 0.0,
-            samples: (acc.width * acc.height * acc.n) as u64,
+            samples: (w * h) as u64 * (range.1 - range.0) as u64,
             rays: counters.rays,
             shadow_rays: counters.shadow_rays,
             film_evals: counters.film_evals,
@@ -737,7 +887,9 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
             threads,
         },
         effects: scene.effects.clone(),
-        sample_range: scene.sample_range,
+        sample_range: range,
+        requested_range: scene.sample_range,
+        interrupted,
     })
 }
 

@@ -169,8 +169,8 @@ impl PolarizedBsdf for BlendBsdf {
 #[cfg(test)]
 mod tests {
     use super::super::tests::{
-        albedo, assert_chi2, assert_eval_pdf_sample_agree, assert_mueller_agrees, conductor,
-        constant, ctx_of, diffuse, dir, wl,
+        albedo, assert_chi2, assert_eval_pdf_sample_agree, assert_mueller_agrees,
+        assert_reciprocal, conductor, constant, ctx_of, diffuse, dir, wl,
     };
     use super::*;
     use crate::scene::mitsuba::load_str;
@@ -202,6 +202,7 @@ mod tests {
             assert_eval_pdf_sample_agree(name, b);
             assert_mueller_agrees(name, b);
         }
+        assert_reciprocal("blend", &cases[0].1, 1e-4);
     }
 
     /// f = (1 − w)·f₀ + w·f₁; w = 0 and 1 are the nested BSDFs alone; a blend of two white

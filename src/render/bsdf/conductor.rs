@@ -76,7 +76,7 @@ impl BsdfPlugin for Conductor {
         };
         let material = p.string("material")?;
         let (eta, k) = (p.real_spectrum("eta")?, p.real_spectrum("k")?);
-        p.accept_float("specular_reflectance", |v| v == 1.0)?;
+        p.accept_unit(&["specular_reflectance"])?;
         let ior = match (material, eta, k) {
             (Some(_), Some(_), _) | (Some(_), None, Some(_)) => {
                 return Err(p.error("give either 'material' or 'eta'/'k', not both"))

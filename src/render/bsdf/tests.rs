@@ -350,6 +350,42 @@ fn eval_pdf_sample_agree() {
     }
 }
 
+/// Helmholtz reciprocity of a reflection model: f(wi, wo) = f(wo, wi), i.e.
+/// eval(wi, wo)/|cos θo| = eval(wo, wi)/|cos θi|, at random pairs of upper-hemisphere
+/// directions (relative tolerance `tol`; models that are reciprocal only up to an
+/// approximation pass a looser one).
+pub(super) fn assert_reciprocal(name: &str, b: &Bsdf, tol: f32) {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let mut s = Sampler::from_seed(17);
+    for k in 0..500 {
+        let wi = dir(85.0 * s.next_1d(), 360.0 * s.next_1d());
+        let wo = dir(85.0 * s.next_1d(), 360.0 * s.next_1d());
+        let f_io = b.eval(&ctx, wi, wo) / wo.z;
+        let f_oi = b.eval(&ctx, wo, wi) / wi.z;
+        for l in 0..4 {
+            assert!(
+                (f_io[l] - f_oi[l]).abs() <= tol * f_io[l].abs().max(f_oi[l].abs()).max(1e-3),
+                "{name} #{k} λ{l}: f(wi, wo) {} vs f(wo, wi) {}",
+                f_io[l],
+                f_oi[l]
+            );
+        }
+    }
+}
+
+#[test]
+fn reflection_models_are_reciprocal() {
+    for (name, b) in [
+        ("diffuse", diffuse(0.7)),
+        ("roughconductor", conductor("0.2+3.9i", 0.3, 0.3)),
+        ("roughconductor-aniso", conductor("0.2+3.9i", 0.1, 0.5)),
+        ("roughthinfilm", thin_film(0.25, 400.0)),
+    ] {
+        assert_reciprocal(name, &b, 1e-4);
+    }
+}
+
 /// The mean sample weight from `wi` over `n` samples per wavelength: the directional albedo
 /// (1 for a lossless BSDF in a white furnace).
 pub(super) fn albedo(b: &Bsdf, wi: Vec3, n: u32) -> Spec {

@@ -6,7 +6,7 @@
 // `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::{mitsuba_ior, Ctx, Prop, Props, Val, MITSUBA_IOR_TABLE};
+use super::{is_unit, mitsuba_ior, Ctx, Prop, Props, Val, MITSUBA_IOR_TABLE};
 use crate::optics::{dispersion, Complex64, Ior};
 use crate::render::bsdf::Bsdf;
 use crate::scene::{BitmapTexture, SpectrumDesc, TextureDesc};
@@ -125,10 +125,10 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         self.props.texture(self.ctx, name, default)
     }
 
-    /// Accepts a `<float>` parameter Mitsuba has and this renderer ignores, if `ok(value)`.
-    pub fn accept_float(&mut self, name: &str, ok: impl Fn(f64) -> bool) -> Result<()> {
-        self.props
-            .accept(&[name], self.ctx, |v| matches!(v, Val::Float(x) if ok(*x)))
+    /// Accepts specular reflectance/transmittance factors Mitsuba has and this renderer
+    /// ignores, when they are 1 (Mitsuba's default), however written.
+    pub fn accept_unit(&mut self, names: &[&str]) -> Result<()> {
+        self.props.accept(names, self.ctx, is_unit)
     }
 
     /// Accepts a `<boolean>` parameter Mitsuba has and this renderer ignores, if `ok(value)`.

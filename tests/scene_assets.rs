@@ -169,7 +169,7 @@ fn every_scene_loads() {
         );
         n += 1;
     }
-    assert!(n >= 7, "expected the 7 scenes of issue 6, found {n}");
+    assert!(n >= 7, "expected the 7 teapot and plane scenes, found {n}");
 }
 
 #[test]

@@ -123,17 +123,6 @@ impl ThinFilmX4 {
         .response(lambda_nm as f64, cos_theta1 as f64)
     }
 
-    /// The same film at all four wavelengths (non-dispersive indices).
-    pub fn from_film(f: &ThinFilm) -> Self {
-        let c = |z: Complex64| Complex32::new(z.re as f32, z.im as f32);
-        ThinFilmX4 {
-            ambient_ior: f.ambient_ior as f32,
-            film_ior: [c(f.film_ior); 4],
-            thickness_nm: f.thickness_nm as f32,
-            substrate_ior: [c(f.substrate_ior); 4],
-        }
-    }
-
     /// Evaluate at four wavelengths (nm) for `cos θ1` in the ambient. No validation: inputs
     /// must satisfy [`ThinFilm::validate`] (the renderer checks materials at load time).
     #[inline]

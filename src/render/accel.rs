@@ -329,15 +329,6 @@ impl Accel {
         false
     }
 
-    /// Shape index of a hit.
-    #[inline]
-    pub fn shape_of(&self, prim: Prim) -> u32 {
-        match prim {
-            Prim::Triangle(i) => self.tri_ref[i as usize].0,
-            Prim::Sphere(i) => self.spheres[i as usize].shape,
-        }
-    }
-
     /// Builds the surface interaction (position, normals, UVs) of a hit.
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> SurfaceInteraction {
         match hit.prim {
@@ -422,11 +413,6 @@ impl Accel {
                 }
             }
         }
-    }
-
-    /// Spheres (for area-light sampling).
-    pub fn sphere_of_shape(&self, shape: u32) -> Option<&SphereGeom> {
-        self.spheres.iter().find(|s| s.shape == shape)
     }
 
     /// A shape's mesh, if it is one.

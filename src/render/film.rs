@@ -1,8 +1,9 @@
 //! The film: spectral samples → linear sRGB, pixel reconstruction and exact-merge accumulation.
 //!
-//! Each sample's spectrum becomes CIE XYZ through [`SampledSpectrum::to_xyz`] (mean over the
-//! four wavelengths of cmf·L/pdf, Mitsuba/pbrt-v4) and then linear sRGB (Rec.709, D65, no
-//! adaptation, no clamping; conventions.md "Film").
+//! Each sample's spectrum becomes linear sRGB through the RGB matching functions
+//! ([`crate::spectrum::sampled::rgb_cmf_d65_f32_lanes`]: the mean over the four wavelengths of
+//! cmf·L/pdf, Mitsuba/pbrt-v4; Rec.709, D65, no adaptation, no clamping;
+//! `docs/conventions.md`, "Film").
 //!
 //! Box filter (every sample stays in its pixel): a pixel's samples are summed in a fixed
 //! binary tree over their *global* sample indices ([`tree_sum`]). A render of samples
@@ -12,13 +13,6 @@
 //! their radius with normalised weights (Mitsuba `hdrfilm` with `tent`/`gaussian`).
 
 use crate::scene::ReconstructionFilter;
-use crate::spectrum::{SampledSpectrum, SampledWavelengths};
-
-/// Linear sRGB of one spectral sample.
-#[inline]
-pub fn sample_to_rgb(l: SampledSpectrum, wl: &SampledWavelengths) -> [f32; 3] {
-    l.to_linear_srgb(wl)
-}
 
 /// Sum of `values` in the canonical binary tree over sample indices: the range is split at its
 /// largest power-of-two-aligned midpoint, so aligned sub-ranges are exact subtrees.

@@ -1,4 +1,4 @@
-//! Stokes vectors and Mueller matrices for polarised rendering (issue 9, part 1).
+//! Stokes vectors and Mueller matrices for polarised rendering.
 //!
 //! Conventions are Mitsuba 3's (`mitsuba/render/mueller.h`, `fresnel.h`), so that a scene
 //! renders the same here and in Mitsuba's `*_polarized` variants:
@@ -19,7 +19,7 @@
 //! The path tracer only records S0 at the sensor, so it transports the *first row* of the
 //! path's Mueller product (a Stokes covector) from the camera towards the lights instead of
 //! full 4×4 matrices: `row ← row · M` per vertex, and an unpolarised emitter of radiance L
-//! contributes `row[0] · L` (see [`super::integrator_polarized`]).
+//! contributes `row[0] · L` (see [`super::stokes`]).
 
 use glam::Vec3;
 use num_complex::Complex32;

@@ -1,7 +1,7 @@
 //! Spectra and textures as the renderer evaluates them: scene descriptions
 //! ([`crate::scene::SpectrumDesc`], [`crate::scene::TextureDesc`]) turned into values at the
 //! four path wavelengths. RGB reflectances use Jakob & Hanika 2019 upsampling, RGB emitters
-//! Mitsuba's `srgb_d65` (conventions.md "Environment map").
+//! Mitsuba's `srgb_d65` (`docs/conventions.md`, "Environment map").
 
 use crate::scene::{BitmapTexture, SpectrumDesc, TextureDesc};
 use crate::spectrum::{
@@ -82,11 +82,6 @@ impl Spectrum {
             Spectrum::Tabulated(t) => t.iter().map(|p| p.1).sum::<f32>() / t.len().max(1) as f32,
             Spectrum::D65(s) => *s,
         }
-    }
-
-    /// Whether the value is the same at every wavelength.
-    pub fn is_constant(&self) -> bool {
-        matches!(self, Spectrum::Constant(_))
     }
 
     /// The description it was made from (an RGB emitter's as its colour).
@@ -233,14 +228,6 @@ impl Texture {
     /// Whether the value varies over the surface.
     pub fn is_varying(&self) -> bool {
         !matches!(self, Texture::Value(_))
-    }
-
-    /// Whether the texture is a constant equal to `v` everywhere.
-    pub fn constant_scalar(&self) -> Option<f32> {
-        match self {
-            Texture::Value(Spectrum::Constant(c)) => Some(*c),
-            _ => None,
-        }
     }
 }
 

@@ -278,6 +278,20 @@ fn channel_count(f: Format) -> usize {
     }
 }
 
+/// The camera of a glTF perspective camera node with world transform `world`.
+fn perspective_camera(world: Mat4, p: &gltf::camera::Perspective) -> Camera {
+    // glTF looks down −Z with +X right; Mitsuba looks down +Z with +X left.
+    let to_world = world * Mat4::from_rotation_y(std::f32::consts::PI);
+    let znear = p.znear().max(1e-6);
+    Camera {
+        to_world,
+        fov_deg: p.yfov().to_degrees(),
+        fov_axis: FovAxis::Y,
+        near_clip: znear,
+        far_clip: p.zfar().unwrap_or(1e4).max(znear * 2.0),
+    }
+}
+
 /// Loads a `.gltf` or `.glb` file (see the module docs for the mapping).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
     if !path.is_file() {
@@ -308,19 +322,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         }
         if let (None, Some(cam)) = (&camera, node.camera()) {
             if let gltf::camera::Projection::Perspective(p) = cam.projection() {
-                // glTF looks down −Z with +X right; Mitsuba looks down +Z with +X left.
-                let to_world = world * Mat4::from_rotation_y(std::f32::consts::PI);
-                let znear = p.znear().max(1e-6);
-                camera = Some((
-                    Camera {
-                        to_world,
-                        fov_deg: p.yfov().to_degrees(),
-                        fov_axis: FovAxis::Y,
-                        near_clip: znear,
-                        far_clip: p.zfar().unwrap_or(1e4).max(znear * 2.0),
-                    },
-                    p.aspect_ratio(),
-                ));
+                camera = Some((perspective_camera(world, &p), p.aspect_ratio()));
             }
         }
         let Some(mesh) = node.mesh() else { continue };

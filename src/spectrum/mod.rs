@@ -36,11 +36,6 @@ pub const N_TABLE_NM: usize = 471;
 /// (106.856917; pbrt-v4 rounds the same sum to 106.856895).
 pub const CIE_Y_INTEGRAL: f64 = tables::CIE_Y_SUM_1NM;
 
-/// The raw 1 nm tables, index = λ − 360 nm: (x̄, ȳ, z̄) and D65 (100 at 560 nm).
-pub fn cie_tables_1nm() -> (&'static [[f64; 3]; N_TABLE_NM], &'static [f64; N_TABLE_NM]) {
-    (&tables::CIE_CMF_1NM, &tables::CIE_D65_1NM)
-}
-
 /// Linear interpolation position in the 1 nm tables: (index, fraction), or None outside
 /// 360–830 nm (and for NaN).
 #[inline]

@@ -191,11 +191,6 @@ impl SampledWavelengths {
     pub fn secondary_terminated(&self) -> bool {
         self.pdf[1..].iter().all(|&p| p == 0.0)
     }
-
-    /// The wavelengths as a spectrum (handy for λ-dependent formulas).
-    pub fn lambda_spectrum(&self) -> SampledSpectrum {
-        SampledSpectrum(self.lambda)
-    }
 }
 
 /// pdf (1/nm) of [`SampledWavelengths::sample_visible`] for one wavelength
@@ -281,10 +276,6 @@ impl SampledSpectrum {
 
     pub fn clamp(self, lo: f32, hi: f32) -> Self {
         self.map(|v| v.clamp(lo, hi))
-    }
-
-    pub fn clamp_zero(self) -> Self {
-        self.map(|v| v.max(0.0))
     }
 
     /// Element-wise a/b with 0 where b == 0 (pbrt's SafeDiv).

@@ -3,19 +3,12 @@
 //! spectra). Polarised: Mitsuba's `specular_reflection` Mueller matrix of the complex
 //! Fresnel amplitudes at the (micro)facet.
 
-use super::microfacet::{
-    reflection_eval, reflection_eval_mueller, reflection_lobe, reflection_lobe_pdf,
-    reflection_sample, reflection_sample_mueller, Ggx,
-};
-use super::{
-    fresnel::fresnel_conductor, BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, MuellerValue,
-    PolarizedBsdf, ShadingCtx,
-};
-use crate::optics::{Complex64, Ior};
+use super::microfacet::{opaque_reflector_methods, reflection_lobe, Ggx, OpaqueReflector};
+use super::{fresnel::fresnel_conductor, BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
+use crate::optics::Ior;
 use crate::render::polarization::{specular_reflection_conductor, Mueller};
 use crate::render::texture::Spec;
 use crate::scene::mitsuba::{PluginParams, RealSpectrum};
-use glam::{Vec2, Vec3};
 use num_complex::Complex32;
 
 #[derive(Debug, Clone)]
@@ -44,9 +37,15 @@ impl Conductor {
             ggx: (alpha_u > 0.0 || alpha_v > 0.0).then(|| Ggx::new(alpha_u, alpha_v)),
         })
     }
+}
+
+impl OpaqueReflector for Conductor {
+    fn ggx(&self) -> Option<Ggx> {
+        self.ggx
+    }
 
     #[inline]
-    fn fresnel(&self, ctx: &ShadingCtx, cos_i: f32) -> Spec {
+    fn reflectance(&self, ctx: &ShadingCtx, cos_i: f32) -> Spec {
         Spec::from_array(ctx.wl.lambda.map(|l| {
             let n = self.eta.at(l as f64);
             fresnel_conductor(cos_i, n.re as f32, n.im as f32)
@@ -54,7 +53,7 @@ impl Conductor {
     }
 
     #[inline]
-    fn fresnel_mueller(&self, ctx: &ShadingCtx, cos_i: f32) -> [Mueller; 4] {
+    fn reflectance_mueller(&self, ctx: &ShadingCtx, cos_i: f32) -> [Mueller; 4] {
         ctx.wl.lambda.map(|l| {
             let n = self.eta.at(l as f64);
             specular_reflection_conductor(cos_i, Complex32::new(n.re as f32, n.im as f32))
@@ -96,11 +95,6 @@ impl BsdfPlugin for Conductor {
     }
 }
 
-/// A perfect mirror: n = 0, k = 1 (Mitsuba's `material="none"`).
-pub fn perfect_mirror() -> Ior {
-    Ior::Constant(Complex64::new(0.0, 1.0))
-}
-
 impl BsdfModel for Conductor {
     fn flags(&self) -> BsdfFlags {
         reflection_lobe(self.ggx)
@@ -116,51 +110,6 @@ impl BsdfModel for Conductor {
         }
     }
 
-    fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
-        let fresnel = |c| self.fresnel(ctx, c);
-        reflection_eval(self.ggx, wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
-    }
-
-    fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
-        reflection_lobe_pdf(self.ggx, wi, wo)
-    }
-
-    fn sample(
-        &self,
-        ctx: &ShadingCtx,
-        wi: Vec3,
-        _u1: f32,
-        u2: Vec2,
-        lobes: Lobes,
-    ) -> Option<BsdfSample> {
-        if !lobes.reflection() {
-            return None;
-        }
-        let s = reflection_sample(self.ggx, wi, u2, |c| self.fresnel(ctx, c), |f, g| f * g)?;
-        Some(s.into_sample(self.ggx))
-    }
-
-    fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
-        Ok(self)
-    }
+    opaque_reflector_methods!();
 }
 
-impl PolarizedBsdf for Conductor {
-    fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
-        reflection_eval_mueller(self.ggx, wi, wo, |c| self.fresnel_mueller(ctx, c))
-    }
-
-    fn sample_mueller(
-        &self,
-        ctx: &ShadingCtx,
-        wi: Vec3,
-        _u1: f32,
-        u2: Vec2,
-        lobes: Lobes,
-    ) -> Option<(BsdfSample, MuellerValue)> {
-        if !lobes.reflection() {
-            return None;
-        }
-        reflection_sample_mueller(self.ggx, wi, u2, |c| self.fresnel_mueller(ctx, c))
-    }
-}

@@ -101,13 +101,7 @@ impl BsdfModel for Dielectric {
         format!("dielectric {}/{}", self.int_ior, self.ext_ior)
     }
 
-    fn eval(&self, _ctx: &ShadingCtx, _wi: Vec3, _wo: Vec3) -> Spec {
-        Spec::ZERO
-    }
-
-    fn pdf(&self, _ctx: &ShadingCtx, _wi: Vec3, _wo: Vec3) -> f32 {
-        0.0
-    }
+    super::delta_lobes_only!();
 
     fn sample(
         &self,

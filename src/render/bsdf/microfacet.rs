@@ -3,7 +3,7 @@
 //! separable Smith shadowing term G = G1(wi) G1(wo) that Mitsuba 3 uses.
 
 use super::fresnel::{reflect, reflect_local};
-use super::{BsdfFlags, BsdfSample, MuellerValue};
+use super::{BsdfFlags, BsdfSample, Lobes, MuellerValue, PolarizedBsdf, ShadingCtx};
 use crate::render::polarization::Mueller;
 use crate::render::texture::Spec;
 use glam::{Vec2, Vec3};
@@ -272,6 +272,103 @@ pub fn reflection_lobe(ggx: Option<Ggx>) -> BsdfFlags {
         Some(_) => BsdfFlags::GLOSSY_REFLECTION,
     }
 }
+
+/// An opaque reflector: one lobe, a mirror or a GGX lobe, weighted by a Fresnel term
+/// (conductor, thin film, multilayer stack). Such a model implements this trait and writes
+/// [`opaque_reflector_methods!`] in its `BsdfModel` impl; its polarised form is the impl
+/// below.
+pub trait OpaqueReflector {
+    /// The roughness (None: a mirror).
+    fn ggx(&self) -> Option<Ggx>;
+    /// Reflectance at the path's wavelengths for cos θ at the (micro)facet.
+    fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32) -> Spec;
+    /// The same as Mueller matrices (Mitsuba's conventions).
+    fn reflectance_mueller(&self, ctx: &ShadingCtx, cos_theta: f32) -> [Mueller; 4];
+}
+
+impl<T: OpaqueReflector> PolarizedBsdf for T {
+    fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
+        reflection_eval_mueller(self.ggx(), wi, wo, |c| self.reflectance_mueller(ctx, c))
+    }
+
+    fn sample_mueller(
+        &self,
+        ctx: &ShadingCtx,
+        wi: Vec3,
+        _u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
+    ) -> Option<(BsdfSample, MuellerValue)> {
+        if !lobes.reflection() {
+            return None;
+        }
+        reflection_sample_mueller(self.ggx(), wi, u2, |c| self.reflectance_mueller(ctx, c))
+    }
+}
+
+/// `BsdfModel::eval` of an [`OpaqueReflector`].
+#[inline]
+pub fn opaque_eval(r: &impl OpaqueReflector, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
+    let fresnel = |c| r.reflectance(ctx, c);
+    reflection_eval(r.ggx(), wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
+}
+
+/// `BsdfModel::sample` of an [`OpaqueReflector`] (`u2` picks the direction).
+#[inline]
+pub fn opaque_sample(
+    r: &impl OpaqueReflector,
+    ctx: &ShadingCtx,
+    wi: Vec3,
+    u2: Vec2,
+    lobes: Lobes,
+) -> Option<BsdfSample> {
+    if !lobes.reflection() {
+        return None;
+    }
+    let s = reflection_sample(r.ggx(), wi, u2, |c| r.reflectance(ctx, c), |f, g| f * g)?;
+    Some(s.into_sample(r.ggx()))
+}
+
+/// The `eval`, `pdf`, `sample` and `polarized` methods of an [`OpaqueReflector`]'s
+/// `BsdfModel` impl.
+macro_rules! opaque_reflector_methods {
+    () => {
+        fn eval(
+            &self,
+            ctx: &$crate::render::bsdf::ShadingCtx,
+            wi: ::glam::Vec3,
+            wo: ::glam::Vec3,
+        ) -> $crate::render::texture::Spec {
+            $crate::render::bsdf::microfacet::opaque_eval(self, ctx, wi, wo)
+        }
+
+        fn pdf(
+            &self,
+            _ctx: &$crate::render::bsdf::ShadingCtx,
+            wi: ::glam::Vec3,
+            wo: ::glam::Vec3,
+        ) -> f32 {
+            use $crate::render::bsdf::microfacet::OpaqueReflector;
+            $crate::render::bsdf::microfacet::reflection_lobe_pdf(self.ggx(), wi, wo)
+        }
+
+        fn sample(
+            &self,
+            ctx: &$crate::render::bsdf::ShadingCtx,
+            wi: ::glam::Vec3,
+            _u1: f32,
+            u2: ::glam::Vec2,
+            lobes: $crate::render::bsdf::Lobes,
+        ) -> Option<$crate::render::bsdf::BsdfSample> {
+            $crate::render::bsdf::microfacet::opaque_sample(self, ctx, wi, u2, lobes)
+        }
+
+        fn polarized(&self) -> Result<&dyn $crate::render::bsdf::PolarizedBsdf, &'static str> {
+            Ok(self)
+        }
+    };
+}
+pub(crate) use opaque_reflector_methods;
 
 #[cfg(test)]
 mod tests {

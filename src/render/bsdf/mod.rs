@@ -164,6 +164,31 @@ pub trait PolarizedBsdf {
     ) -> Option<(BsdfSample, MuellerValue)>;
 }
 
+/// `eval` and `pdf` of a model whose lobes are all Dirac deltas: zero everywhere (only
+/// `sample` reaches such lobes), written out by the model so that it says so.
+macro_rules! delta_lobes_only {
+    () => {
+        fn eval(
+            &self,
+            _ctx: &$crate::render::bsdf::ShadingCtx,
+            _wi: ::glam::Vec3,
+            _wo: ::glam::Vec3,
+        ) -> $crate::render::texture::Spec {
+            $crate::render::texture::Spec::ZERO
+        }
+
+        fn pdf(
+            &self,
+            _ctx: &$crate::render::bsdf::ShadingCtx,
+            _wi: ::glam::Vec3,
+            _wo: ::glam::Vec3,
+        ) -> f32 {
+            0.0
+        }
+    };
+}
+use delta_lobes_only;
+
 /// How a model is made from a scene file's plugin element.
 pub trait BsdfPlugin: Sized {
     /// Mitsuba plugin names (`type="…"`) this model is built from.

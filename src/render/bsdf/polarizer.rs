@@ -14,7 +14,7 @@ use super::{
 };
 use crate::render::geometry::{Frame, SurfaceInteraction};
 use crate::render::polarization::{linear_polarizer, stokes_basis};
-use crate::render::texture::{Spec, Texture};
+use crate::render::texture::Texture;
 use crate::scene::mitsuba::PluginParams;
 use crate::scene::TextureDesc;
 use glam::{Vec2, Vec3};
@@ -78,13 +78,7 @@ impl BsdfModel for PolarizerBsdf {
         format!("polarizer θ={}°", self.theta.to_degrees())
     }
 
-    fn eval(&self, _ctx: &ShadingCtx, _wi: Vec3, _wo: Vec3) -> Spec {
-        Spec::ZERO
-    }
-
-    fn pdf(&self, _ctx: &ShadingCtx, _wi: Vec3, _wo: Vec3) -> f32 {
-        0.0
-    }
+    super::delta_lobes_only!();
 
     /// Pass-through (unpolarised weight: transmittance / 2).
     fn sample(

@@ -9,19 +9,13 @@
 //! into the substrate is absorbed. One-sided. Polarised: the Mueller matrix of the stack's
 //! complex amplitudes r_s, r_p.
 
-use super::microfacet::{
-    reflection_eval, reflection_eval_mueller, reflection_lobe, reflection_lobe_pdf,
-    reflection_sample, reflection_sample_mueller, Ggx,
-};
-use super::{
-    BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, MuellerValue, PolarizedBsdf, ShadingCtx,
-};
+use super::microfacet::{opaque_reflector_methods, reflection_lobe, Ggx, OpaqueReflector};
+use super::{BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
 use crate::optics::{Ior, Layer, Stack};
 use crate::render::counters::{count, Counter};
 use crate::render::polarization::{film_reflection, Mueller};
 use crate::render::texture::Spec;
 use crate::scene::mitsuba::PluginParams;
-use glam::{Vec2, Vec3};
 use num_complex::Complex32;
 
 #[derive(Debug, Clone)]
@@ -72,10 +66,16 @@ impl StackBsdf {
             substrate_ior: self.substrate_ior.at(lambda_nm),
         }
     }
+}
+
+impl OpaqueReflector for StackBsdf {
+    fn ggx(&self) -> Option<Ggx> {
+        self.ggx
+    }
 
     /// Unpolarised TMM reflectance at the four path wavelengths for `cos θ` in the ambient.
     #[inline]
-    pub fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32) -> Spec {
+    fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32) -> Spec {
         count(Counter::FilmEvals, 1);
         let cos = (cos_theta as f64).clamp(0.0, 1.0);
         let r = ctx.wl.lambda.map(|l| {
@@ -85,6 +85,7 @@ impl StackBsdf {
             } else {
                 0.0
             }
+
         });
         Spec::from_array(r)
     }
@@ -102,6 +103,7 @@ impl StackBsdf {
             } else {
                 Mueller::ZERO
             }
+
         })
     }
 }
@@ -157,51 +159,6 @@ impl BsdfModel for StackBsdf {
         )
     }
 
-    fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
-        let fresnel = |c| self.reflectance(ctx, c);
-        reflection_eval(self.ggx, wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
-    }
-
-    fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
-        reflection_lobe_pdf(self.ggx, wi, wo)
-    }
-
-    fn sample(
-        &self,
-        ctx: &ShadingCtx,
-        wi: Vec3,
-        _u1: f32,
-        u2: Vec2,
-        lobes: Lobes,
-    ) -> Option<BsdfSample> {
-        if !lobes.reflection() {
-            return None;
-        }
-        let s = reflection_sample(self.ggx, wi, u2, |c| self.reflectance(ctx, c), |f, g| f * g)?;
-        Some(s.into_sample(self.ggx))
-    }
-
-    fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
-        Ok(self)
-    }
+    opaque_reflector_methods!();
 }
 
-impl PolarizedBsdf for StackBsdf {
-    fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
-        reflection_eval_mueller(self.ggx, wi, wo, |c| self.reflectance_mueller(ctx, c))
-    }
-
-    fn sample_mueller(
-        &self,
-        ctx: &ShadingCtx,
-        wi: Vec3,
-        _u1: f32,
-        u2: Vec2,
-        lobes: Lobes,
-    ) -> Option<(BsdfSample, MuellerValue)> {
-        if !lobes.reflection() {
-            return None;
-        }
-        reflection_sample_mueller(self.ggx, wi, u2, |c| self.reflectance_mueller(ctx, c))
-    }
-}

@@ -3,6 +3,7 @@
 //! energy conservation of the thin film (R + T = 1 when lossless) and finiteness at grazing
 //! angles and zero thickness.
 
+use super::microfacet::OpaqueReflector;
 use super::*;
 use crate::optics::Ior;
 use crate::render::counters;

@@ -7,13 +7,8 @@
 //! One-sided. Polarised: the Mueller matrix of the film's complex amplitudes r_s, r_p
 //! (which reduces to the bare substrate's at zero thickness).
 
-use super::microfacet::{
-    reflection_eval, reflection_eval_mueller, reflection_lobe, reflection_lobe_pdf,
-    reflection_sample, reflection_sample_mueller, Ggx,
-};
-use super::{
-    BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, MuellerValue, PolarizedBsdf, ShadingCtx,
-};
+use super::microfacet::{opaque_reflector_methods, reflection_lobe, Ggx, OpaqueReflector};
+use super::{BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
 use crate::optics::film_f32::ThinFilmX4;
 use crate::optics::Ior;
 use crate::render::counters::{count, Counter};
@@ -21,7 +16,6 @@ use crate::render::polarization::{film_reflection, Mueller};
 use crate::render::texture::{Spec, Texture};
 use crate::scene::mitsuba::{PluginParams, RealSpectrum};
 use crate::scene::TextureDesc;
-use glam::{Vec2, Vec3};
 use num_complex::Complex32;
 
 #[derive(Debug, Clone)]
@@ -92,6 +86,12 @@ impl ThinFilmBsdf {
         let t = resp.t().map(|v| clean(v, f32::MAX));
         (Spec::from_array(r), Spec::from_array(t))
     }
+}
+
+impl OpaqueReflector for ThinFilmBsdf {
+    fn ggx(&self) -> Option<Ggx> {
+        self.ggx
+    }
 
     #[inline]
     fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32) -> Spec {
@@ -112,6 +112,7 @@ impl ThinFilmBsdf {
             } else {
                 Mueller::ZERO
             }
+
         })
     }
 }
@@ -180,51 +181,6 @@ impl BsdfModel for ThinFilmBsdf {
         )
     }
 
-    fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
-        let fresnel = |c| self.reflectance(ctx, c);
-        reflection_eval(self.ggx, wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
-    }
-
-    fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
-        reflection_lobe_pdf(self.ggx, wi, wo)
-    }
-
-    fn sample(
-        &self,
-        ctx: &ShadingCtx,
-        wi: Vec3,
-        _u1: f32,
-        u2: Vec2,
-        lobes: Lobes,
-    ) -> Option<BsdfSample> {
-        if !lobes.reflection() {
-            return None;
-        }
-        let s = reflection_sample(self.ggx, wi, u2, |c| self.reflectance(ctx, c), |f, g| f * g)?;
-        Some(s.into_sample(self.ggx))
-    }
-
-    fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
-        Ok(self)
-    }
+    opaque_reflector_methods!();
 }
 
-impl PolarizedBsdf for ThinFilmBsdf {
-    fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
-        reflection_eval_mueller(self.ggx, wi, wo, |c| self.reflectance_mueller(ctx, c))
-    }
-
-    fn sample_mueller(
-        &self,
-        ctx: &ShadingCtx,
-        wi: Vec3,
-        _u1: f32,
-        u2: Vec2,
-        lobes: Lobes,
-    ) -> Option<(BsdfSample, MuellerValue)> {
-        if !lobes.reflection() {
-            return None;
-        }
-        reflection_sample_mueller(self.ggx, wi, u2, |c| self.reflectance_mueller(ctx, c))
-    }
-}

@@ -264,7 +264,7 @@ struct Ctx<'a, 'i> {
     instanced_triangles: usize,
     /// A `direct` integrator's strategies (emitter sampling, BSDF sampling), checked against
     /// the scene's lights and BSDFs once everything is loaded.
-    direct_strategies: Option<(Node<'a, 'i>, bool, bool)>,
+    direct_strategies: Option<(Node<'a, 'i>, u32, bool)>,
 }
 
 /// A node's identity across documents: (document address, node id).
@@ -666,6 +666,15 @@ impl<'a, 'i> Ctx<'a, 'i> {
             if self.built.contains(&node_key(c)) {
                 continue;
             }
+            if let Some(id) = self.attr(c, "id")? {
+                if self
+                    .pending
+                    .get(&id)
+                    .is_some_and(|n| node_key(*n) == node_key(c))
+                {
+                    self.pending.remove(&id);
+                }
+            }
             self.top_level(c)?;
         }
         self.check_overrides()?;
@@ -783,17 +792,30 @@ impl<'a, 'i> Ctx<'a, 'i> {
 
     /// A `direct` integrator without one of its strategies misses light the path tracer
     /// finds (see [`direct_integrator`](Self::direct_integrator)): refused when that light
-    /// exists in this scene.
-    fn check_direct_strategies(&self) -> Result<()> {
-        let Some((node, emitter_sampling, bsdf_sampling)) = self.direct_strategies else {
+    /// exists in this scene. With several emitter samples, Mitsuba 3.9 adds every sample of a
+    /// delta light (point) at full weight — its MIS weight for delta lights lacks the
+    /// 1/`emitter_samples` factor (`direct.cpp`) — so point lights come out
+    /// `emitter_samples` times brighter; thinfilm scales them to render what Mitsuba renders.
+    fn check_direct_strategies(&mut self) -> Result<()> {
+        let Some((node, emitter_samples, bsdf_sampling)) = self.direct_strategies else {
             return Ok(());
         };
-        if !emitter_sampling
-            && self
-                .emitters
-                .iter()
-                .any(|e| matches!(e, EmitterDesc::Point { .. }))
-        {
+        let has_point = self
+            .emitters
+            .iter()
+            .any(|e| matches!(e, EmitterDesc::Point { .. }));
+        if emitter_samples > 1 && has_point {
+            eprintln!(
+                "note: {}: direct with emitter_samples = {emitter_samples}: point lights are {emitter_samples}× as bright, as Mitsuba renders them (its delta-light weight omits 1/emitter_samples)",
+                self.loc(node)
+            );
+            for e in &mut self.emitters {
+                if let EmitterDesc::Point { intensity, .. } = e {
+                    *intensity = scaled_spectrum(intensity, emitter_samples as f32);
+                }
+            }
+        }
+        if emitter_samples == 0 && has_point {
             return Err(self.err(
                 node,
                 "direct with emitter_samples = 0 in a scene with point lights is not supported (Mitsuba never reaches them; thinfilm's path tracer would)",
@@ -1107,10 +1129,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     let angle = self.req_attr(c, "angle")?;
                     let angle = parse_f64(&angle)
                         .ok_or_else(|| self.err(c, format!("angle=\"{angle}\" is not a number")))?;
-                    let axis = axis
-                        .try_normalize()
-                        .ok_or_else(|| self.err(c, "rotation axis is zero"))?;
-                    Mat4::from_axis_angle(axis, (angle as f32).to_radians())
+                    if axis == Vec3::ZERO {
+                        return Err(self.err(c, "rotation axis is zero"));
+                    }
+                    mitsuba_rotation(axis, angle)
                 }
                 "matrix" => {
                     self.check_attrs(c, &["value"])?;
@@ -1237,7 +1259,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
 
     fn parse_object(&mut self, node: Node<'a, 'i>) -> Result<Val> {
         let tag = node.tag_name().name();
-        self.check_attrs(node, &["type", "id", "name"])?;
+        if node.parent().is_some_and(|p| p.is_root()) {
+            // The root element of an included file carries the scene version.
+            self.check_attrs(node, &["type", "id", "name", "version"])?;
+        } else {
+            self.check_attrs(node, &["type", "id", "name"])?;
+        }
         if matches!(tag, "medium" | "phase" | "volume") {
             let plugin = self.attr(node, "type")?.unwrap_or_default();
             return Err(self.err(
@@ -2481,7 +2508,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 "need at least one BSDF or emitter sample (counts ≥ 0)",
             ));
         }
-        self.direct_strategies = Some((p.node, emitter > 0, bsdf > 0));
+        self.direct_strategies = Some((p.node, emitter.min(u32::MAX as i64) as u32, bsdf > 0));
         Ok(IntegratorSettings {
             max_depth: 2,
             rr_depth: i32::MAX,
@@ -2586,6 +2613,44 @@ fn mitsuba_default_camera(bounds: Option<(Vec3, Vec3)>) -> Camera {
         fov_axis: FovAxis::X,
         near_clip,
         far_clip,
+    }
+}
+
+/// Mitsuba's `<rotate>` (drjit's `rotate`): Rodrigues' formula with the axis as given, *not*
+/// normalised — an axis of length ≠ 1 also scales and shears, exactly as in Mitsuba 3.9
+/// (`rotate x="0" y="1" z="1" angle="15"` gives a matrix with unit diagonal entries on y, z).
+fn mitsuba_rotation(axis: Vec3, angle_deg: f64) -> Mat4 {
+    let (s, c) = angle_deg.to_radians().sin_cos();
+    let a = axis.as_dvec3();
+    let k = 1.0 - c;
+    let m = glam::DMat3::from_cols(
+        glam::DVec3::new(
+            c + a.x * a.x * k,
+            a.x * a.y * k + a.z * s,
+            a.x * a.z * k - a.y * s,
+        ),
+        glam::DVec3::new(
+            a.x * a.y * k - a.z * s,
+            c + a.y * a.y * k,
+            a.y * a.z * k + a.x * s,
+        ),
+        glam::DVec3::new(
+            a.x * a.z * k + a.y * s,
+            a.y * a.z * k - a.x * s,
+            c + a.z * a.z * k,
+        ),
+    );
+    Mat4::from_mat3(m.as_mat3())
+}
+
+fn scaled_spectrum(s: &SpectrumDesc, k: f32) -> SpectrumDesc {
+    match s {
+        SpectrumDesc::Constant(v) => SpectrumDesc::Constant(v * k),
+        SpectrumDesc::Rgb(c) => SpectrumDesc::Rgb(c.map(|x| x * k)),
+        SpectrumDesc::Tabulated(t) => {
+            SpectrumDesc::Tabulated(t.iter().map(|&(l, v)| (l, v * k)).collect())
+        }
+        SpectrumDesc::D65 { scale } => SpectrumDesc::D65 { scale: scale * k },
     }
 }
 

@@ -413,6 +413,8 @@ def references(args):
         write_exr(mi, exr, (acc / args.ref_spp).astype("float32"))
         entry.update({"reference": os.path.relpath(exr, root), "width": size[0], "height": size[1],
                       "spp": args.ref_spp, "seconds": round(secs, 1)})
+    if args.only and "command" in manifest:
+        command = manifest["command"]  # a partial re-render keeps the full command
     manifest.update({"mitsuba_version": mi.__version__, "variant": VARIANT, "command": command})
     with open(manifest_path + ".partial", "w") as f:
         json.dump(manifest, f, indent=2, sort_keys=True)

@@ -2084,14 +2084,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         to_world: &Mat4,
         flip_normals: bool,
     ) -> Result<Geometry> {
-        let center = match p.take("center") {
-            Some(Prop {
-                val: Val::Point(v) | Val::Vector(v),
-                ..
-            }) => v,
-            Some(q) => return Err(self.err(q.node, "center must be a <point>")),
-            None => Vec3::ZERO,
-        };
+        let center = self.point(p, "center", Vec3::ZERO)?;
         let radius = p.float(self, "radius", 1.0)? as f32;
         let m = *to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
         sphere_geometry(&m, flip_normals).map_err(|e| self.err(p.node, e))

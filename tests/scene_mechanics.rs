@@ -320,7 +320,7 @@ fn direct_is_the_path_tracer_at_depth_two_with_mitsubas_sample_counts() {
     // ... but are fine where nothing differs.
     load(
         r#"<integrator type="direct"><integer name="bsdf_samples" value="0"/></integrator>
-           <shape type="sphere"><bsdf type="roughconductor"/></shape><emitter type="point"/>"#,
+           <shape type="sphere"><bsdf type="roughconductor"><string name="distribution" value="ggx"/></bsdf></shape><emitter type="point"/>"#,
     )
     .unwrap();
     // Mitsuba weights every one of `emitter_samples` delta-light samples by 1: point lights
@@ -459,6 +459,53 @@ fn accepted_and_refused_parameters() {
         let e = err(body);
         assert!(e.contains(needle), "{body}: {e}");
     }
+}
+
+#[test]
+fn models_the_renderer_lacks_are_refused_not_substituted() {
+    // Mitsuba's rough BSDFs default to Beckmann; the renderer has GGX only. Rendering one
+    // for the other would be a different highlight, so the scene is refused — with the
+    // plugin, the parameter and the way out in the message.
+    for plugin in ["roughconductor", "roughdielectric", "roughplastic"] {
+        for dist in ["", r#"<string name="distribution" value="beckmann"/>"#] {
+            let e = err(&format!(
+                r#"<shape type="sphere"><bsdf type="{plugin}">{dist}<float name="alpha" value="0.2"/></bsdf></shape>"#
+            ));
+            assert!(
+                e.contains(&format!("bsdf \"{plugin}\"")) && e.contains("Beckmann"),
+                "{plugin} {dist}: {e}"
+            );
+            assert!(e.contains("value=\"ggx\""), "{e}");
+        }
+        let ggx = format!(
+            r#"<shape type="sphere"><bsdf type="{plugin}"><string name="distribution" value="ggx"/></bsdf></shape>"#
+        );
+        load(&ggx).unwrap();
+    }
+    // Anisotropic roughness: Mitsuba orients α_u along dp/du, the renderer's frame does not.
+    let e = err(
+        r#"<shape type="sphere"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>
+             <float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.3"/></bsdf></shape>"#,
+    );
+    assert!(e.contains("roughconductor") && e.contains("anisotropic"), "{e}");
+    // A scaled specular lobe and RGB-valued indices name the plugin and the parameter.
+    let e = err(
+        r#"<shape type="sphere"><bsdf type="conductor"><rgb name="specular_reflectance" value="0.5"/></bsdf></shape>"#,
+    );
+    assert!(e.contains("'specular_reflectance'") && e.contains("\"conductor\""), "{e}");
+    let e = err(
+        r#"<shape type="sphere"><bsdf type="dielectric"><float name="specular_transmittance" value="0.9"/></bsdf></shape>"#,
+    );
+    assert!(e.contains("'specular_transmittance'") && e.contains("\"dielectric\""), "{e}");
+    let e = err(
+        r#"<shape type="sphere"><bsdf type="conductor"><rgb name="eta" value="0.2, 0.9, 1.1"/><float name="k" value="3"/></bsdf></shape>"#,
+    );
+    assert!(e.contains("'eta' of bsdf \"conductor\"") && e.contains("RGB"), "{e}");
+    // The defaults, written out, are fine.
+    load(
+        r#"<shape type="sphere"><bsdf type="conductor"><rgb name="specular_reflectance" value="1, 1, 1"/></bsdf></shape>"#,
+    )
+    .unwrap();
 }
 
 #[test]

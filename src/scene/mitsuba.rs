@@ -1,25 +1,18 @@
-//! Mitsuba 3 XML scene subset (see design.md §2 "Scenes" and issue 6).
+//! Mitsuba 3 XML scenes: the parser, Mitsuba's scene-description mechanics and the plugins
+//! the renderer can draw as Mitsuba draws them. docs/mitsuba-support.md lists every
+//! supported plugin and parameter, Mitsuba's defaults where one is omitted, and each
+//! deviation.
 //!
-//! Supported: `<scene version>`, `<default>` / `$param` substitution (with `-D` overrides),
-//! `id` / `<ref>`, transforms (`lookat`, `translate`, `rotate`, `scale`, `matrix`, composed in
-//! document order: each new operation is applied after the previous ones, M ← op · M),
-//! `perspective` sensor (`fov`, `fov_axis`, `focal_length`, `near_clip`, `far_clip`, `to_world`)
-//! with `hdrfilm`
-//! (`width`, `height`, `rfilter` box/tent/gaussian; format options accepted and ignored since
-//! they do not change pixel values) and any sampler (`sample_count`, `seed`; `independent` → PCG, the stratified types → Owen-scrambled Sobol'), `path`
-//! integrator (`max_depth`, `rr_depth`, `hide_emitters`), shapes `obj`, `ply`, `sphere`,
-//! `rectangle`, `cube`, `disk` (`to_world`, `flip_normals`, `face_normals`), emitters
-//! `envmap`, `constant`, `area`, `point`, BSDFs `diffuse`, `conductor`, `roughconductor`,
-//! `dielectric`, `roughdielectric`, `plastic`, `roughplastic`, `twosided`, `thinfilm`,
-//! `polarizer` (constant `theta`), the sensor extension `<string name="polarizer"
-//! value="s|p|DEG"/>` (scenes/README.md),
-//! textures `bitmap`, `checkerboard`, values `float`, `integer`, `boolean`, `string`, `rgb`,
-//! `spectrum`, `point`, `vector`.
+//! Mechanics: `<scene version>`, `<include>`, `<path>`, `<default>` / `$param` (with `-D`
+//! overrides), `id` / `<ref>` / `<alias>`, transforms composed in document order (each new
+//! operation applied after the previous ones, M ← op · M), `shapegroup` / `instance`.
 //!
-//! Everything else — elements, attributes, parameters, plugin types — is an error naming the
-//! file, line:column, element and plugin, never silently ignored. The only tolerated
-//! deviation: rough BSDFs with Mitsuba's default `beckmann` distribution are rendered with
-//! GGX (the renderer's only microfacet model) and a warning is printed.
+//! Everything else — elements, attributes, parameters, plugin types, values a plugin would
+//! need a model the renderer lacks (Beckmann microfacets, anisotropic roughness, scaled
+//! specular lobes, RGB-valued indices) — is an error naming the file, line:column, element,
+//! plugin and parameter. No plugin is silently replaced by another; parameters that change
+//! nothing in the image (e.g. `focus_distance` on a pinhole camera) are accepted as Mitsuba
+//! accepts them, and wrapper integrators say on stderr what they ignore.
 
 // `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -1337,7 +1330,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let material = p.string(self, "material")?;
                 let eta = p.take("eta");
                 let k = p.take("k");
-                p.accept(&["specular_reflectance"], self, is_unit)?;
+                p.unit_factors(&["specular_reflectance"], self)?;
                 let ior = match (material, eta, k) {
                     (Some(_), Some(e), _) | (Some(_), None, Some(e)) => {
                         return Err(
@@ -1349,11 +1342,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     (None, eta, k) => {
                         // Mitsuba's conductor defaults when eta/k are given: eta 0, k 1.
                         let n = match eta {
-                            Some(e) => self.spectral(&e, "eta")?,
+                            Some(e) => self.spectral(&e, &format!("'eta' of bsdf \"{plugin}\""))?,
                             None => Spectral::Const(0.0),
                         };
                         let kk = match k {
-                            Some(k) => self.spectral(&k, "k")?,
+                            Some(k) => self.spectral(&k, &format!("'k' of bsdf \"{plugin}\""))?,
                             None => Spectral::Const(1.0),
                         };
                         if !(n.min() >= 0.0 && kk.min() >= 0.0) {
@@ -1381,23 +1374,13 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     ));
                 }
                 let alpha = if plugin == "roughdielectric" {
-                    let (au, av) = self.microfacet(p)?;
-                    if au != av {
-                        return Err(
-                            self.err(p.node, "anisotropic roughdielectric is not supported")
-                        );
-                    }
-                    au
+                    self.microfacet(p)?.0
                 } else {
                     0.0
                 };
                 let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
                 let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
-                p.accept(
-                    &["specular_reflectance", "specular_transmittance"],
-                    self,
-                    is_unit,
-                )?;
+                p.unit_factors(&["specular_reflectance", "specular_transmittance"], self)?;
                 BsdfDesc::Dielectric {
                     int_ior,
                     ext_ior,
@@ -1406,15 +1389,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
             "plastic" | "roughplastic" => {
                 let alpha = if plugin == "roughplastic" {
-                    let (au, av) = self.microfacet(p)?;
-                    if au != av {
-                        return Err(self.err(p.node, "anisotropic roughplastic is not supported"));
-                    }
-                    au
+                    self.microfacet(p)?.0
                 } else {
                     0.0
                 };
-                p.accept(&["specular_reflectance"], self, is_unit)?;
+                p.unit_factors(&["specular_reflectance"], self)?;
                 BsdfDesc::Plastic {
                     diffuse_reflectance: p.texture(self, "diffuse_reflectance", 0.5)?,
                     int_ior: p.ior_number(self, "int_ior", 1.49)? as f32,
@@ -1695,17 +1674,28 @@ impl<'a, 'i> Ctx<'a, 'i> {
         }
     }
 
-    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`.
+    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`. Only GGX is
+    /// implemented: Beckmann — also Mitsuba's default when `distribution` is omitted — is
+    /// refused rather than rendered as GGX (the highlights differ in shape and tails).
     fn microfacet(&mut self, p: &mut Props<'a, 'i>) -> Result<(f32, f32)> {
         let dist = p.string(self, "distribution")?;
         match dist.as_deref() {
             Some("ggx") => {}
-            Some("beckmann") | None => eprintln!(
-                "warning: {}: {} \"{}\" uses Mitsuba's default Beckmann distribution; rendering with GGX (add <string name=\"distribution\" value=\"ggx\"/> to match exactly)",
-                self.loc(p.node),
-                p.tag,
-                p.plugin
-            ),
+            Some("beckmann") | None => {
+                return Err(self.err(
+                    p.node,
+                    format!(
+                        "{} \"{}\": the Beckmann microfacet distribution ({}) is not supported; only GGX is implemented — add <string name=\"distribution\" value=\"ggx\"/> to render it with GGX, knowing the highlight will differ from Mitsuba's",
+                        p.tag,
+                        p.plugin,
+                        if dist.is_some() {
+                            "'distribution' = \"beckmann\""
+                        } else {
+                            "Mitsuba's default when 'distribution' is omitted"
+                        }
+                    ),
+                ))
+            }
             Some(other) => {
                 return Err(self.err(p.node, format!("unknown distribution \"{other}\" (ggx, beckmann)")))
             }
@@ -1727,6 +1717,18 @@ impl<'a, 'i> Ctx<'a, 'i> {
         };
         if !(u >= 0.0 && v >= 0.0) {
             return Err(self.err(p.node, "roughness must be ≥ 0"));
+        }
+        if u != v {
+            // Mitsuba stretches α_u along its shading tangent s = dp/du made ⟂ n (the
+            // texture's u direction); the renderer's BSDF frame is built from the normal
+            // alone, so the highlight would be rotated: refused, not substituted.
+            return Err(self.err(
+                p.node,
+                format!(
+                    "{} \"{}\": anisotropic roughness (alpha_u = {u} ≠ alpha_v = {v}) is not supported (the renderer does not orient α_u along dp/du as Mitsuba does); give one 'alpha'",
+                    p.tag, p.plugin
+                ),
+            ));
         }
         Ok((u as f32, v as f32))
     }
@@ -1759,7 +1761,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             v => Err(self.err(
                 q.node,
                 format!(
-                    "{what} must be a number or a <spectrum> of λ:value pairs, not {} (RGB indices have no physical meaning)",
+                    "{what} must be a number or a <spectrum> of λ:value pairs, not {}: RGB-valued indices are not supported (Mitsuba upsamples them like colours; a measured index is a spectrum)",
                     v.kind()
                 ),
             )),
@@ -2672,6 +2674,7 @@ fn sphere_geometry(m: &Mat4, flip_normals: bool) -> std::result::Result<Geometry
     Ok(Geometry::Sphere {
         center: c,
         radius: r,
+        rotation: Mat3::from_cols(axes[0] / r, axes[1] / r, axes[2] / r),
         flip_normals,
     })
 }
@@ -2687,9 +2690,12 @@ fn transformed_shape(shape: &Shape, m: &Mat4) -> std::result::Result<Shape, Stri
         Geometry::Sphere {
             center,
             radius,
+            rotation,
             flip_normals,
         } => {
-            let to_unit = Mat4::from_translation(*center) * Mat4::from_scale(Vec3::splat(*radius));
+            let to_unit = Mat4::from_translation(*center)
+                * Mat4::from_mat3(*rotation)
+                * Mat4::from_scale(Vec3::splat(*radius));
             sphere_geometry(&(*m * to_unit), *flip_normals)
                 .map_err(|e| format!("instanced sphere: {e}"))?
         }
@@ -3013,6 +3019,25 @@ impl<'a, 'i> Props<'a, 'i> {
                         q.node,
                         format!(
                             "unsupported value for '{n}' of {} plugin \"{}\"",
+                            self.tag, self.plugin
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
+    /// default, 1, is supported — a scaled or textured lobe is refused, not dropped.
+    fn unit_factors(&mut self, names: &[&str], ctx: &Ctx) -> Result<()> {
+        for n in names {
+            if let Some(q) = self.take(n) {
+                if !is_unit(&q.val) {
+                    return Err(ctx.err(
+                        q.node,
+                        format!(
+                            "unsupported value for '{n}' of {} plugin \"{}\": only 1 (Mitsuba's default) is supported; a scaled or textured {n} is not",
                             self.tag, self.plugin
                         ),
                     ));

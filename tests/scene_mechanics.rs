@@ -487,20 +487,32 @@ fn models_the_renderer_lacks_are_refused_not_substituted() {
         r#"<shape type="sphere"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>
              <float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.3"/></bsdf></shape>"#,
     );
-    assert!(e.contains("roughconductor") && e.contains("anisotropic"), "{e}");
+    assert!(
+        e.contains("roughconductor") && e.contains("anisotropic"),
+        "{e}"
+    );
     // A scaled specular lobe and RGB-valued indices name the plugin and the parameter.
     let e = err(
         r#"<shape type="sphere"><bsdf type="conductor"><rgb name="specular_reflectance" value="0.5"/></bsdf></shape>"#,
     );
-    assert!(e.contains("'specular_reflectance'") && e.contains("\"conductor\""), "{e}");
+    assert!(
+        e.contains("'specular_reflectance'") && e.contains("\"conductor\""),
+        "{e}"
+    );
     let e = err(
         r#"<shape type="sphere"><bsdf type="dielectric"><float name="specular_transmittance" value="0.9"/></bsdf></shape>"#,
     );
-    assert!(e.contains("'specular_transmittance'") && e.contains("\"dielectric\""), "{e}");
+    assert!(
+        e.contains("'specular_transmittance'") && e.contains("\"dielectric\""),
+        "{e}"
+    );
     let e = err(
         r#"<shape type="sphere"><bsdf type="conductor"><rgb name="eta" value="0.2, 0.9, 1.1"/><float name="k" value="3"/></bsdf></shape>"#,
     );
-    assert!(e.contains("'eta' of bsdf \"conductor\"") && e.contains("RGB"), "{e}");
+    assert!(
+        e.contains("'eta' of bsdf \"conductor\"") && e.contains("RGB"),
+        "{e}"
+    );
     // The defaults, written out, are fine.
     load(
         r#"<shape type="sphere"><bsdf type="conductor"><rgb name="specular_reflectance" value="1, 1, 1"/></bsdf></shape>"#,

@@ -1129,7 +1129,9 @@ mod tests {
             };
             let si = accel.interaction(&ray, &accel.intersect(&ray).unwrap());
             // u wraps at the seam (1 ≡ 0) and is undefined at the pole.
-            let du = (si.uv.x - uv.x).rem_euclid(1.0).min((uv.x - si.uv.x).rem_euclid(1.0));
+            let du = (si.uv.x - uv.x)
+                .rem_euclid(1.0)
+                .min((uv.x - si.uv.x).rem_euclid(1.0));
             assert!(
                 (du < 1e-4 || uv.y == 0.0) && (si.uv.y - uv.y).abs() < 1e-3,
                 "{origin}: {} vs Mitsuba's {uv}",

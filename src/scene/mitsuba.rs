@@ -3012,32 +3012,35 @@ impl<'a, 'i> Props<'a, 'i> {
 
     /// Removes the named parameters if present, checking their type with `ok`.
     fn accept(&mut self, names: &[&str], ctx: &Ctx, ok: impl Fn(&Val) -> bool) -> Result<()> {
+        self.accept_or(names, ctx, ok, "")
+    }
+
+    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
+    /// default, 1, is supported — a scaled or textured lobe is refused, not dropped.
+    fn unit_factors(&mut self, names: &[&str], ctx: &Ctx) -> Result<()> {
+        self.accept_or(
+            names,
+            ctx,
+            is_unit,
+            ": only 1 (Mitsuba's default) is supported, not a scaled or textured lobe",
+        )
+    }
+
+    /// [`Self::accept`] with `why` appended to the error message.
+    fn accept_or(
+        &mut self,
+        names: &[&str],
+        ctx: &Ctx,
+        ok: impl Fn(&Val) -> bool,
+        why: &str,
+    ) -> Result<()> {
         for n in names {
             if let Some(q) = self.take(n) {
                 if !ok(&q.val) {
                     return Err(ctx.err(
                         q.node,
                         format!(
-                            "unsupported value for '{n}' of {} plugin \"{}\"",
-                            self.tag, self.plugin
-                        ),
-                    ));
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
-    /// default, 1, is supported — a scaled or textured lobe is refused, not dropped.
-    fn unit_factors(&mut self, names: &[&str], ctx: &Ctx) -> Result<()> {
-        for n in names {
-            if let Some(q) = self.take(n) {
-                if !is_unit(&q.val) {
-                    return Err(ctx.err(
-                        q.node,
-                        format!(
-                            "unsupported value for '{n}' of {} plugin \"{}\": only 1 (Mitsuba's default) is supported; a scaled or textured {n} is not",
+                            "unsupported value for '{n}' of {} plugin \"{}\"{why}",
                             self.tag, self.plugin
                         ),
                     ));

@@ -91,16 +91,15 @@ fn simulate(cfg: &SimulateConfig) -> Result<(CaptureSet, Vec<f32>)> {
     let angles = (0..cfg.angles_deg.len())
         .map(|a| {
             let s = sim.angle(a, &pb);
-            AngleCapture {
-                incident_deg: s.incident_deg,
-                reflectance: s.data,
-                valid: vec![true; cfg.width * cfg.height],
-            }
+            AngleCapture::from_bip(s.incident_deg, s.data, nb)
         })
         .collect();
     Ok((
         CaptureSet {
             polarization: cfg.polarization,
+            radiometry: thinfilm::capture::Radiometry::Absolute,
+            film_model: None,
+            pixel_names: None,
             ambient_ior: cfg.ambient_ior,
             substrate_ior: cfg.substrate_ior.clone(),
             wavelengths_nm: cfg.wavelengths_nm.clone(),

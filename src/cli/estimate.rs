@@ -4,7 +4,10 @@
 use anyhow::Result;
 use std::path::PathBuf;
 use std::time::Instant;
+use thinfilm::capture::Radiometry;
+use thinfilm::estimate::film::FilmModelKind;
 use thinfilm::estimate::{report, Method, Options};
+use thinfilm::optics::Ior;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -16,9 +19,26 @@ pub struct Args {
     /// Estimator: the seed's as published, exhaustive grid, or the full refinement.
     #[arg(long, value_enum, default_value_t = Method::Full)]
     pub method: Method,
-    /// Known film index: fit the thickness only (works with a single angle).
+    /// Known film index: fit the thickness only (works with a single angle). A number
+    /// (1.33), n+ki, a material name (water, MgF2, …), cauchy:A,B[,C] (λ in nm) or
+    /// sellmeier:B1,C1,… (λ in µm).
     #[arg(long)]
-    pub film_ior: Option<f64>,
+    pub film_ior: Option<Ior>,
+    /// Film index model to fit: constant, cauchy (A + B/λ²) or cauchy3 (+ C/λ⁴). Default:
+    /// the capture's "film_model", else chosen by the data (information criterion).
+    #[arg(long, value_enum)]
+    pub film_model: Option<FilmModelKind>,
+    /// Fit a shift of the substrate's real index (reported in fit.json). Default: only
+    /// when the data demand it.
+    #[arg(long, conflicts_with = "no_fit_substrate")]
+    pub fit_substrate: bool,
+    /// Never fit the substrate index.
+    #[arg(long)]
+    pub no_fit_substrate: bool,
+    /// Override the capture's "radiometry": relative (unknown scale per pixel and angle,
+    /// the default) or absolute (calibrated reflectance: the fit uses amplitudes).
+    #[arg(long, value_enum)]
+    pub radiometry: Option<Radiometry>,
     /// Ground truth folder (from `thinfilm simulate`) to report errors against.
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
@@ -54,6 +74,13 @@ pub fn run(args: Args) -> Result<()> {
     let opts = Options {
         method: args.method,
         film_ior: args.film_ior,
+        film_model: args.film_model,
+        fit_substrate: match (args.fit_substrate, args.no_fit_substrate) {
+            (true, _) => Some(true),
+            (_, true) => Some(false),
+            _ => None,
+        },
+        radiometry: args.radiometry,
         min_thickness_nm: args.min_thickness_nm,
         max_thickness_nm: args.max_thickness_nm,
         min_film_ior: args.min_film_ior,

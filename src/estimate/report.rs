@@ -3,6 +3,7 @@
 //! (KHR_materials_iridescence). Also the seed's "BRDF error": mean ΔE*ab (D65) between
 //! measured and model spectra over every pixel and angle (seed eq. 15), and RMSE (eq. 16).
 
+use super::film::{FilmIndex, FilmModelKind};
 use super::model::Geometry;
 use super::Fit;
 use crate::capture::{CaptureSet, GroundTruth};
@@ -105,7 +106,7 @@ pub fn mean_delta_e(
     let fitted: Vec<usize> = (0..fit.thickness_nm.len())
         .filter(|&p| fit.thickness_nm[p].is_finite())
         .collect();
-    let pixels = super::spread(&fitted, max_pixels);
+    let pixels = super::data::spread(&fitted, max_pixels);
     let nb = set.bands();
     let lab = |s: &[f32]| {
         let mut xyz = [0.0; 3];
@@ -196,12 +197,48 @@ pub fn fit_json(
     seconds.insert("total".into(), num(total));
     let sub = set.substrate_ior.at(550.0);
     let rmse = fit.rmse();
+    let film_model = match &fit.film {
+        FilmIndex::Known(ior) => json!({"model": "given", "index": ior.to_string()}),
+        f => {
+            let (a, b, c) = f.cauchy_coefficients().unwrap_or_default();
+            let mut m = json!({
+                "model": f.kind().map(|k| k.to_string()).unwrap_or_default(),
+                "index": f.spec(),
+                "parameters_sigma": fit.film_param_sigma.iter().map(|v| num(*v)).collect::<Vec<_>>(),
+            });
+            if f.kind() != Some(FilmModelKind::Constant) {
+                m["cauchy_a"] = num(a);
+                m["cauchy_b_nm2"] = num(b);
+                m["cauchy_c_nm4"] = num(c);
+            }
+            m
+        }
+    };
+    let sig_stats = thickness_stats(&fit.thickness_sigma_nm);
     let mut v = json!({
         "format": "thinfilm-fit/1",
         "method": fit.method.to_string(),
         "film_ior": num(fit.film_ior),
         "film_ior_uncertainty": fit.film_ior_sigma.map(num).unwrap_or(Value::Null),
         "film_ior_note": fit.film_ior_note,
+        "film_index": film_model,
+        "substrate_fit": fit.substrate_sigma.map(|s| json!({
+            "shift": num(fit.substrate_shift),
+            "shift_sigma": num(s),
+            "substrate_ior": num(sub.re + fit.substrate_shift),
+        })),
+        "nuisance": {
+            "model": fit.nuisance.spec.describe(),
+            "multiplier": fit.nuisance.multiplier,
+            "background": fit.nuisance.background,
+        },
+        "noise": {"typical": num(fit.noise), "source": fit.noise_source},
+        "chi2_per_dof": num(fit.chi2_red),
+        "model_selection": fit.selection,
+        "thickness_sigma_nm": {
+            "median": sig_stats.map(|s| num(s.median)).unwrap_or(Value::Null),
+            "p95": sig_stats.map(|s| num(s.p95)).unwrap_or(Value::Null),
+        },
         "ambient_ior": num(set.ambient_ior),
         "substrate_ior": num(sub.re),
         "substrate_k": num(sub.im),
@@ -466,14 +503,14 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> R
         "thickness (nm)",
     )
     .context("writing thickness.png")?;
-    let rmse: Vec<f32> = fit
-        .sse
+    let chi2_red: Vec<f32> = fit
+        .chi2
         .iter()
         .zip(&fit.samples)
         .zip(&fit.thickness_nm)
         .map(|((&s, &c), d)| {
             if d.is_finite() && c > 0 {
-                (s / c as f32).sqrt()
+                s / c as f32
             } else {
                 f32::NAN
             }
@@ -481,10 +518,10 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> R
         .collect();
     write_colormap_png(
         &out.join("residual.png"),
-        &rmse,
+        &chi2_red,
         w,
         h,
-        "residual RMSE (reflectance)",
+        "residual χ²/sample (1 = noise level)",
     )
     .context("writing residual.png")?;
     let (tex, lo, hi) = gltf_texture(fit);

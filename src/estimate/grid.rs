@@ -80,6 +80,7 @@ impl IndexStage for GridIndex {
                 o.grid_thickness_step_nm,
                 sub.len()
             ),
+            dispersive_start: None,
         })
     }
 }

@@ -28,11 +28,14 @@ impl IndexStage for PeaksIndex {
             );
         }
         let sub = spread(&pixels, 4096);
-        match index_from_peaks(cx, &sub) {
-            Some((n0, _, k)) if n0 > cx.obs.geom.min_film_ior() && n0 < 10.0 => Ok(IndexEstimate {
+        let tracks = peak_tracks(cx, &sub);
+        let mut ns: Vec<f64> = tracks.iter().map(|t| t.1).collect();
+        match median(&mut ns) {
+            Some(n0) if n0 > cx.obs.geom.min_film_ior() && n0 < 10.0 => Ok(IndexEstimate {
                 film: FilmIndex::constant(n0),
                 sigma: None,
-                note: format!("sub-band peaks: median of {k} tracks {n0:.4}"),
+                note: format!("sub-band peaks: median of {} tracks {n0:.4}", tracks.len()),
+                dispersive_start: dispersion_from_tracks(&tracks, &cx.obs.geom),
             }),
             _ => {
                 cx.warn("no peak could be tracked across angles; first index from a coarse scan");
@@ -42,6 +45,7 @@ impl IndexStage for PeaksIndex {
                     film: FilmIndex::constant(n),
                     sigma: None,
                     note: format!("coarse index scan {n:.3}"),
+                    dispersive_start: None,
                 })
             }
         }
@@ -60,14 +64,14 @@ pub fn angle_order(set: &CaptureSet) -> Vec<(usize, f64)> {
     v
 }
 
-/// Sub-band peaks tracked over angles, eq. (12) per track: (median, robust σ, tracks).
-fn index_from_peaks(cx: &Context, pixels: &[usize]) -> Option<(f64, f64, usize)> {
+/// Sub-band peaks tracked over angles: (mean wavelength, eq. (12) index) per track.
+fn peak_tracks(cx: &Context, pixels: &[usize]) -> Vec<(f64, f64)> {
     let obs = &cx.obs;
     let (na, nb, s) = (obs.angles, obs.bands, obs.stride);
     let order = angle_order(obs.set);
     let n_lo = obs.geom.min_film_ior().max(1.05);
     let lambdas = &obs.geom.wavelengths_nm;
-    let mut estimates: Vec<f64> = pixels
+    pixels
         .par_iter()
         .map_init(
             || (vec![0f32; na * s], vec![false; na]),
@@ -93,16 +97,77 @@ fn index_from_peaks(cx: &Context, pixels: &[usize]) -> Option<(f64, f64, usize)>
             },
         )
         .flatten()
-        .collect();
-    let count = estimates.len();
-    let med = median(&mut estimates)?;
-    let mut dev: Vec<f64> = estimates.iter().map(|e| (e - med).abs()).collect();
-    let mad = median(&mut dev).unwrap_or(0.0) * 1.4826;
-    Some((med, mad / (count as f64).sqrt(), count))
+        .collect()
 }
 
-/// Index estimates of every peak track of one pixel.
-fn tracks(per_angle: &[(f64, Vec<peaks::Peak>)], n_lo: f64) -> Vec<f64> {
+/// A dispersive first guess from how the tracks' index changes with wavelength. For a
+/// dispersive film, eq. (12) on a peak's shift with angle measures √(n·n_g) (n_g = n − λ
+/// dn/dλ, the group index) instead of n: differentiating mλ = 2d√(n(λ)² − kx²) along a
+/// track gives dλ/dkx² = −λ / (2 (n² − λ n n' − kx²)). With Cauchy's n = A + B/λ²,
+/// n·n_g = (A + B/λ²)(A + 3B/λ²); (A, B) are fitted to the medians of the tracks in six
+/// wavelength bins. `None` without enough tracks spread over the band or when the fit
+/// finds no dispersion.
+fn dispersion_from_tracks(
+    tracks: &[(f64, f64)],
+    geom: &super::model::Geometry,
+) -> Option<FilmIndex> {
+    if tracks.len() < 12 {
+        return None;
+    }
+    let mut t = tracks.to_vec();
+    t.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let span = geom.lambda_max() - geom.lambda_min();
+    if t[t.len() - 1].0 - t[0].0 < 0.15 * span {
+        return None;
+    }
+    let bins = 6;
+    let pts: Vec<(f64, f64)> = (0..bins)
+        .filter_map(|i| {
+            let chunk = &t[i * t.len() / bins..(i + 1) * t.len() / bins];
+            let mut l: Vec<f64> = chunk.iter().map(|c| c.0).collect();
+            let mut n: Vec<f64> = chunk.iter().map(|c| c.1).collect();
+            Some((median(&mut l)?, median(&mut n)?.powi(2)))
+        })
+        .collect();
+    // Gauss–Newton on (A, B) for v = (A + B u)(A + 3 B u), u = 1/λ².
+    let mut a = pts.iter().map(|p| p.1.sqrt()).sum::<f64>() / pts.len() as f64;
+    let mut b = 0.0;
+    for _ in 0..20 {
+        let (mut h, mut g) = ([0.0; 3], [0.0; 2]);
+        for &(l, v) in &pts {
+            let u = 1.0 / (l * l);
+            let (n, ng) = (a + b * u, a + 3.0 * b * u);
+            let e = n * ng - v;
+            let (ja, jb) = (n + ng, u * ng + 3.0 * u * n);
+            h[0] += ja * ja;
+            h[1] += ja * jb;
+            h[2] += jb * jb;
+            g[0] += ja * e;
+            g[1] += jb * e;
+        }
+        let det = h[0] * h[2] - h[1] * h[1];
+        if !(det.abs() > 0.0) {
+            return None;
+        }
+        let da = -(h[2] * g[0] - h[1] * g[1]) / det;
+        let db = -(h[0] * g[1] - h[1] * g[0]) / det;
+        a += da;
+        b += db;
+        if da.abs() < 1e-9 && db.abs() < 1e-3 {
+            break;
+        }
+    }
+    let r = super::film::REFERENCE_NM;
+    // Normal dispersion only, and at least 0.002 change of n over the band.
+    let change = b * (1.0 / geom.lambda_min().powi(2) - 1.0 / geom.lambda_max().powi(2));
+    (a.is_finite() && b.is_finite() && b > 0.0 && change > 0.002).then(|| FilmIndex::Fitted {
+        kind: super::film::FilmModelKind::Cauchy,
+        p: vec![a + b / (r * r), b / (r * r)],
+    })
+}
+
+/// (mean wavelength, index) of every peak track of one pixel.
+fn tracks(per_angle: &[(f64, Vec<peaks::Peak>)], n_lo: f64) -> Vec<(f64, f64)> {
     let mut out = Vec::new();
     for start in 0..per_angle.len() {
         for pk in &per_angle[start].1 {
@@ -132,7 +197,8 @@ fn tracks(per_angle: &[(f64, Vec<peaks::Peak>)], n_lo: f64) -> Vec<f64> {
             }
             if track.len() >= 2 {
                 if let Ok(n) = peaks::index_from_track(&track) {
-                    out.push(n);
+                    let l = track.iter().map(|t| t.1).sum::<f64>() / track.len() as f64;
+                    out.push((l, n));
                 }
             }
         }

@@ -322,6 +322,7 @@ fn known_index(ior: &Ior, cx: &Context) -> Result<IndexEstimate> {
         film: FilmIndex::Known(ior.clone()),
         sigma: None,
         note: "given (--film-ior)".into(),
+        dispersive_start: None,
     })
 }
 

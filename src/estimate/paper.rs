@@ -78,6 +78,7 @@ impl IndexStage for Eq12Index {
             film: FilmIndex::constant(n),
             sigma: None,
             note: format!("eq. (12): median over {k} angle pairs of band-quantised peaks"),
+            dispersive_start: None,
         })
     }
 }

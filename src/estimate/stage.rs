@@ -79,6 +79,8 @@ pub struct IndexEstimate {
     pub sigma: Option<f64>,
     /// How it was obtained.
     pub note: String,
+    /// A dispersive (Cauchy) starting point, when the stage sees dispersion.
+    pub dispersive_start: Option<FilmIndex>,
 }
 
 /// One step of the model selection: which model, its criterion, whether it was kept.

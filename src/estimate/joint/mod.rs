@@ -217,9 +217,14 @@ fn extensions(
             out.push(n);
         }
     }
-    if film_auto && c.film == Some(FilmModelKind::Constant) {
+    let next_film = match c.film {
+        Some(FilmModelKind::Constant) => Some(FilmModelKind::Cauchy),
+        Some(FilmModelKind::Cauchy) => Some(FilmModelKind::Cauchy3),
+        _ => None,
+    };
+    if let (true, Some(k)) = (film_auto, next_film) {
         out.push(Candidate {
-            film: Some(FilmModelKind::Cauchy),
+            film: Some(k),
             ..*c
         });
     }
@@ -268,9 +273,10 @@ impl RefineStage for JointRefine {
                 }
             },
         };
-        let init_film = match film_kind {
-            Some(k) => first.film.as_kind(k),
-            None => first.film.clone(),
+        let init_film = match (film_kind, &first.dispersive_start) {
+            (Some(FilmModelKind::Constant), _) | (None, _) => first.film.clone(),
+            (Some(k), Some(start)) => start.as_kind(k),
+            (Some(k), None) => first.film.as_kind(k),
         };
         let blank = State {
             film: init_film,
@@ -291,6 +297,7 @@ impl RefineStage for JointRefine {
             criterion: criterion(&cur, cur.inflation()),
             chosen: true,
         }];
+        let (mut model_dn, mut model_dd) = (0f64, 0f64);
         loop {
             let infl = cur.inflation();
             let base = criterion(&cur, infl);
@@ -298,7 +305,20 @@ impl RefineStage for JointRefine {
                 extensions(cx, &cand, film_auto, substrate_auto)
                     .into_iter()
                     .map(|c| {
-                        let f = joint.fit(&sel_data, &c, &cur.state, 15);
+                        let mut f = joint.fit(&sel_data, &c, &cur.state, 15);
+                        // A dispersive film far from the constant fit: also start from
+                        // the peaks' dispersion with fresh thickness orders.
+                        if let (true, Some(start)) = (c.film != cand.film, &first.dispersive_start)
+                        {
+                            let init = State {
+                                film: start.clone(),
+                                ..cur.state.clone()
+                            };
+                            let g = joint.fit_with_search(&sel_data, &c, &init, 2);
+                            if g.chi2 < f.chi2 {
+                                f = g;
+                            }
+                        }
                         (c, f)
                     })
                     .collect();
@@ -316,7 +336,26 @@ impl RefineStage for JointRefine {
                     best = Some((i, crit));
                 }
             }
-            let Some((i, _)) = best else { break };
+            let Some((i, _)) = best else {
+                // Model sensitivity: how far the extensions the data did not ask for move
+                // n(550) and the thicknesses (a model error the noise does not show).
+                let n0 = cur.state.film.n550();
+                for (_, f) in &tried {
+                    if fitted {
+                        model_dn = model_dn.max((f.state.film.n550() - n0).abs());
+                    }
+                    let mut rel: Vec<f64> = f
+                        .state
+                        .d
+                        .iter()
+                        .zip(&cur.state.d)
+                        .filter(|(_, b)| **b > 1.0)
+                        .map(|(a, b)| ((a - b) / b).abs())
+                        .collect();
+                    model_dd = model_dd.max(super::data::median(&mut rel).unwrap_or(0.0));
+                }
+                break;
+            };
             let n = selection.len() - tried.len() + i;
             selection[n].chosen = true;
             let (c, f) = tried
@@ -337,7 +376,10 @@ impl RefineStage for JointRefine {
         } else {
             0
         };
-        let film_param_sigma: Vec<f64> = (0..nf).filter_map(|i| fit.sigma(i)).collect();
+        let mut film_param_sigma: Vec<f64> = (0..nf).filter_map(|i| fit.sigma(i)).collect();
+        if let Some(s0) = film_param_sigma.first_mut() {
+            *s0 = s0.hypot(model_dn);
+        }
         let substrate_sigma = cand.fit_substrate.then(|| fit.sigma(nf)).flatten();
         let mut rel: Vec<f64> = fit
             .state
@@ -347,7 +389,7 @@ impl RefineStage for JointRefine {
             .filter(|(d, _)| **d > 1.0)
             .map(|(d, s)| s / d)
             .collect();
-        let thickness_rel_sigma = super::data::median(&mut rel).unwrap_or(0.0);
+        let thickness_rel_sigma = super::data::median(&mut rel).unwrap_or(0.0).hypot(model_dd);
         let note = format!(
             "{}; joint Levenberg–Marquardt on {} pixels ({} model, {}; χ²/dof {:.2})",
             first.note,

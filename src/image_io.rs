@@ -71,6 +71,21 @@ pub fn write_exr_channels(
     height: usize,
     channels: &[(&str, &[f32])],
 ) -> Result<()> {
+    write_exr_channels_with_attributes(path, width, height, channels, &[])
+}
+
+/// Header attributes of an EXR: `(name, text value)` pairs (OpenEXR `string` attributes, shown
+/// by any EXR header tool); thinfilm writes a render's or a fit's provenance in them.
+pub type Attributes = Vec<(String, String)>;
+
+/// [`write_exr_channels`] plus text attributes in the header.
+pub fn write_exr_channels_with_attributes(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: &[(&str, &[f32])],
+    attributes: &[(String, String)],
+) -> Result<()> {
     for (name, plane) in channels {
         if plane.len() != width * height {
             bail!(
@@ -88,6 +103,12 @@ pub fn write_exr_channels(
             .collect();
         let mut attrs = LayerAttributes::named("");
         attrs.layer_name = None;
+        for (name, value) in attributes {
+            let (Some(n), Some(v)) = (Text::new_or_none(name), Text::new_or_none(value)) else {
+                bail!("EXR attribute {name:?} = {value:?} is not Latin-1 text");
+            };
+            attrs.other.insert(n, AttributeValue::Text(v));
+        }
         let layer = Layer::new(
             (width, height),
             attrs,
@@ -106,6 +127,32 @@ pub type NamedPlane = (String, Vec<f32>);
 
 /// Reads every channel of the first layer as f32 planes: `(width, height, [(name, plane)])`.
 pub fn read_exr_channels(path: &Path) -> Result<(usize, usize, Vec<NamedPlane>)> {
+    let e = read_exr(path)?;
+    Ok((e.width, e.height, e.channels))
+}
+
+/// An EXR's first layer: its float planes and its text header attributes.
+#[derive(Debug, Clone)]
+pub struct ExrFile {
+    pub width: usize,
+    pub height: usize,
+    pub channels: Vec<NamedPlane>,
+    /// Text attributes of the header, by name (other attribute types are left out).
+    pub attributes: std::collections::BTreeMap<String, String>,
+}
+
+impl ExrFile {
+    /// The plane of channel `name`, if there is one.
+    pub fn channel(&self, name: &str) -> Option<&[f32]> {
+        self.channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.as_slice())
+    }
+}
+
+/// Reads the first layer of an EXR with its text attributes.
+pub fn read_exr(path: &Path) -> Result<ExrFile> {
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -123,7 +170,22 @@ pub fn read_exr_channels(path: &Path) -> Result<(usize, usize, Vec<NamedPlane>)>
         .iter()
         .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
         .collect();
-    Ok((w, h, channels))
+    let attributes = image
+        .attributes
+        .other
+        .iter()
+        .chain(&layer.attributes.other)
+        .filter_map(|(k, v)| match v {
+            AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
+            _ => None,
+        })
+        .collect();
+    Ok(ExrFile {
+        width: w,
+        height: h,
+        channels,
+        attributes,
+    })
 }
 
 /// Reads one named channel (e.g. `thickness`).

@@ -14,6 +14,7 @@ pub mod envi;
 mod rng;
 mod set;
 pub mod simulate;
+pub mod spectra;
 
 pub use set::{ior_from_json, ior_to_json, CaptureFile, CAPTURE_FORMAT, GROUND_TRUTH_FORMAT};
 
@@ -160,7 +161,7 @@ impl CaptureSet {
 }
 
 /// Masked samples (pixel × band × angle) by cause.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct InvalidCounts {
     pub non_finite: u64,
     pub ignore_value: u64,

@@ -525,7 +525,7 @@ pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
     let substrate_ior =
         ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
     let exr = resolve(&gt_dir, &spec.thickness_exr);
-    let (w, h, thickness_nm) = crate::image_io::read_exr_channel(&exr, "thickness")?;
+    let (w, h, thickness_nm) = crate::material::read_thickness_exr(&exr)?;
     if (w, h) != (spec.width, spec.height) {
         bail!(
             "{}: is {w}×{h} but {j} says {}×{}",

@@ -20,9 +20,6 @@ pub struct Args {
     /// Additive reflectance noise σ of the simulated captures.
     #[arg(long, default_value_t = 0.004)]
     noise: f64,
-    /// Hide the progress bar.
-    #[arg(long)]
-    quiet: bool,
 }
 
 pub(crate) fn parse_size(s: &str) -> Result<(usize, usize), String> {
@@ -43,11 +40,11 @@ pub(crate) fn parse_size(s: &str) -> Result<(usize, usize), String> {
     Ok((w, h))
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
     let mut cfg = DemoConfig {
         out: args.out,
         noise_sigma: args.noise,
-        progress: !args.quiet,
+        progress: report.progress(),
         ..DemoConfig::default()
     };
     (cfg.width, cfg.height) = args.size;

@@ -1,18 +1,43 @@
 //! `thinfilm estimate CAPTURE_DIR --out DIR`: fit the film index and per-pixel thickness
 //! of a capture set and write the fitted material (see `crate::estimate`).
 
-use anyhow::Result;
+use super::Output;
+use anyhow::{Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
-use thinfilm::capture::Radiometry;
+use thinfilm::capture::spectra::{load_spectra, SpectraSetup};
+use thinfilm::capture::{Polarization, Radiometry};
 use thinfilm::estimate::film::FilmModelKind;
-use thinfilm::estimate::{report, Method, Options};
+use thinfilm::estimate::{report as fit_report, Method, Options};
 use thinfilm::optics::Ior;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Capture folder holding `capture.json` and one ENVI cube per angle.
-    pub capture_dir: PathBuf,
+    #[arg(required_unless_present = "spectra")]
+    pub capture_dir: Option<PathBuf>,
+    /// Point spectra instead of a capture folder: 2-column text files (wavelength nm,
+    /// intensity; .csv/.xy), one pixel each, all on the same wavelengths. Fit with the same
+    /// engine (each spectrum gets its own scale; lamp shape and background are shared).
+    #[arg(long, num_args = 1.., conflicts_with = "capture_dir", value_name = "FILE")]
+    pub spectra: Vec<PathBuf>,
+    /// With --spectra: a dark / "void" spectrum (no film: dark offset and stray light),
+    /// subtracted from each spectrum.
+    #[arg(long, requires = "spectra", value_name = "FILE")]
+    pub dark: Option<PathBuf>,
+    /// With --spectra: incident angle, degrees.
+    #[arg(long, requires = "spectra", default_value_t = 0.0)]
+    pub incident_deg: f64,
+    /// With --spectra: substrate index (index syntax as --film-ior). Default: the ambient
+    /// medium (a free-standing film, e.g. a soap film).
+    #[arg(long, requires = "spectra")]
+    pub substrate_ior: Option<Ior>,
+    /// With --spectra: index of the medium the light arrives from.
+    #[arg(long, requires = "spectra", default_value_t = 1.0)]
+    pub ambient_ior: f64,
+    /// With --spectra: polarisation observed (s, p or unpolarized).
+    #[arg(long, requires = "spectra", default_value = "unpolarized")]
+    pub polarization: Polarization,
     /// Output folder (fit.json, thickness.exr/png, residual.png, material.xml/gltf).
     #[arg(long)]
     pub out: PathBuf,
@@ -65,12 +90,21 @@ pub struct Args {
     /// Ignore the headers' FWHM (no band integration in the model).
     #[arg(long)]
     pub no_band_integration: bool,
-    /// No progress bar.
-    #[arg(long)]
-    pub quiet: bool,
+    /// Fit only rows START:END of the capture (a band of a capture too large for one job).
+    /// The index, noise and nuisance terms come from pixel samples of the whole capture,
+    /// so the band's thickness equals the same rows of the whole fit, bit for bit, and
+    /// `thinfilm merge` stitches the bands' thickness.exr.
+    #[arg(long, value_parser = parse_rows, value_name = "START:END")]
+    pub rows: Option<(usize, usize)>,
 }
 
-pub fn run(args: Args) -> Result<()> {
+fn parse_rows(s: &str) -> Result<(usize, usize), String> {
+    thinfilm::render::provenance::parse_range(s)
+        .map(|(a, b)| (a as usize, b as usize))
+        .map_err(|e| format!("{e:#}"))
+}
+
+pub fn run(args: Args, report: Output) -> Result<()> {
     let opts = Options {
         method: args.method,
         film_ior: args.film_ior,
@@ -89,26 +123,42 @@ pub fn run(args: Args) -> Result<()> {
         grid_thickness_step_nm: args.grid_thickness_step_nm,
         grid_pixel_stride: args.grid_pixel_stride,
         band_integration: !args.no_band_integration,
-        progress: !args.quiet,
+        progress: report.progress(),
+        rows: args.rows,
         ..Options::default()
     };
     if !(opts.grid_ior_step > 0.0 && opts.grid_thickness_step_nm > 0.0) {
         anyhow::bail!("--grid-ior-step and --grid-thickness-step-nm must be > 0");
     }
     let t = Instant::now();
-    let report::FitRun {
+    let fit_report::FitRun {
         fit,
         delta_e: de,
         truth,
         ..
-    } = report::fit_capture_dir(
-        &args.capture_dir,
-        &args.out,
-        &opts,
-        args.ground_truth.as_deref(),
-    )?;
-    let stats = report::thickness_stats(&fit.thickness_nm);
-    println!(
+    } = match &args.capture_dir {
+        Some(dir) => {
+            fit_report::fit_capture_dir(dir, &args.out, &opts, args.ground_truth.as_deref())?
+        }
+        None => {
+            let setup = SpectraSetup {
+                incident_deg: args.incident_deg,
+                ambient_ior: args.ambient_ior,
+                substrate_ior: args.substrate_ior.clone(),
+                polarization: args.polarization,
+                radiometry: args.radiometry.unwrap_or_default(),
+            };
+            let files: Vec<&std::path::Path> = args.spectra.iter().map(|p| p.as_path()).collect();
+            fit_report::fit_loaded(
+                || load_spectra(&files, args.dark.as_deref(), &setup),
+                &args.out,
+                &opts,
+                args.ground_truth.as_deref(),
+            )?
+        }
+    };
+    let stats = thinfilm::stats::Summary::of_finite(&fit.thickness_nm);
+    report.text(format_args!(
         "{}: film index {:.4}{}, thickness mean {} nm, residual RMSE {}, ΔE*ab {} (written in {:.2} s to {})",
         fit.method,
         fit.film_ior,
@@ -118,15 +168,24 @@ pub fn run(args: Args) -> Result<()> {
         de.as_ref().map(|d| format!("{d:.2}")).unwrap_or_else(|e| format!("n/a ({e})")),
         t.elapsed().as_secs_f64(),
         args.out.display()
-    );
-    if let Some(t) = truth {
-        println!(
+    ));
+    if let Some(t) = &truth {
+        report.text(format_args!(
             "vs ground truth: |n error| {:.4}, thickness MAE {:.2} nm, mean error {:+.2} nm",
             t.film_ior_abs_error, t.thickness_mae_nm, t.thickness_mean_error_nm
-        );
+        ));
     }
     for w in &fit.warnings {
         eprintln!("warning: {w}");
+    }
+    // The document fit.json holds, plus where it went.
+    if report.json {
+        let path = args.out.join("fit.json");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading back {}", path.display()))?;
+        let mut v: serde_json::Value = serde_json::from_str(&text)?;
+        v["output"] = serde_json::json!(args.out);
+        report.json(&v)?;
     }
     Ok(())
 }

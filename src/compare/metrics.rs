@@ -6,7 +6,7 @@
 //!   mean over pixels and channels of (a − b)² / (b² + ε), with ε = [`RELMSE_EPSILON`], so dark
 //!   reference pixels do not blow the metric up.
 //! - ΔE00 (CIEDE2000, Sharma, Wu & Dalal 2005) per pixel after linear sRGB → XYZ → CIELAB
-//!   relative to the D65 white with Y = 1; mean and 95th percentile (nearest rank).
+//!   relative to the D65 white with Y = 1; mean and 95th percentile (linear interpolation between order statistics).
 //! - Mean-colour bias: per channel (mean(A) − mean(B)) / mean(B), the systematic error that
 //!   survives any amount of averaging (a noise-free estimator has zero bias at any spp).
 
@@ -63,6 +63,51 @@ pub fn check_same_size(a: &RgbImage, a_label: &str, b: &RgbImage, b_label: &str)
     Ok(())
 }
 
+/// Brings two images to one size for comparison: equal sizes pass unchanged; when one is an
+/// integer multiple `k` of the other in both directions (a render at 4× the reference's
+/// resolution, say), the larger is box-downsampled by `k` (each output pixel the mean of a
+/// k×k block, which is what rendering at the smaller size estimates). Returns the images and,
+/// when it resized one, a sentence saying so. Other size differences are an error.
+pub fn match_sizes(
+    a: RgbImage,
+    a_label: &str,
+    b: RgbImage,
+    b_label: &str,
+) -> Result<(RgbImage, RgbImage, Option<String>)> {
+    let factor = |big: &RgbImage, small: &RgbImage| -> Option<usize> {
+        (small.width > 0
+            && small.height > 0
+            && big.width % small.width == 0
+            && big.height % small.height == 0
+            && big.width / small.width == big.height / small.height)
+            .then(|| big.width / small.width)
+    };
+    let note = |big: &RgbImage, label: &str, k: usize, small: &RgbImage| {
+        format!(
+            "{label} ({}×{}) box-downsampled by {k} to {}×{} to match the other image",
+            big.width, big.height, small.width, small.height
+        )
+    };
+    if (a.width, a.height) == (b.width, b.height) {
+        return Ok((a, b, None));
+    }
+    if let Some(k) = factor(&a, &b) {
+        let n = note(&a, a_label, k, &b);
+        return Ok((downsample_box(&a, k)?, b, Some(n)));
+    }
+    if let Some(k) = factor(&b, &a) {
+        let n = note(&b, b_label, k, &a);
+        return Ok((a, downsample_box(&b, k)?, Some(n)));
+    }
+    bail!(
+        "image sizes differ: {a_label} is {}×{}, {b_label} is {}×{} (sizes must be equal or          differ by one integer factor in both directions)",
+        a.width,
+        a.height,
+        b.width,
+        b.height
+    )
+}
+
 fn check_finite(img: &RgbImage, label: &str) -> Result<()> {
     if let Some(i) = img
         .pixels
@@ -95,15 +140,9 @@ pub fn delta_e00_map(a: &RgbImage, b: &RgbImage) -> Result<Vec<f64>> {
         .collect())
 }
 
-/// Nearest-rank percentile (`q` in [0, 1]) of unsorted values; NaN-free input expected.
+/// The `q`-quantile of unsorted, NaN-free values ([`crate::stats::percentile`]).
 pub fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    let mut v = values.to_vec();
-    v.sort_by(|x, y| x.total_cmp(y));
-    let rank = (q.clamp(0.0, 1.0) * v.len() as f64).ceil() as usize;
-    v[rank.saturating_sub(1).min(v.len() - 1)]
+    crate::stats::percentile(&mut values.to_vec(), q)
 }
 
 /// Computes every metric of A against the reference B. Errors on size mismatch or
@@ -273,16 +312,6 @@ mod tests {
         assert!(lab[1].abs() < 0.05 && lab[2].abs() < 0.05, "{lab:?}");
         let black = linear_srgb_to_lab([0.0, 0.0, 0.0]);
         assert!(black.iter().all(|v| v.abs() < 1e-9), "{black:?}");
-    }
-
-    #[test]
-    fn percentile_nearest_rank() {
-        let v: Vec<f64> = (1..=100).map(|i| i as f64).collect();
-        assert_eq!(percentile(&v, 0.95), 95.0);
-        assert_eq!(percentile(&v, 1.0), 100.0);
-        assert_eq!(percentile(&v, 0.0), 1.0);
-        assert_eq!(percentile(&[3.0], 0.95), 3.0);
-        assert!(percentile(&[], 0.5).is_nan());
     }
 
     #[test]

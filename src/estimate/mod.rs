@@ -37,6 +37,7 @@ pub mod stage;
 pub mod synth;
 pub mod table;
 mod thickness;
+pub mod tiles;
 
 use crate::capture::{CaptureSet, Radiometry};
 use crate::optics::Ior;
@@ -166,6 +167,9 @@ pub struct Options {
     /// Pixels used for the joint refinement of `full`.
     pub joint_pixels: usize,
     pub progress: bool,
+    /// Fit only rows `[A, B)`: the index from their pixels (unless given), their thickness
+    /// exactly as in the whole fit ([`tiles`]). `None`: every row.
+    pub rows: Option<(usize, usize)>,
 }
 
 impl Default for Options {
@@ -186,6 +190,7 @@ impl Default for Options {
             band_integration: true,
             joint_pixels: 256,
             progress: false,
+            rows: None,
         }
     }
 }
@@ -217,8 +222,13 @@ pub struct Fit {
     /// Model selection record of the joint stage.
     pub selection: Vec<SelectionStep>,
     pub width: usize,
+    /// Rows in this fit (`rows.1 − rows.0`).
     pub height: usize,
-    /// Per pixel, nm, NaN where no thickness was fitted.
+    /// Rows `[A, B)` of the capture this fit covers (all of them unless `--rows`).
+    pub rows: (usize, usize),
+    /// What the thickness map is, for its EXR header (`thinfilm merge` stitches by it).
+    pub provenance: tiles::TileInfo,
+    /// Per pixel of `rows`, nm, NaN where no thickness was fitted.
     pub thickness_nm: Vec<f32>,
     /// Per pixel 1σ, nm (NaN where no thickness).
     pub thickness_sigma_nm: Vec<f32>,
@@ -329,6 +339,9 @@ fn known_index(ior: &Ior, cx: &Context) -> Result<IndexEstimate> {
 /// Runs the chosen estimator.
 pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     check_set(set)?;
+    if let Some(rows) = opts.rows {
+        tiles::check_rows(rows, set.height)?;
+    }
     if opts.film_ior.is_none() {
         let mut distinct: Vec<f64> = set.angles.iter().map(|a| a.incident_deg).collect();
         distinct.sort_by(f64::total_cmp);
@@ -380,14 +393,26 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let t = Stopwatch::start();
     let checked = checks::run(&cx, &sol, &mut map);
     t.stop("checks", &mut stages);
-    let invalid = (0..set.width * set.height)
+    // A band of rows (`--rows`): every stage ran on the whole capture (the global stages
+    // on pixel samples of it), so the band's thickness is exactly the same rows of the
+    // whole fit; keep those rows.
+    let rows = opts.rows.unwrap_or((0, set.height));
+    let kept = rows.0 * set.width..rows.1 * set.width;
+    let mut sigma = checked.sigma;
+    crop(&mut map.d, &kept);
+    crop(&mut sigma, &kept);
+    crop(&mut map.chi2, &kept);
+    crop(&mut map.samples, &kept);
+    let invalid = kept
+        .clone()
         .filter(|&p| !set.angles.iter().any(|a| a.valid[p]))
         .count();
     let fitted = map.d.iter().filter(|d| d.is_finite()).count();
-    let total = set.width * set.height;
+    let total = kept.len();
+    let film_ior = sol.film.n550();
     Ok(Fit {
         method: opts.method,
-        film_ior: sol.film.n550(),
+        film_ior,
         film_ior_sigma: sol.film_sigma().filter(|s| s.is_finite()),
         film_param_sigma: sol.film_param_sigma.clone(),
         film_ior_note: sol.note.clone(),
@@ -400,11 +425,19 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         selection: sol.selection.clone(),
         film: sol.film,
         width: set.width,
-        height: set.height,
+        height: rows.1 - rows.0,
+        rows,
+        provenance: tiles::TileInfo {
+            rows,
+            image_height: set.height,
+            fit_hash: tiles::fit_hash(set, film_ior, &opts),
+            film_ior,
+            version: env!("CARGO_PKG_VERSION").to_string(),
+        },
         unfitted_pixels: total - invalid - fitted.min(total - invalid),
         not_identifiable: checked.not_identifiable,
         thickness_nm: map.d,
-        thickness_sigma_nm: checked.sigma,
+        thickness_sigma_nm: sigma,
         chi2: map.chi2,
         samples: map.samples,
         invalid_pixels: invalid,
@@ -412,4 +445,10 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         stage_cpu_seconds: stages.cpu,
         warnings: cx.take_warnings(),
     })
+}
+
+/// Keeps the pixels `kept` of a per-pixel map.
+fn crop<T>(v: &mut Vec<T>, kept: &std::ops::Range<usize>) {
+    v.truncate(kept.end);
+    v.drain(..kept.start);
 }

@@ -83,18 +83,8 @@ pub struct IndexEstimate {
     pub dispersive_start: Option<FilmIndex>,
 }
 
-/// One step of the model selection: which model, its criterion, whether it was kept.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct SelectionStep {
-    pub model: String,
-    /// χ² (noise-weighted residual) on the joint pixels.
-    pub chi2: f64,
-    /// Global parameters of the model.
-    pub parameters: usize,
-    /// Information criterion (lower is better).
-    pub criterion: f64,
-    pub chosen: bool,
-}
+/// One step of the model selection (as written in fit.json).
+pub use crate::material::ModelSelectionStep as SelectionStep;
 
 /// Film, substrate and nuisance terms shared by every pixel, with their uncertainty.
 #[derive(Debug, Clone)]

@@ -263,6 +263,8 @@ mod x86 {
 }
 
 /// Portable [`hermite_sums`] (four lanes per sum, so the compiler may vectorise it).
+// The lane index addresses five accumulators at once.
+#[allow(clippy::needless_range_loop)]
 #[inline]
 fn hermite_sums_scalar(
     y: &[f32],

@@ -47,13 +47,7 @@ pub fn fringes(cx: &Context, sol: &FilmSolution, d: f64) -> f64 {
 /// Runs the checks, fills missing curvatures, blanks unidentifiable pixels.
 pub fn run(cx: &Context, sol: &FilmSolution, map: &mut ThicknessMap) -> Checked {
     let obs = &cx.obs;
-    let fixed = FixedModel {
-        geom: &obs.geom,
-        film: &sol.film,
-        substrate_shift: sol.substrate_shift,
-        nuisance: &sol.nuisance,
-        sigma: &sol.sigma,
-    };
+    let fixed = FixedModel::of(&obs.geom, sol);
     let white = Whitening::new(&sol.nuisance, &sol.sigma, obs.angles, obs.stride);
     let independent = obs.independent_pixels();
     let need_solver = map.curvature.is_none() || independent;

@@ -239,15 +239,7 @@ fn track_prev(prev: &(f64, Vec<peaks::Peak>), kx: f64, lambda: f64, n_lo: f64) -
 fn index_scan(cx: &Context, pixels: &[usize]) -> Option<f64> {
     let obs = &cx.obs;
     let sample = spread(pixels, 16);
-    let spec = if obs.radiometry == crate::capture::Radiometry::Absolute {
-        NuisanceSpec::ABSOLUTE
-    } else {
-        NuisanceSpec {
-            free_gain: true,
-            multiplier_terms: 0,
-            background_terms: 0,
-        }
-    };
+    let spec = NuisanceSpec::smallest(obs.radiometry);
     let nuisance = Nuisance::new(spec, obs.angles, &obs.geom.wavelengths_nm);
     let white = Whitening::new(&nuisance, &cx.noise.sigma, obs.angles, obs.stride);
     let lo = cx.opts.min_film_ior.max(obs.geom.min_film_ior());

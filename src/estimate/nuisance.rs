@@ -54,6 +54,15 @@ impl NuisanceSpec {
         background_terms: 0,
     };
 
+    /// The smallest model a capture of this radiometry allows: the film alone for
+    /// calibrated reflectance, a free gain per pixel and angle otherwise.
+    pub fn smallest(radiometry: crate::capture::Radiometry) -> NuisanceSpec {
+        NuisanceSpec {
+            free_gain: radiometry != crate::capture::Radiometry::Absolute,
+            ..NuisanceSpec::ABSOLUTE
+        }
+    }
+
     /// Global parameters per angle.
     pub fn per_angle(&self) -> usize {
         self.multiplier_terms + self.background_terms

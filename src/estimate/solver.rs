@@ -24,7 +24,18 @@ pub struct FixedModel<'a> {
     pub sigma: &'a [f32],
 }
 
-impl FixedModel<'_> {
+impl<'a> FixedModel<'a> {
+    /// The model of a film solution on the capture's geometry.
+    pub fn of(geom: &'a Geometry, sol: &'a super::stage::FilmSolution) -> Self {
+        FixedModel {
+            geom,
+            film: &sol.film,
+            substrate_shift: sol.substrate_shift,
+            nuisance: &sol.nuisance,
+            sigma: &sol.sigma,
+        }
+    }
+
     /// s_ab/σ_ab per angle and band: the model side of the whitening.
     pub fn model_weights(&self) -> Vec<f32> {
         let (na, nb) = (self.geom.incident_deg.len(), self.geom.wavelengths_nm.len());

@@ -26,13 +26,7 @@ const NONE: PixelFit = (f32::NAN, 0.0, 0, 0.0);
 impl ThicknessStage for TableThickness {
     fn run(&self, cx: &Context, sol: &FilmSolution) -> Result<ThicknessMap> {
         let obs = &cx.obs;
-        let fixed = FixedModel {
-            geom: &obs.geom,
-            film: &sol.film,
-            substrate_shift: sol.substrate_shift,
-            nuisance: &sol.nuisance,
-            sigma: &sol.sigma,
-        };
+        let fixed = FixedModel::of(&obs.geom, sol);
         let solver = ThicknessSolver::new(
             &fixed,
             cx.opts.min_thickness_nm,

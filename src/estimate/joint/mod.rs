@@ -252,7 +252,6 @@ impl RefineStage for JointRefine {
         }
         let joint = Joint::new(cx);
         let pixels = spread(&usable, opts.joint_pixels.max(1));
-        let absolute = cx.obs.radiometry == crate::capture::Radiometry::Absolute;
         let film_kind = if fitted {
             Some(opts.film_model.unwrap_or(FilmModelKind::Constant))
         } else {
@@ -263,15 +262,7 @@ impl RefineStage for JointRefine {
         let mut cand = Candidate {
             film: film_kind,
             fit_substrate: opts.fit_substrate == Some(true),
-            nuisance: if absolute {
-                NuisanceSpec::ABSOLUTE
-            } else {
-                NuisanceSpec {
-                    free_gain: true,
-                    multiplier_terms: 0,
-                    background_terms: 0,
-                }
-            },
+            nuisance: NuisanceSpec::smallest(cx.obs.radiometry),
         };
         let init_film = match (film_kind, &first.dispersive_start) {
             (Some(FilmModelKind::Constant), _) | (None, _) => first.film.clone(),

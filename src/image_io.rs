@@ -206,6 +206,29 @@ pub fn read_exr_channel(path: &Path, name: &str) -> Result<(usize, usize, Vec<f3
     Ok((w, h, plane))
 }
 
+/// Reads a one-quantity image: the first of the channels `names` present, or the only
+/// channel of a single-channel file.
+pub fn read_exr_scalar(path: &Path, names: &[&str]) -> Result<(usize, usize, Vec<f32>)> {
+    let (w, h, channels) = read_exr_channels(path)?;
+    let listed: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
+    let single = channels.len() == 1;
+    let plane = channels
+        .into_iter()
+        .enumerate()
+        .filter(|(_, (n, _))| single || names.contains(&n.as_str()))
+        .min_by_key(|(_, (n, _))| names.iter().position(|m| m == n).unwrap_or(usize::MAX))
+        .map(|(_, (_, p))| p)
+        .with_context(|| {
+            format!(
+                "{}: no channel named {} (channels: {})",
+                path.display(),
+                names.join(" or "),
+                listed.join(", ")
+            )
+        })?;
+    Ok((w, h, plane))
+}
+
 /// Reads an RGB EXR (channels R, G, B; a single Y channel is read as grey).
 pub fn read_exr_rgb(path: &Path) -> Result<RgbImage> {
     let (w, h, channels) = read_exr_channels(path)?;

@@ -31,6 +31,14 @@ pub struct CaptureFile {
     pub angles: Vec<AngleEntry>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub description: Option<String>,
+    /// `relative` (default: unknown scale per pixel and angle) or `absolute` (calibrated
+    /// reflectance).
+    #[serde(default)]
+    pub radiometry: super::Radiometry,
+    /// Film index model to fit: `constant`, `cauchy` or `cauchy3` (default: chosen by
+    /// the data).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub film_model: Option<crate::estimate::film::FilmModelKind>,
 }
 
 fn default_ambient() -> Value {
@@ -46,6 +54,10 @@ pub struct AngleEntry {
     pub white: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dark: Option<String>,
+    /// EXR of the per-pixel incidence in degrees (one channel, `Y` or `incident_deg`), for
+    /// cameras whose field of view spans several degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub incident_deg_map: Option<String>,
 }
 
 /// `{"ior": n, "k": k}` for a constant index, `{"material": name}` for a library material.
@@ -281,6 +293,43 @@ fn reflectance(
     (data, valid, counts)
 }
 
+/// A per-pixel incidence map named in capture.json: degrees, the cube's size, each value
+/// in [0, 90) or NaN (unknown: that pixel is not used at this angle).
+fn angle_map(
+    json: &Path,
+    dir: &Path,
+    field: &str,
+    name: &str,
+    size: (usize, usize),
+) -> Result<Vec<f32>> {
+    let path = resolve(dir, name);
+    let (w, h, map) = crate::image_io::read_exr_scalar(&path, &["incident_deg", "Y"])
+        .with_context(|| format!("{}: {field}", json.display()))?;
+    if (w, h) != size {
+        bail!(
+            "{}: {field}: {} is {w}×{h} but the cube is {}×{}",
+            json.display(),
+            path.display(),
+            size.0,
+            size.1
+        );
+    }
+    if let Some((i, v)) = map
+        .iter()
+        .enumerate()
+        .find(|(_, v)| v.is_finite() && !(0.0..90.0).contains(*v) || v.is_infinite())
+    {
+        bail!(
+            "{}: {field}: {} pixel ({}, {}) = {v}° is outside [0°, 90°)",
+            json.display(),
+            path.display(),
+            i % w,
+            i / w
+        );
+    }
+    Ok(map)
+}
+
 pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     let (dir, json) = if path.is_file() {
         (
@@ -385,10 +434,31 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
             )?),
             (None, _) => None,
         };
-        let (data, valid, counts) = reflectance(&file, white.as_deref(), dark.as_deref());
+        let (data, mut valid, counts) = reflectance(&file, white.as_deref(), dark.as_deref());
         invalid.add(&counts);
+        let map = a
+            .incident_deg_map
+            .as_deref()
+            .map(|name| {
+                let size = (file.header.samples, file.header.lines);
+                angle_map(
+                    &json,
+                    &dir,
+                    &format!("{field}.incident_deg_map"),
+                    name,
+                    size,
+                )
+            })
+            .transpose()?;
+        if let Some(m) = &map {
+            // Pixels of unknown incidence are not used at this angle.
+            for (v, th) in valid.iter_mut().zip(m) {
+                *v &= th.is_finite();
+            }
+        }
         angles.push(AngleCapture {
             incident_deg: a.incident_deg,
+            incident_deg_map: map,
             reflectance: data,
             valid,
         });
@@ -400,6 +470,9 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     let h = first;
     Ok(CaptureSet {
         polarization: spec.polarization,
+        radiometry: spec.radiometry,
+        film_model: spec.film_model,
+        pixel_names: None,
         ambient_ior,
         substrate_ior,
         wavelengths_nm: h.wavelengths_nm.unwrap_or_default(),

@@ -5,21 +5,65 @@ use super::Output;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
+use thinfilm::capture::spectra::{load_spectra, SpectraSetup};
+use thinfilm::capture::{Polarization, Radiometry};
+use thinfilm::estimate::film::FilmModelKind;
 use thinfilm::estimate::{report as fit_report, Method, Options};
+use thinfilm::optics::Ior;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Capture folder holding `capture.json` and one ENVI cube per angle.
-    pub capture_dir: PathBuf,
+    #[arg(required_unless_present = "spectra")]
+    pub capture_dir: Option<PathBuf>,
+    /// Point spectra instead of a capture folder: 2-column text files (wavelength nm,
+    /// intensity; .csv/.xy), one pixel each, all on the same wavelengths. Fit with the same
+    /// engine (each spectrum gets its own scale; lamp shape and background are shared).
+    #[arg(long, num_args = 1.., conflicts_with = "capture_dir", value_name = "FILE")]
+    pub spectra: Vec<PathBuf>,
+    /// With --spectra: a dark / "void" spectrum (no film: dark offset and stray light),
+    /// subtracted from each spectrum.
+    #[arg(long, requires = "spectra", value_name = "FILE")]
+    pub dark: Option<PathBuf>,
+    /// With --spectra: incident angle, degrees.
+    #[arg(long, requires = "spectra", default_value_t = 0.0)]
+    pub incident_deg: f64,
+    /// With --spectra: substrate index (index syntax as --film-ior). Default: the ambient
+    /// medium (a free-standing film, e.g. a soap film).
+    #[arg(long, requires = "spectra")]
+    pub substrate_ior: Option<Ior>,
+    /// With --spectra: index of the medium the light arrives from.
+    #[arg(long, requires = "spectra", default_value_t = 1.0)]
+    pub ambient_ior: f64,
+    /// With --spectra: polarisation observed (s, p or unpolarized).
+    #[arg(long, requires = "spectra", default_value = "unpolarized")]
+    pub polarization: Polarization,
     /// Output folder (fit.json, thickness.exr/png, residual.png, material.xml/gltf).
     #[arg(long)]
     pub out: PathBuf,
     /// Estimator: the seed's as published, exhaustive grid, or the full refinement.
     #[arg(long, value_enum, default_value_t = Method::Full)]
     pub method: Method,
-    /// Known film index: fit the thickness only (works with a single angle).
+    /// Known film index: fit the thickness only (works with a single angle). A number
+    /// (1.33), n+ki, a material name (water, MgF2, …), cauchy:A,B[,C] (λ in nm) or
+    /// sellmeier:B1,C1,… (λ in µm).
     #[arg(long)]
-    pub film_ior: Option<f64>,
+    pub film_ior: Option<Ior>,
+    /// Film index model to fit: constant, cauchy (A + B/λ²) or cauchy3 (+ C/λ⁴). Default:
+    /// the capture's "film_model", else chosen by the data (information criterion).
+    #[arg(long, value_enum)]
+    pub film_model: Option<FilmModelKind>,
+    /// Fit a shift of the substrate's real index (reported in fit.json). Default: only
+    /// when the data demand it.
+    #[arg(long, conflicts_with = "no_fit_substrate")]
+    pub fit_substrate: bool,
+    /// Never fit the substrate index.
+    #[arg(long)]
+    pub no_fit_substrate: bool,
+    /// Override the capture's "radiometry": relative (unknown scale per pixel and angle,
+    /// the default) or absolute (calibrated reflectance: the fit uses amplitudes).
+    #[arg(long, value_enum)]
+    pub radiometry: Option<Radiometry>,
     /// Ground truth folder (from `thinfilm simulate`) to report errors against.
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
@@ -47,10 +91,9 @@ pub struct Args {
     #[arg(long)]
     pub no_band_integration: bool,
     /// Fit only rows START:END of the capture (a band of a capture too large for one job).
-    /// With --film-ior the band's thickness equals the same rows of the whole fit, bit for
-    /// bit, and `thinfilm merge` stitches the bands' thickness.exr; without it the index is
-    /// fitted from the band's pixels (phase one of a huge capture: index from a band, then
-    /// every band with that index).
+    /// The index, noise and nuisance terms come from pixel samples of the whole capture,
+    /// so the band's thickness equals the same rows of the whole fit, bit for bit, and
+    /// `thinfilm merge` stitches the bands' thickness.exr.
     #[arg(long, value_parser = parse_rows, value_name = "START:END")]
     pub rows: Option<(usize, usize)>,
 }
@@ -65,6 +108,13 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     let opts = Options {
         method: args.method,
         film_ior: args.film_ior,
+        film_model: args.film_model,
+        fit_substrate: match (args.fit_substrate, args.no_fit_substrate) {
+            (true, _) => Some(true),
+            (_, true) => Some(false),
+            _ => None,
+        },
+        radiometry: args.radiometry,
         min_thickness_nm: args.min_thickness_nm,
         max_thickness_nm: args.max_thickness_nm,
         min_film_ior: args.min_film_ior,
@@ -86,12 +136,27 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         delta_e: de,
         truth,
         ..
-    } = fit_report::fit_capture_dir(
-        &args.capture_dir,
-        &args.out,
-        &opts,
-        args.ground_truth.as_deref(),
-    )?;
+    } = match &args.capture_dir {
+        Some(dir) => {
+            fit_report::fit_capture_dir(dir, &args.out, &opts, args.ground_truth.as_deref())?
+        }
+        None => {
+            let setup = SpectraSetup {
+                incident_deg: args.incident_deg,
+                ambient_ior: args.ambient_ior,
+                substrate_ior: args.substrate_ior.clone(),
+                polarization: args.polarization,
+                radiometry: args.radiometry.unwrap_or_default(),
+            };
+            let files: Vec<&std::path::Path> = args.spectra.iter().map(|p| p.as_path()).collect();
+            fit_report::fit_loaded(
+                || load_spectra(&files, args.dark.as_deref(), &setup),
+                &args.out,
+                &opts,
+                args.ground_truth.as_deref(),
+            )?
+        }
+    };
     let stats = thinfilm::stats::Summary::of_finite(&fit.thickness_nm);
     report.text(format_args!(
         "{}: film index {:.4}{}, thickness mean {} nm, residual RMSE {}, ΔE*ab {} (written in {:.2} s to {})",

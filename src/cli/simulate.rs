@@ -79,6 +79,35 @@ pub struct Options {
     /// ENVI interleave of the written cubes: bsq, bil or bip [default: bsq].
     #[arg(long)]
     pub interleave: Option<Interleave>,
+    /// Realism: exposure of each angle drawn in 1 ± V (0.4 = ±40 %) [default: 0].
+    #[arg(long, value_name = "V", help_heading = "Realistic capture effects")]
+    pub exposure_variation: Option<f64>,
+    /// Realism: vignetting gain in the image corners (radial falloff), 0.5 = half [default: 1].
+    #[arg(long, value_name = "GAIN", help_heading = "Realistic capture effects")]
+    pub vignetting: Option<f64>,
+    /// Realism: lamp drift since the white reference, a tilt across the band drawn in ±V
+    /// per angle (0.1 = ±10 % from blue to red end) [default: 0].
+    #[arg(long, value_name = "V", help_heading = "Realistic capture effects")]
+    pub lamp_tilt: Option<f64>,
+    /// Realism: stray light added per angle, drawn in [0, V] (reflectance units) [default: 0].
+    #[arg(long, value_name = "V", help_heading = "Realistic capture effects")]
+    pub background: Option<f64>,
+    /// Realism: error added to the substrate index written into capture.json (the
+    /// simulation uses the true one) [default: 0].
+    #[arg(
+        long,
+        value_name = "DN",
+        allow_hyphen_values = true,
+        help_heading = "Realistic capture effects"
+    )]
+    pub substrate_error: Option<f64>,
+    /// Realism: the incidence varies by ±DEG across the image width (camera field of view)
+    /// [default: 0].
+    #[arg(long, value_name = "DEG", help_heading = "Realistic capture effects")]
+    pub fov_deg: Option<f64>,
+    /// Write per-pixel incidence maps (angleNN.exr) and name them in capture.json.
+    #[arg(long, help_heading = "Realistic capture effects")]
+    pub angle_maps: bool,
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize), String> {
@@ -163,6 +192,26 @@ pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> 
     if let Some(v) = args.interleave {
         cfg.interleave = v;
     }
+    let r = &mut cfg.realism;
+    if let Some(v) = args.exposure_variation {
+        r.exposure_variation = v;
+    }
+    if let Some(v) = args.vignetting {
+        r.vignetting_min = v;
+    }
+    if let Some(v) = args.lamp_tilt {
+        r.lamp_tilt = v;
+    }
+    if let Some(v) = args.background {
+        r.background = v;
+    }
+    if let Some(v) = args.substrate_error {
+        r.substrate_error = v;
+    }
+    if let Some(v) = args.fov_deg {
+        r.fov_half_deg = v;
+    }
+    r.write_angle_maps |= args.angle_maps;
     cfg.progress = progress;
     cfg.validate()?;
     Ok(cfg)

@@ -101,6 +101,9 @@ pub fn fit_hash(set: &CaptureSet, film_ior: f64, options: &super::Options) -> u6
     let super::Options {
         method,
         film_ior: _, // the index used is hashed below
+        film_model,
+        fit_substrate,
+        radiometry,
         min_thickness_nm,
         max_thickness_nm,
         min_film_ior,
@@ -115,7 +118,7 @@ pub fn fit_hash(set: &CaptureSet, film_ior: f64, options: &super::Options) -> u6
     } = options;
     let _ = write!(
         h,
-        "{method}|{film_ior:?}|{min_thickness_nm:?}|{max_thickness_nm:?}|{min_film_ior:?}|\
+        "{method}|{film_ior:?}|{film_model:?}|{fit_substrate:?}|{radiometry:?}|{min_thickness_nm:?}|{max_thickness_nm:?}|{min_film_ior:?}|\
          {max_film_ior:?}|{grid_ior_step:?}|{grid_thickness_step_nm:?}|{grid_pixel_stride}|\
          {band_integration}|{joint_pixels}|{}x{}|{:?}|{:?}|{}|{}|{:?}|{}",
         set.width,

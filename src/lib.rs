@@ -9,7 +9,8 @@
 //! - [`scene`]: scene description (Mitsuba XML subset, glTF, OBJ, PLY) and assets;
 //! - [`render`]: the hero-wavelength spectral path tracer;
 //! - [`compare`]: image metrics, side-by-side figures, plots;
-//! - [`image_io`]: EXR and PNG reading/writing shared by the stages.
+//! - [`image_io`]: EXR and PNG reading/writing shared by the stages;
+//! - [`limits`]: the memory budget, numeric domains and panic containment every loader uses.
 
 pub mod capture;
 pub mod compare;
@@ -17,6 +18,7 @@ pub mod demo;
 pub mod estimate;
 pub mod figure;
 pub mod image_io;
+pub mod limits;
 pub mod optics;
 pub mod render;
 pub mod scene;

@@ -1,7 +1,7 @@
 //! `thinfilm estimate CAPTURE_DIR --out DIR`: fit the film index and per-pixel thickness
 //! of a capture set and write the fitted material (see `crate::estimate`).
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use std::path::PathBuf;
 use std::time::Instant;
 use thinfilm::estimate::{report, Method, Options};
@@ -16,31 +16,31 @@ pub struct Args {
     /// Estimator: the seed's as published, exhaustive grid, or the full refinement.
     #[arg(long, value_enum, default_value_t = Method::Full)]
     pub method: Method,
-    /// Known film index: fit the thickness only (works with a single angle).
-    #[arg(long)]
+    /// Known film index: fit the thickness only (works with a single angle). In [1, 10].
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::film_index)]
     pub film_ior: Option<f64>,
     /// Ground truth folder (from `thinfilm simulate`) to report errors against.
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
-    /// Largest thickness considered, nm.
-    #[arg(long, default_value_t = 2000.0)]
+    /// Largest thickness considered, nm (at most 100000).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 2000.0, value_parser = super::args::thickness_nm)]
     pub max_thickness_nm: f64,
     /// Smallest thickness considered, nm.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.0, value_parser = super::args::thickness_nm)]
     pub min_thickness_nm: f64,
-    /// Index range for `grid` (and `full`'s fallback scan).
-    #[arg(long, default_value_t = 1.1)]
+    /// Index range for `grid` (and `full`'s fallback scan), within [1, 10].
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1.1, value_parser = super::args::film_index)]
     pub min_film_ior: f64,
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 3.0, value_parser = super::args::film_index)]
     pub max_film_ior: f64,
-    /// `grid` index step.
-    #[arg(long, default_value_t = 0.01)]
+    /// `grid` index step (at most 100000 steps over the index range).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.01, value_parser = super::args::positive)]
     pub grid_ior_step: f64,
-    /// `grid` thickness step, nm.
-    #[arg(long, default_value_t = 2.0)]
+    /// `grid` thickness step, nm (at most 1000000 steps over the thickness range).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 2.0, value_parser = super::args::positive)]
     pub grid_thickness_step_nm: f64,
-    /// `grid` searches the index on every k-th pixel (x and y).
-    #[arg(long, default_value_t = 1)]
+    /// `grid` searches the index on every k-th pixel (x and y), k ≥ 1.
+    #[arg(long, default_value_t = 1, value_parser = super::args::count)]
     pub grid_pixel_stride: usize,
     /// Ignore the headers' FWHM (no band integration in the model).
     #[arg(long)]
@@ -48,6 +48,47 @@ pub struct Args {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Most steps a `grid` search may take along the index and along the thickness.
+const MAX_GRID_IOR_STEPS: f64 = 1e5;
+const MAX_GRID_THICKNESS_STEPS: f64 = 1e6;
+
+/// Relations between options that clap checks one by one.
+fn check_ranges(args: &Args) -> Result<()> {
+    if args.min_thickness_nm >= args.max_thickness_nm {
+        bail!(
+            "--min-thickness-nm {} must be below --max-thickness-nm {}",
+            args.min_thickness_nm,
+            args.max_thickness_nm
+        );
+    }
+    if args.min_film_ior >= args.max_film_ior {
+        bail!(
+            "--min-film-ior {} must be below --max-film-ior {}",
+            args.min_film_ior,
+            args.max_film_ior
+        );
+    }
+    let ior_steps = (args.max_film_ior - args.min_film_ior) / args.grid_ior_step;
+    if ior_steps > MAX_GRID_IOR_STEPS {
+        bail!(
+            "--grid-ior-step {} makes {ior_steps:.0} steps over [{}, {}]; at most {MAX_GRID_IOR_STEPS}",
+            args.grid_ior_step,
+            args.min_film_ior,
+            args.max_film_ior
+        );
+    }
+    let d_steps = (args.max_thickness_nm - args.min_thickness_nm) / args.grid_thickness_step_nm;
+    if d_steps > MAX_GRID_THICKNESS_STEPS {
+        bail!(
+            "--grid-thickness-step-nm {} makes {d_steps:.0} steps over [{}, {}] nm; at most {MAX_GRID_THICKNESS_STEPS}",
+            args.grid_thickness_step_nm,
+            args.min_thickness_nm,
+            args.max_thickness_nm
+        );
+    }
+    Ok(())
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -65,9 +106,7 @@ pub fn run(args: Args) -> Result<()> {
         progress: !args.quiet,
         ..Options::default()
     };
-    if !(opts.grid_ior_step > 0.0 && opts.grid_thickness_step_nm > 0.0) {
-        anyhow::bail!("--grid-ior-step and --grid-thickness-step-nm must be > 0");
-    }
+    check_ranges(&args)?;
     let t = Instant::now();
     let report::FitRun {
         fit,

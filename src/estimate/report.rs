@@ -446,10 +446,14 @@ pub fn material_gltf(fit: &Fit, set: &CaptureSet, min: f64, max: f64, texture: &
     })
 }
 
-/// Writes every output file of a fit into `out`.
+/// Writes every output file of a fit into `out`, as one step (see
+/// [`crate::image_io::write_files_atomically`]): other files in `out` are left alone, and a
+/// failed or killed run leaves the previous outputs.
 pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> Result<()> {
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("creating output folder {}", out.display()))?;
+    crate::image_io::write_files_atomically(out, |stage| write_outputs_into(stage, set, fit, json))
+}
+
+fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> Result<()> {
     let (w, h) = (fit.width, fit.height);
     crate::image_io::write_exr_channels(
         &out.join("thickness.exr"),

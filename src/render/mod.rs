@@ -215,6 +215,8 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
             (0, spp)
         }
     };
+    let filter = Filter::new(&scene.film.filter)?;
+    check_render_memory(&filter, width, height, sample_range, options.threads)?;
     let mut settings = scene.integrator;
     if let Some(d) = options.max_depth {
         settings.max_depth = d;
@@ -260,7 +262,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         settings,
         width,
         height,
-        filter: Filter::new(&scene.film.filter)?,
+        filter,
         seed: options.seed.unwrap_or(scene.seed),
         sampler: options.sampler.unwrap_or(scene.sampler),
         sample_range,
@@ -270,6 +272,32 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         polarized,
         primary_bins,
     })
+}
+
+/// Refuses a render whose buffers would exceed the memory budget (see [`render_prepared`]):
+/// the rows of filter splats, the accumulated and final images and the PNG bytes, plus one
+/// pixel's samples per thread.
+fn check_render_memory(
+    filter: &Filter,
+    width: u32,
+    height: u32,
+    sample_range: (u32, u32),
+    threads: Option<usize>,
+) -> Result<()> {
+    let rows = match filter {
+        Filter::Box => 1,
+        _ => 2 * filter.radius().ceil() as u64 + 1,
+    };
+    let pixels = width as u64 * height as u64;
+    let threads = threads.unwrap_or_else(rayon::current_num_threads) as u64;
+    let samples = (sample_range.1 - sample_range.0) as u64;
+    let bytes = pixels
+        .saturating_mul(16 * rows + 16 + 12 + 3)
+        .saturating_add(threads.saturating_mul(samples).saturating_mul(12));
+    crate::limits::check_alloc(
+        format!("a {width}×{height} render of {samples} samples per pixel"),
+        bytes,
+    )
 }
 
 /// The camera half of a sample: its random numbers (positioned after the camera dimensions),

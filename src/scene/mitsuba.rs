@@ -105,6 +105,7 @@ pub fn load_str(
         emitters: Vec::new(),
         sensor: None,
         integrator: None,
+        depth: 0,
     };
     ctx.parse_scene(doc.root_element(), defaults)
 }
@@ -207,7 +208,51 @@ struct Ctx<'a, 'i> {
     emitters: Vec<EmitterDesc>,
     sensor: Option<Sensor>,
     integrator: Option<IntegratorSettings>,
+    /// Objects being parsed around the current one (nesting depth).
+    depth: usize,
 }
+
+/// Deepest nesting of objects (a BSDF inside a BSDF inside a shape …) accepted; real scenes
+/// stay below 5, and the parser recurses once per level.
+const MAX_NESTING: usize = 32;
+
+/// Physical domains of numeric parameters, by name: Mitsuba gives each name one meaning
+/// across plugins, so one table checks every plugin's parameters as they are collected —
+/// finite, and inside these closed ranges (`(names, lowest, highest)`). Spectra and RGB
+/// values are checked component by component.
+const DOMAINS: &[(&[&str], f64, f64)] = &[
+    (
+        &[
+            "reflectance",
+            "diffuse_reflectance",
+            "specular_reflectance",
+            "specular_transmittance",
+            "transmittance",
+            "color0",
+            "color1",
+            "radiance",
+            "intensity",
+            "irradiance",
+            "scale",
+        ],
+        0.0,
+        f32::MAX as f64,
+    ),
+    (
+        &["radius", "near_clip", "far_clip"],
+        f32::MIN_POSITIVE as f64,
+        f32::MAX as f64,
+    ),
+    (&["stddev"], f32::MIN_POSITIVE as f64, 32.0),
+    (&["alpha", "alpha_u", "alpha_v"], 0.0, 10.0),
+    (
+        &["int_ior", "ext_ior", "film_ior", "substrate_ior", "eta"],
+        f32::MIN_POSITIVE as f64,
+        crate::limits::MAX_IOR,
+    ),
+    (&["k", "substrate_k"], 0.0, crate::limits::MAX_EXTINCTION),
+    (&["thickness"], 0.0, crate::limits::MAX_THICKNESS_NM),
+];
 
 const OBJECT_TAGS: &[&str] = &[
     "shape",
@@ -221,8 +266,13 @@ const OBJECT_TAGS: &[&str] = &[
     "rfilter",
 ];
 
+/// A number as scene files may hold it: finite and within single precision (the renderer's
+/// geometry and spectra are f32; `1e39` would silently become infinity).
 fn parse_f64(s: &str) -> Option<f64> {
-    s.trim().parse::<f64>().ok()
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && v.abs() <= f32::MAX as f64)
 }
 
 /// Splits "1, 2, 3" or "1 2 3".
@@ -505,7 +555,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "float" => {
                 self.check_attrs(node, &["name", "value", "id"])?;
                 let v = self.req_attr(node, "value")?;
-                Val::Float(parse_f64(&v).ok_or_else(|| bad(self, "a number", &v))?)
+                Val::Float(parse_f64(&v).ok_or_else(|| bad(self, "a finite number", &v))?)
             }
             "integer" => {
                 self.check_attrs(node, &["name", "value", "id"])?;
@@ -588,9 +638,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let mut out = [default; 3];
         for (k, key) in ["x", "y", "z"].iter().enumerate() {
             if let Some(v) = self.attr(node, key)? {
-                out[k] = parse_f64(&v)
-                    .ok_or_else(|| self.err(node, format!("{key}=\"{v}\" is not a number")))?
-                    as f32;
+                out[k] = parse_f64(&v).ok_or_else(|| {
+                    self.err(node, format!("{key}=\"{v}\" is not a finite number"))
+                })? as f32;
             }
         }
         Ok(Vec3::from(out))
@@ -618,7 +668,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 if c.tag_name().name() == "float" && c.attribute("name") == Some("scale") {
                     let v = self.req_attr(c, "value")?;
                     scale = parse_f64(&v)
-                        .ok_or_else(|| self.err(c, format!("'{v}' is not a number")))?
+                        .ok_or_else(|| self.err(c, format!("'{v}' is not a finite number")))?
                         as f32;
                 } else {
                     return Err(self.err(c, "unsupported parameter of a d65 spectrum (only scale)"));
@@ -665,8 +715,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         None => self.xyz(c, 0.0)?,
                     };
                     let angle = self.req_attr(c, "angle")?;
-                    let angle = parse_f64(&angle)
-                        .ok_or_else(|| self.err(c, format!("angle=\"{angle}\" is not a number")))?;
+                    let angle = parse_f64(&angle).ok_or_else(|| {
+                        self.err(c, format!("angle=\"{angle}\" is not a finite number"))
+                    })?;
                     let axis = axis
                         .try_normalize()
                         .ok_or_else(|| self.err(c, "rotation axis is zero"))?;
@@ -768,6 +819,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 }
                 _ => return Err(self.unknown_element(c, &Self::describe(node))),
             };
+            self.check_domain(c, &name, &val)?;
             // Unnamed nested objects ("<bsdf>") are checked by the plugin that takes them.
             if !name.starts_with('<') && list.iter().any(|p: &Prop| p.name == name) {
                 return Err(self.err(c, format!("parameter '{name}' given twice")));
@@ -783,6 +835,53 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     fn parse_object(&mut self, node: Node<'a, 'i>) -> Result<Val> {
+        if self.depth >= MAX_NESTING {
+            return Err(self.err(node, format!("objects nested more than {MAX_NESTING} deep")));
+        }
+        self.depth += 1;
+        let val = self.parse_object_inner(node);
+        self.depth -= 1;
+        val
+    }
+
+    /// Checks a parameter's value against its name's entry in [`DOMAINS`] (and an index
+    /// given as text against the physical index range).
+    fn check_domain(&self, node: Node, name: &str, val: &Val) -> Result<()> {
+        let Some(&(_, lo, hi)) = DOMAINS.iter().find(|(names, _, _)| names.contains(&name)) else {
+            return Ok(());
+        };
+        let values: Vec<f64> = match val {
+            Val::Float(v) => vec![*v],
+            Val::Int(v) => vec![*v as f64],
+            Val::Rgb(c) => c.iter().map(|&x| x as f64).collect(),
+            Val::Spectrum(s) | Val::Texture(TextureDesc::Value(s)) => match s {
+                SpectrumDesc::Constant(v) | SpectrumDesc::D65 { scale: v } => vec![*v as f64],
+                SpectrumDesc::Rgb(c) => c.iter().map(|&x| x as f64).collect(),
+                SpectrumDesc::Tabulated(t) => t.iter().map(|p| p.1 as f64).collect(),
+            },
+            Val::Str(s) if lo > 0.0 && mitsuba_ior(s).is_none() => {
+                // An index written as text ("1.5", "2+0.1i", "cauchy:…"): physical range.
+                if let Ok(ior) = s.parse::<Ior>() {
+                    crate::limits::check_index(format!("parameter '{name}'"), &ior)
+                        .map_err(|e| self.err(node, e))?;
+                }
+                Vec::new()
+            }
+            _ => Vec::new(),
+        };
+        if let Some(v) = values
+            .iter()
+            .find(|v| !(v.is_finite() && **v >= lo && **v <= hi))
+        {
+            return Err(self.err(
+                node,
+                format!("parameter '{name}' = {v} is outside [{lo}, {hi}]"),
+            ));
+        }
+        Ok(())
+    }
+
+    fn parse_object_inner(&mut self, node: Node<'a, 'i>) -> Result<Val> {
         let tag = node.tag_name().name();
         self.check_attrs(node, &["type", "id", "name"])?;
         let mut p = self.collect_props(node)?;
@@ -1670,7 +1769,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let width = p.int(self, "width", 768)?;
         let height = p.int(self, "height", 576)?;
         if !(1..=65536).contains(&width) || !(1..=65536).contains(&height) {
-            return Err(self.err(p.node, format!("film size {width}×{height} out of range")));
+            return Err(self.err(
+                p.node,
+                format!("film width {width} × height {height}: each must be in 1..=65536"),
+            ));
         }
         // Output-format options do not change pixel values.
         p.accept(
@@ -1699,8 +1801,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "box" => ReconstructionFilter::Box,
             "tent" => {
                 let radius = p.float(self, "radius", 1.0)? as f32;
-                if !(radius > 0.0) {
-                    return Err(self.err(p.node, "tent radius must be > 0"));
+                // The filter's footprint is allocated per image row: keep it to pixels.
+                if !(radius > 0.0 && radius <= 32.0) {
+                    return Err(self.err(
+                        p.node,
+                        format!("tent radius {radius} must be in (0, 32] pixels"),
+                    ));
                 }
                 ReconstructionFilter::Tent { radius }
             }
@@ -1835,6 +1941,7 @@ fn combine_ior(label: &str, n: &Spectral, k: &Spectral) -> Ior {
 /// of the dispersion library (`MgF2`, `TiO2`, `SiO2`, …). A group in parentheses followed by
 /// `xN` repeats N times: `(TiO2:52, SiO2:94)x6, TiO2:52` is a 13-layer quarter-wave mirror.
 pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> {
+    const MAX_LAYERS: usize = 10_000;
     fn items(text: &str) -> std::result::Result<Vec<&str>, String> {
         let mut out = Vec::new();
         let (mut depth, mut start) = (0i32, 0);
@@ -1886,6 +1993,9 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
                 }
                 let mut group = Vec::new();
                 parse(&body[..close], &mut group, level + 1)?;
+                if out.len() + group.len().saturating_mul(count) > MAX_LAYERS {
+                    return Err(format!("'{item}' makes more than {MAX_LAYERS} layers"));
+                }
                 for _ in 0..count {
                     out.extend(group.iter().cloned());
                 }
@@ -1909,9 +2019,11 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
                 .trim()
                 .parse()
                 .map_err(|e| format!("layer '{item}': {e}"))?;
+            crate::limits::check_index(format!("layer '{item}'"), &ior)
+                .map_err(|e| e.to_string())?;
             out.push((ior, d));
-            if out.len() > 10_000 {
-                return Err("more than 10000 layers".into());
+            if out.len() > MAX_LAYERS {
+                return Err(format!("more than {MAX_LAYERS} layers"));
             }
         }
         Ok(())
@@ -2107,6 +2219,17 @@ impl<'a, 'i> Props<'a, 'i> {
         match self.take(name) {
             None => Ok(Mat4::IDENTITY),
             Some(q) => match q.val {
+                // A singular object or camera transform has no inverse: normals and camera
+                // rays would be NaN. (`to_uv` may legitimately collapse a texture.)
+                Val::Transform(m)
+                    if name == "to_world"
+                        && !(m.determinant().is_normal() && m.inverse().is_finite()) =>
+                {
+                    Err(ctx.err(
+                        q.node,
+                        "to_world is singular (a zero scale or a degenerate matrix)",
+                    ))
+                }
                 Val::Transform(m) => Ok(m),
                 _ => Err(Self::type_err(ctx, &q, "a <transform>")),
             },

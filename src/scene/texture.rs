@@ -248,7 +248,7 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
     match extension(path).as_str() {
         "exr" => image_io::read_exr_rgb(path),
         "hdr" => {
-            let img = image::open(path)
+            let img = image_io::read_image(path, 24)
                 .with_context(|| format!("reading Radiance HDR {}", path.display()))?
                 .to_rgb32f();
             let (w, h) = (img.width() as usize, img.height() as usize);
@@ -260,7 +260,7 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
             })
         }
         "png" => {
-            let img = image::open(path)
+            let img = image_io::read_image(path, 24)
                 .with_context(|| format!("reading PNG {}", path.display()))?
                 .to_rgb16();
             let (w, h) = (img.width() as usize, img.height() as usize);

@@ -24,9 +24,11 @@ pub const DEFAULT_MEMORY_LIMIT: u64 = 2 << 30;
 /// The environment variable that overrides [`DEFAULT_MEMORY_LIMIT`].
 pub const MEMORY_LIMIT_VAR: &str = "THINFILM_MEMORY_LIMIT";
 
-/// Largest film thickness any stage accepts, nm (100 µm: far beyond where a camera band of a
-/// few nm still resolves interference fringes).
-pub const MAX_THICKNESS_NM: f64 = 100_000.0;
+/// Largest film thickness any stage accepts, nm. The fringes of a 20 µm film lie 4–8 nm apart
+/// across the visible, no wider than a hyperspectral camera's bands: thicker films show no
+/// interference a capture resolves, and simulating them costs band-integration nodes in
+/// proportion to the thickness.
+pub const MAX_THICKNESS_NM: f64 = 20_000.0;
 
 /// Largest real part of a refractive index accepted anywhere (dielectrics stay below ~5,
 /// metals' n below ~30 in the visible and near infrared).

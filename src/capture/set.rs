@@ -123,8 +123,9 @@ pub fn ior_from_json(v: &Value, what: &str) -> Result<Ior> {
 /// Largest `ambient_ior` accepted (dense immersion liquids reach ~1.8; 3 leaves room).
 const MAX_AMBIENT_IOR: f64 = 3.0;
 
-/// Most angles a capture set may list (1° steps over a quarter circle and then some).
-const MAX_ANGLES: usize = 180;
+/// Most angles a capture set may list. Goniometric captures use tens; the fit's cost grows
+/// with the square of the count (angle pairs), so thousands would stall it.
+const MAX_ANGLES: usize = 64;
 
 /// Two captures at the same incident angle add no information about the index and make the
 /// angle pairs of the fit degenerate: refuse them, naming both entries.

@@ -125,6 +125,14 @@ impl SimulateConfig {
         {
             bail!("incident angle {}° is given twice", self.angles_deg[i]);
         }
+        // Spectrometers have a few hundred bands; the simulation's cost grows with each.
+        if self.wavelengths_nm.len() > 2048 || self.angles_deg.len() > 64 {
+            bail!(
+                "{} wavelengths and {} angles: at most 2048 wavelengths and 64 angles",
+                self.wavelengths_nm.len(),
+                self.angles_deg.len()
+            );
+        }
         // One angle's cube is in memory at a time (f32 plus its encoded copy ≤ 8 bytes).
         let samples = size_product(
             "image size",

@@ -35,7 +35,7 @@ pub fn non_negative_f32(s: &str) -> Result<f32, String> {
     in_range(s, 0.0, f32::MAX as f64).map(|v| v as f32)
 }
 
-/// A thickness in nm, in [0, 100 µm].
+/// A thickness in nm, in [0, 20 µm].
 pub fn thickness_nm(s: &str) -> Result<f64, String> {
     in_range(s, 0.0, MAX_THICKNESS_NM)
 }

@@ -22,7 +22,7 @@ pub struct Args {
     /// Ground truth folder (from `thinfilm simulate`) to report errors against.
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
-    /// Largest thickness considered, nm (at most 100000).
+    /// Largest thickness considered, nm (at most 20000).
     #[arg(long, allow_hyphen_values = true, default_value_t = 2000.0, value_parser = super::args::thickness_nm)]
     pub max_thickness_nm: f64,
     /// Smallest thickness considered, nm.

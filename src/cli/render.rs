@@ -13,8 +13,8 @@ pub struct Args {
     /// Output EXR (linear sRGB, Rec.709/D65). A tone-mapped PNG is written beside it.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Samples per pixel (overrides the scene's sampler `sample_count`).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    /// Samples per pixel, 1 to 1048576 (overrides the scene's sampler `sample_count`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1 << 20))]
     pub spp: Option<u32>,
     /// Sampler seed (overrides the scene's).
     #[arg(long)]

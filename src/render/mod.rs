@@ -65,6 +65,10 @@ pub struct RenderOptions {
 /// `polarizer_spheres` (0.75/1.11/1.14/1.11 s), 1.45/0.94/0.48/0.41 on `bubble`
 /// (0.48/0.59/0.79/0.95 s), 2.12/1.65/1.45/1.45 on `lens` (1.6/2.1/2.5/2.3 s).
 pub const DEFAULT_FRESNEL_SPLITS: u32 = 3;
+/// Most samples per pixel one render takes (2^20; references use 2^14).
+pub const MAX_SPP: u32 = 1 << 20;
+/// Deepest a path may go without Russian roulette (see `prepare`).
+const MAX_UNROULETTED_DEPTH: i32 = 1024;
 /// Upper bound on `fresnel_splits`: 2^16 branches per camera sample at worst.
 pub const MAX_FRESNEL_SPLITS: u32 = 16;
 
@@ -225,6 +229,23 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         bail!(
             "max_depth must be −1 (unlimited) or ≥ 1, got {}",
             settings.max_depth
+        );
+    }
+    // A path ends at max_depth or, past rr_depth, by Russian roulette: with neither within
+    // reach, a path between two perfect mirrors would never end.
+    if (settings.max_depth == -1 || settings.max_depth > MAX_UNROULETTED_DEPTH)
+        && settings.rr_depth > MAX_UNROULETTED_DEPTH
+    {
+        bail!(
+            "rr_depth {} with max_depth {}: paths could bounce forever; give max_depth or rr_depth ≤ {MAX_UNROULETTED_DEPTH}",
+            settings.rr_depth,
+            settings.max_depth
+        );
+    }
+    if sample_range.1 - sample_range.0 > MAX_SPP {
+        bail!(
+            "{} samples per pixel: at most {MAX_SPP} per render (split larger ones with --sample-range)",
+            sample_range.1 - sample_range.0
         );
     }
     let mut bsdfs = Vec::with_capacity(scene.bsdfs.len());

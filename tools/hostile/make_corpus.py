@@ -303,6 +303,8 @@ for cid, opt, culprit in [
     ("size_zero", "--size 0x5", "--size"),
     ("size_bands_budget", "--size 20000x20000 --wavelengths 400:720:1", "--size"),
     ("wavelengths_tiny_step", "--wavelengths 400:720:0.00001", "--wavelengths"),
+    ("wavelengths_many", "--wavelengths 400:720:0.01", "wavelengths"),
+    ("thickness_max_allowed_plus", "--thickness 20001", "--thickness"),
     ("wavelengths_nan", "--wavelengths nan:700:4", "--wavelengths"),
     ("wavelengths_dup", "--wavelengths 500,500,600", "--wavelengths"),
     ("thickness_nan", "--thickness nan", "--thickness"),
@@ -444,6 +446,16 @@ for cid, sensor, culprit in [
     xml_case(cid, xml_scene(SPHERE, sensor), f"fail:{cid}.xml|{culprit}")
 xml_case("max_depth_bad", xml_scene(SPHERE + '<integrator type="path"><integer name="max_depth" value="-7"/></integrator>'),
          "fail:max_depth_bad.xml|max_depth")
+MIRRORS = ('<shape type="rectangle"><transform name="to_world"><translate z="-1"/></transform>'
+           '<bsdf type="conductor"/></shape><shape type="rectangle"><transform name="to_world">'
+           '<rotate y="1" angle="180"/><translate z="6"/></transform><bsdf type="conductor"/></shape>'
+           '<emitter type="constant"/>')
+xml_case("mirror_box_no_roulette", xml_scene(MIRRORS + '<integrator type="path"><integer name="rr_depth" value="2000000000"/></integrator>'),
+         "fail:mirror_box_no_roulette.xml|rr_depth")
+xml_case("mirror_box_deep", xml_scene(MIRRORS + '<integrator type="path"><integer name="max_depth" value="1000"/><integer name="rr_depth" value="1000"/></integrator>'),
+         "ok")
+xml_case("spp_above_cap", xml_scene(SPHERE, SENSOR.replace('name="sample_count" value="1"', 'name="sample_count" value="2000000"')),
+         "fail:spp_above_cap.xml|2000000")
 xml_case("param_undefined", xml_scene('<shape type="sphere"><float name="radius" value="$r"/></shape>'),
          "fail:param_undefined.xml|$r")
 xml_case("define_nan", xml_scene('<default name="r" value="1"/><shape type="sphere"><float name="radius" value="$r"/></shape>'),

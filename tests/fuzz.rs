@@ -211,7 +211,7 @@ fn mutate_once(data: &mut Vec<u8>, rng: &mut Rng) {
             let at = rng.below(len + 1);
             data.splice(at..at, rng.pick(HOSTILE_BYTES).iter().copied());
         }
-        6 | 7 | 8 => {
+        6..=8 => {
             let spans = number_spans(data);
             if !spans.is_empty() {
                 let (a, b) = *rng.pick(&spans);

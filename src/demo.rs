@@ -4,7 +4,8 @@
 
 use crate::capture::{self, simulate::SimulateConfig};
 use crate::estimate::{report, Method, Options};
-use crate::figure::{self, FilmMaterial, RenderSettings, SampleRow};
+use crate::figure::{self, RenderSettings, SampleRow};
+use crate::material::FilmMaterial;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::fmt::Write as _;
@@ -131,7 +132,7 @@ fn fit_one(capture_dir: &Path, gt_dir: &Path, method: Method, out: &Path) -> Res
         method,
         film_ior: run.fit.film_ior,
         film_ior_abs_error: truth.film_ior_abs_error,
-        mean_thickness_nm: report::thickness_stats(&run.fit.thickness_nm)
+        mean_thickness_nm: crate::stats::Summary::of_finite(&run.fit.thickness_nm)
             .map(|s| s.mean)
             .unwrap_or(f64::NAN),
         thickness_mae_nm: truth.thickness_mae_nm,

@@ -6,148 +6,22 @@
 //! variation the capture showed appears on the rendered surface (a fitted map on a plane is
 //! `scenes/plane_thickness_map.xml`).
 
-use crate::capture::{self, GroundTruth};
+use crate::capture;
 use crate::compare::figure::{
     colour_bar, compose_panels, heatmap, nice_ceiling, Canvas, Colormap, Panel,
 };
 use crate::compare::metrics::{compare_images, delta_e00_map};
 use crate::image_io::{self, RgbImage};
-use crate::optics::Ior;
+use crate::material::FilmMaterial;
 use crate::render::{self, RenderOptions};
 use crate::scene::{
-    self, look_at, sky, teapot, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings,
-    FovAxis, Geometry, IntegratorSettings, ReconstructionFilter, Scene, Shape, TextureDesc,
-    TextureFilter, WrapMode,
+    self, look_at, sky, teapot, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
+    IntegratorSettings, ReconstructionFilter, Scene, Shape,
 };
 use anyhow::{bail, Context, Result};
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Mat4, Vec3};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-
-/// A thin-film material with a (possibly spatially varying) thickness map.
-#[derive(Debug, Clone)]
-pub struct FilmMaterial {
-    pub film_ior: Ior,
-    pub substrate_ior: Ior,
-    pub width: usize,
-    pub height: usize,
-    /// Thickness in nm, row-major; NaN where unknown (filled before rendering).
-    pub thickness_nm: Vec<f32>,
-}
-
-impl FilmMaterial {
-    /// Mean of the finite thickness values, nm.
-    pub fn mean_thickness_nm(&self) -> f64 {
-        let (sum, n) = self
-            .thickness_nm
-            .iter()
-            .filter(|v| v.is_finite())
-            .fold((0.0f64, 0usize), |(s, n), &v| (s + v as f64, n + 1));
-        if n == 0 {
-            f64::NAN
-        } else {
-            sum / n as f64
-        }
-    }
-
-    /// Film index at 550 nm, for labels.
-    pub fn film_ior_550(&self) -> f64 {
-        self.film_ior.at(550.0).re
-    }
-
-    /// The material from a ground truth written by `thinfilm simulate`.
-    pub fn from_ground_truth(gt: &GroundTruth) -> Self {
-        FilmMaterial {
-            film_ior: gt.film_ior.clone(),
-            substrate_ior: gt.substrate_ior.clone(),
-            width: gt.width,
-            height: gt.height,
-            thickness_nm: gt.thickness_nm.clone(),
-        }
-    }
-
-    /// The fitted material in a `thinfilm estimate` output folder (`fit.json` +
-    /// `thickness.exr`).
-    pub fn from_fit_dir(dir: &Path) -> Result<Self> {
-        let fit_path = dir.join("fit.json");
-        let text = std::fs::read_to_string(&fit_path).with_context(|| {
-            format!(
-                "reading {} (is {} an estimate output folder?)",
-                fit_path.display(),
-                dir.display()
-            )
-        })?;
-        let json: serde_json::Value = serde_json::from_str(&text)
-            .with_context(|| format!("parsing {}", fit_path.display()))?;
-        let field = |name: &str| {
-            json.get(name)
-                .and_then(|v| v.as_f64())
-                .with_context(|| format!("{}: missing numeric field '{name}'", fit_path.display()))
-        };
-        let film_ior = field("film_ior")?;
-        let substrate_n = field("substrate_ior")?;
-        let substrate_k = json
-            .get("substrate_k")
-            .and_then(|v| v.as_f64())
-            .unwrap_or(0.0);
-        let (w, h, thickness_nm) =
-            image_io::read_exr_channel(&dir.join("thickness.exr"), "thickness")?;
-        Ok(FilmMaterial {
-            film_ior: Ior::real(film_ior),
-            substrate_ior: Ior::Constant(num_complex::Complex64::new(substrate_n, substrate_k)),
-            width: w,
-            height: h,
-            thickness_nm,
-        })
-    }
-
-    /// The BSDF with the thickness map as a bilinear texture; NaN texels (pixels the fit
-    /// could not use) are replaced by the median so they render as the typical film.
-    pub fn bsdf(&self) -> BsdfDesc {
-        let mut finite: Vec<f32> = self
-            .thickness_nm
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .collect();
-        let fill = if finite.is_empty() {
-            0.0
-        } else {
-            let mid = finite.len() / 2;
-            *finite.select_nth_unstable_by(mid, f32::total_cmp).1
-        };
-        let data = self
-            .thickness_nm
-            .iter()
-            .map(|&v| if v.is_finite() { v } else { fill })
-            .collect();
-        BsdfDesc::ThinFilm {
-            film_ior: self.film_ior.clone(),
-            thickness_nm: TextureDesc::Bitmap(Arc::new(BitmapTexture {
-                width: self.width,
-                height: self.height,
-                channels: 1,
-                data,
-                filter: TextureFilter::Bilinear,
-                wrap: WrapMode::Mirror,
-                to_uv: Mat3::IDENTITY,
-                value_range: None,
-                path: None,
-            })),
-            substrate_ior: self.substrate_ior.clone(),
-            alpha: 0.0,
-        }
-    }
-
-    /// "n 1.370, d̄ 408 nm" for panel titles.
-    pub fn label(&self) -> String {
-        format!(
-            "n {:.3}, mean d {:.0} nm",
-            self.film_ior_550(),
-            self.mean_thickness_nm()
-        )
-    }
-}
 
 /// Image size and sampling of the teapot renders.
 #[derive(Debug, Clone, Copy)]
@@ -629,30 +503,12 @@ mod tests {
 
     fn material(d: f32) -> FilmMaterial {
         FilmMaterial {
-            film_ior: Ior::real(1.37),
-            substrate_ior: Ior::real(1.64),
+            film_ior: crate::optics::Ior::real(1.37),
+            substrate_ior: crate::optics::Ior::real(1.64),
             width: 4,
             height: 3,
             thickness_nm: vec![d; 12],
         }
-    }
-
-    #[test]
-    fn nan_texels_are_filled_with_the_median() {
-        let mut m = material(400.0);
-        m.thickness_nm[0] = f32::NAN;
-        m.thickness_nm[1] = 500.0;
-        let BsdfDesc::ThinFilm {
-            thickness_nm: TextureDesc::Bitmap(tex),
-            ..
-        } = m.bsdf()
-        else {
-            panic!("expected a thin film with a bitmap thickness");
-        };
-        assert_eq!(tex.data[0], 400.0);
-        assert_eq!(tex.data[1], 500.0);
-        assert!(tex.data.iter().all(|v| v.is_finite()));
-        assert!((m.mean_thickness_nm() - (400.0 * 10.0 + 500.0) / 11.0).abs() < 1e-3);
     }
 
     #[test]

@@ -63,8 +63,7 @@ fn estimate_writes_every_output_and_reports_truth_errors() {
         .as_f64()
         .map(|d| (0.0..5.0).contains(&d))
         .unwrap_or(v["delta_e_reason"].is_string()));
-    let (w, h, d) =
-        thinfilm::image_io::read_exr_channel(&out.join("thickness.exr"), "thickness").unwrap();
+    let (w, h, d) = thinfilm::image_io::read_exr_channel(&out.join("thickness.exr"), "Y").unwrap();
     assert_eq!((w, h, d.len()), (12, 8, 96));
     let xml = std::fs::read_to_string(out.join("material.xml")).unwrap();
     assert!(

@@ -85,7 +85,7 @@ impl CaptureSet {
 }
 
 /// Masked samples (pixel × band × angle) by cause.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct InvalidCounts {
     pub non_finite: u64,
     pub ignore_value: u64,

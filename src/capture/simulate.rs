@@ -684,26 +684,9 @@ fn raw_count(rng: &mut SplitMix64, signal: f64, cfg: &SimulateConfig) -> f64 {
         .clamp(0.0, u16::MAX as f64)
 }
 
-/// Thickness statistics for the ground truth.
+/// Thickness statistics for the ground truth (null when no value is finite).
 pub fn thickness_stats(t: &[f32]) -> Value {
-    let mut v: Vec<f64> = t
-        .iter()
-        .map(|&x| x as f64)
-        .filter(|x| x.is_finite())
-        .collect();
-    if v.is_empty() {
-        return Value::Null;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let std = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
-    let q = |p: f64| {
-        let pos = p * (v.len() - 1) as f64;
-        let (i, f) = (pos.floor() as usize, pos.fract());
-        v[i] + (v[(i + 1).min(v.len() - 1)] - v[i]) * f
-    };
-    json!({"mean": mean, "median": q(0.5), "min": v[0], "max": v[v.len() - 1], "std": std, "p5": q(0.05), "p95": q(0.95)})
+    serde_json::to_value(crate::stats::Summary::of_finite(t)).unwrap_or(Value::Null)
 }
 
 fn angle_label(deg: f64) -> String {

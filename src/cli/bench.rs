@@ -6,6 +6,8 @@ use clap::Subcommand;
 mod bench_effects;
 #[path = "bench_estimate.rs"]
 mod bench_estimate;
+#[path = "bench_gltf.rs"]
+mod bench_gltf;
 #[path = "bench_optics.rs"]
 mod bench_optics;
 #[path = "bench_render.rs"]
@@ -19,6 +21,9 @@ pub enum BenchCommand {
     Estimate(bench_estimate::Args),
     /// Our renders vs Mitsuba 3 references: error against time.
     Render(bench_render::Args),
+    /// glTF's iridescence approximation (Schlick + Fourier XYZ fit) against the exact
+    /// spectral film: ΔE00 over thickness, film index and angle, on a dielectric and a metal.
+    GltfIridescence(bench_gltf::Args),
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
@@ -26,5 +31,6 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Optics(a) => bench_optics::run(a),
         BenchCommand::Estimate(a) => bench_estimate::run(a),
         BenchCommand::Render(a) => bench_render::run(a),
+        BenchCommand::GltfIridescence(a) => bench_gltf::run(a),
     }
 }

@@ -151,7 +151,7 @@ fn run_one(
             method: opts.method,
             n_fit: fit.film_ior,
             n_err: te.film_ior_abs_error,
-            mean_d: report::thickness_stats(&fit.thickness_nm)
+            mean_d: thinfilm::stats::Summary::of_finite(&fit.thickness_nm)
                 .map(|s| s.mean)
                 .unwrap_or(f64::NAN),
             mae: te.thickness_mae_nm,

@@ -119,7 +119,7 @@ pub fn run(args: Args) -> Result<()> {
         &opts,
         args.ground_truth.as_deref(),
     )?;
-    let stats = report::thickness_stats(&fit.thickness_nm);
+    let stats = thinfilm::stats::Summary::of_finite(&fit.thickness_nm);
     println!(
         "{}: film index {:.4}{}, thickness mean {} nm, residual RMSE {}, ΔE*ab {} (written in {:.2} s to {})",
         fit.method,

@@ -6,7 +6,7 @@
 //!   mean over pixels and channels of (a − b)² / (b² + ε), with ε = [`RELMSE_EPSILON`], so dark
 //!   reference pixels do not blow the metric up.
 //! - ΔE00 (CIEDE2000, Sharma, Wu & Dalal 2005) per pixel after linear sRGB → XYZ → CIELAB
-//!   relative to the D65 white with Y = 1; mean and 95th percentile (nearest rank).
+//!   relative to the D65 white with Y = 1; mean and 95th percentile (linear interpolation between order statistics).
 //! - Mean-colour bias: per channel (mean(A) − mean(B)) / mean(B), the systematic error that
 //!   survives any amount of averaging (a noise-free estimator has zero bias at any spp).
 
@@ -95,15 +95,9 @@ pub fn delta_e00_map(a: &RgbImage, b: &RgbImage) -> Result<Vec<f64>> {
         .collect())
 }
 
-/// Nearest-rank percentile (`q` in [0, 1]) of unsorted values; NaN-free input expected.
+/// The `q`-quantile of unsorted, NaN-free values ([`crate::stats::percentile`]).
 pub fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    let mut v = values.to_vec();
-    v.sort_by(|x, y| x.total_cmp(y));
-    let rank = (q.clamp(0.0, 1.0) * v.len() as f64).ceil() as usize;
-    v[rank.saturating_sub(1).min(v.len() - 1)]
+    crate::stats::percentile(&mut values.to_vec(), q)
 }
 
 /// Computes every metric of A against the reference B. Errors on size mismatch or
@@ -273,16 +267,6 @@ mod tests {
         assert!(lab[1].abs() < 0.05 && lab[2].abs() < 0.05, "{lab:?}");
         let black = linear_srgb_to_lab([0.0, 0.0, 0.0]);
         assert!(black.iter().all(|v| v.abs() < 1e-9), "{black:?}");
-    }
-
-    #[test]
-    fn percentile_nearest_rank() {
-        let v: Vec<f64> = (1..=100).map(|i| i as f64).collect();
-        assert_eq!(percentile(&v, 0.95), 95.0);
-        assert_eq!(percentile(&v, 1.0), 100.0);
-        assert_eq!(percentile(&v, 0.0), 1.0);
-        assert_eq!(percentile(&[3.0], 0.95), 3.0);
-        assert!(percentile(&[], 0.5).is_nan());
     }
 
     #[test]

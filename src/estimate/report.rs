@@ -1,69 +1,16 @@
-//! Writing a fit: `fit.json`, `thickness.exr`, colour-mapped PNGs (with a scale bar, like
-//! the seed's Fig. 5), `material.xml` (Mitsuba-style `thinfilm` BSDF) and `material.gltf`
-//! (KHR_materials_iridescence). Also the seed's "BRDF error": mean ΔE*ab (D65) between
+//! Writing a fit: `fit.json` ([`FitFile`]), colour-mapped PNGs (with a scale bar, like the
+//! seed's Fig. 5) and the material files of [`FilmMaterial::write_files`] (`thickness.exr`,
+//! `material.xml`, `material.gltf`). Also the seed's "BRDF error": mean ΔE*ab (D65) between
 //! measured and model spectra over every pixel and angle (seed eq. 15), and RMSE (eq. 16).
 
 use super::model::Geometry;
 use super::Fit;
 use crate::capture::{CaptureSet, GroundTruth};
+use crate::material::{finite, FilmMaterial, FitFile, MapStats, PixelCounts, TruthComparison};
+use crate::optics::Ior;
+use crate::stats::{percentile, Summary};
 use anyhow::{Context, Result};
-use serde_json::{json, Value};
 use std::path::Path;
-
-/// JSON number, or null for non-finite values (fit.json never holds NaN).
-pub fn num(x: f64) -> Value {
-    if x.is_finite() {
-        json!(x)
-    } else {
-        Value::Null
-    }
-}
-
-/// Thickness statistics over fitted pixels.
-#[derive(Debug, Clone, Copy)]
-pub struct Stats {
-    pub mean: f64,
-    pub median: f64,
-    pub p5: f64,
-    pub p95: f64,
-    pub min: f64,
-    pub max: f64,
-}
-
-/// Linear-interpolated percentile (same definition as on sorted data: between the
-/// ⌊q(n−1)⌋-th and the next order statistic), found by selection in O(n) — a
-/// megapixel map is sorted in ~0.1 s, and the outputs ask for several percentiles.
-/// Reorders `v`; `v` must be non-empty and NaN-free.
-fn pct(v: &mut [f64], q: f64) -> f64 {
-    let x = q * (v.len() - 1) as f64;
-    let i = x.floor() as usize;
-    let (_, &mut lo, right) = v.select_nth_unstable_by(i, f64::total_cmp);
-    let hi = right.iter().copied().min_by(f64::total_cmp).unwrap_or(lo);
-    lo + (hi - lo) * (x - i as f64)
-}
-
-pub fn thickness_stats(d: &[f32]) -> Option<Stats> {
-    let mut v: Vec<f64> = d
-        .iter()
-        .filter(|x| x.is_finite())
-        .map(|&x| x as f64)
-        .collect();
-    if v.is_empty() {
-        return None;
-    }
-    // Mean in the input's order (selection reorders v).
-    let mean = v.iter().sum::<f64>() / v.len() as f64;
-    let min = v.iter().copied().fold(f64::INFINITY, f64::min);
-    let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    Some(Stats {
-        mean,
-        median: pct(&mut v, 0.5),
-        p5: pct(&mut v, 0.05),
-        p95: pct(&mut v, 0.95),
-        min,
-        max,
-    })
-}
 
 /// XYZ weights per band for a tabulated reflectance (the XYZ integral is linear in the
 /// samples, so three rows of weights reproduce `tabulated_reflectance_xyz_d65` exactly).
@@ -166,7 +113,7 @@ pub struct TruthErrors {
 
 pub fn truth_errors(fit: &Fit, film_ior_true: f64, truth: &[f32]) -> TruthErrors {
     let (mae, signed, n) = super::synth::thickness_errors(&fit.thickness_nm, truth);
-    let tstats = thickness_stats(truth);
+    let tstats = Summary::of_finite(truth);
     TruthErrors {
         film_ior_true,
         film_ior_abs_error: (fit.film_ior - film_ior_true).abs(),
@@ -177,83 +124,82 @@ pub fn truth_errors(fit: &Fit, film_ior_true: f64, truth: &[f32]) -> TruthErrors
     }
 }
 
-/// Builds fit.json.
+/// The `fit.json` of a fit.
 pub fn fit_json(
     set: &CaptureSet,
     fit: &Fit,
     delta_e: &Result<f64, String>,
     truth: Option<&TruthErrors>,
     extra_seconds: &[(String, f64)],
-) -> Value {
-    let stats = thickness_stats(&fit.thickness_nm);
-    let st = |f: fn(&Stats) -> f64| stats.as_ref().map(|s| num(f(s))).unwrap_or(Value::Null);
-    let mut seconds = serde_json::Map::new();
+) -> FitFile {
+    let stats = Summary::of_finite(&fit.thickness_nm);
+    let mut seconds = std::collections::BTreeMap::new();
     let mut total = 0.0;
     for (k, v) in fit.stage_seconds.iter().chain(extra_seconds) {
-        seconds.insert(k.clone(), num(*v));
+        seconds.insert(k.clone(), finite(*v));
         total += v;
     }
-    seconds.insert("total".into(), num(total));
+    seconds.insert("total".into(), finite(total));
     let sub = set.substrate_ior.at(550.0);
     let rmse = fit.rmse();
-    let mut v = json!({
-        "format": "thinfilm-fit/1",
-        "method": fit.method.to_string(),
-        "film_ior": num(fit.film_ior),
-        "film_ior_uncertainty": fit.film_ior_sigma.map(num).unwrap_or(Value::Null),
-        "film_ior_note": fit.film_ior_note,
-        "ambient_ior": num(set.ambient_ior),
-        "substrate_ior": num(sub.re),
-        "substrate_k": num(sub.im),
-        "substrate": set.substrate_ior.to_string(),
-        "polarization": set.polarization,
-        "incident_deg": set.angles.iter().map(|a| num(a.incident_deg)).collect::<Vec<_>>(),
-        "bands": set.bands(),
-        "width": fit.width,
-        "height": fit.height,
-        "thickness_nm": {
-            "mean": st(|s| s.mean), "median": st(|s| s.median),
-            "p5": st(|s| s.p5), "p95": st(|s| s.p95),
-            "min": st(|s| s.min), "max": st(|s| s.max),
+    FitFile {
+        format: crate::material::FIT_FORMAT.into(),
+        method: fit.method.to_string(),
+        film_ior: finite(fit.film_ior),
+        film_index: fit.film_ior.is_finite().then(|| Ior::real(fit.film_ior)),
+        film_ior_uncertainty: fit.film_ior_sigma.and_then(finite),
+        film_ior_uncertainty_reason: fit.film_ior_sigma.is_none().then(|| {
+            if fit.film_ior_note.starts_with("given") {
+                "index given by the user"
+            } else {
+                "the method gives no uncertainty"
+            }
+            .to_string()
+        }),
+        film_ior_note: fit.film_ior_note.clone(),
+        ambient_ior: finite(set.ambient_ior),
+        substrate_ior: finite(sub.re),
+        substrate_k: finite(sub.im),
+        substrate: set.substrate_ior.clone(),
+        polarization: set.polarization,
+        incident_deg: set.angles.iter().map(|a| finite(a.incident_deg)).collect(),
+        bands: set.bands(),
+        width: fit.width,
+        height: fit.height,
+        thickness_nm: MapStats::from(stats),
+        thickness_nm_reason: stats.is_none().then(|| "no pixel was fitted".into()),
+        pixels: PixelCounts {
+            valid: fit.valid_pixels(),
+            invalid: fit.invalid_pixels,
+            unfitted: fit.unfitted_pixels,
         },
-        "pixels": {
-            "valid": fit.valid_pixels(),
-            "invalid": fit.invalid_pixels,
-            "unfitted": fit.unfitted_pixels,
-        },
-        "invalid_samples": set.invalid,
-        "residual_rmse": rmse.map(num).unwrap_or(Value::Null),
-        "delta_e_ab_d65_mean": delta_e.as_ref().map(|v| num(*v)).unwrap_or(Value::Null),
-        "seconds": seconds,
-        "warnings": fit.warnings,
-    });
-    if fit.film_ior_sigma.is_none() {
-        v["film_ior_uncertainty_reason"] = json!(if fit.film_ior_note.starts_with("given") {
-            "index given by the user"
-        } else {
-            "the method gives no uncertainty"
-        });
+        invalid_samples: set.invalid,
+        residual_rmse: rmse.and_then(finite),
+        residual_rmse_reason: rmse.is_none().then(|| "no pixel was fitted".into()),
+        delta_e_ab_d65_mean: delta_e.as_ref().ok().and_then(|v| finite(*v)),
+        delta_e_reason: delta_e.as_ref().err().cloned(),
+        seconds,
+        warnings: fit.warnings.clone(),
+        ground_truth: truth.map(|t| TruthComparison {
+            film_ior: finite(t.film_ior_true),
+            film_ior_abs_error: finite(t.film_ior_abs_error),
+            mean_thickness_nm: finite(t.mean_thickness_true_nm),
+            thickness_mae_nm: finite(t.thickness_mae_nm),
+            thickness_mean_error_nm: finite(t.thickness_mean_error_nm),
+            pixels_compared: t.pixels_compared,
+        }),
     }
-    if rmse.is_none() {
-        v["residual_rmse_reason"] = json!("no pixel was fitted");
+}
+
+/// The fitted film as a material: the fitted index on the capture's substrate.
+pub fn fitted_material(set: &CaptureSet, fit: &Fit) -> FilmMaterial {
+    FilmMaterial {
+        film_ior: Ior::real(fit.film_ior),
+        substrate_ior: set.substrate_ior.clone(),
+        width: fit.width,
+        height: fit.height,
+        thickness_nm: fit.thickness_nm.clone(),
     }
-    if stats.is_none() {
-        v["thickness_nm_reason"] = json!("no pixel was fitted");
-    }
-    if let Err(e) = delta_e {
-        v["delta_e_reason"] = json!(e);
-    }
-    if let Some(t) = truth {
-        v["ground_truth"] = json!({
-            "film_ior": num(t.film_ior_true),
-            "film_ior_abs_error": num(t.film_ior_abs_error),
-            "mean_thickness_nm": num(t.mean_thickness_true_nm),
-            "thickness_mae_nm": num(t.thickness_mae_nm),
-            "thickness_mean_error_nm": num(t.thickness_mean_error_nm),
-            "pixels_compared": t.pixels_compared,
-        });
-    }
-    v
 }
 
 /// Viridis (polynomial fit by Matt Zucker, CC0), t in [0, 1] → sRGB8.
@@ -308,7 +254,10 @@ pub fn write_colormap_png(
     let (lo, hi) = if finite.is_empty() {
         (0.0, 1.0)
     } else {
-        let (a, b) = (pct(&mut finite, 0.005), pct(&mut finite, 0.995));
+        let (a, b) = (
+            percentile(&mut finite, 0.005),
+            percentile(&mut finite, 0.995),
+        );
         if b > a {
             (a, b)
         } else {
@@ -379,89 +328,15 @@ pub fn write_colormap_png(
     crate::image_io::write_png_rgb8(path, iw, ih, buf)
 }
 
-/// `material.xml`: the `thinfilm` BSDF with the fitted index and the thickness texture.
-pub fn material_xml(fit: &Fit, set: &CaptureSet) -> String {
-    let sub = set.substrate_ior.at(550.0);
-    let stats = thickness_stats(&fit.thickness_nm);
-    format!(
-        "<!-- thinfilm estimate ({method}): film index and per-pixel thickness (nm) fitted from a capture.\n     \
-         Substrate index evaluated at 550 nm ({subname}). Mean thickness {mean}. -->\n\
-         <bsdf type=\"thinfilm\" id=\"fitted_film\">\n    \
-         <float name=\"film_ior\" value=\"{n:.6}\"/>\n    \
-         <texture type=\"bitmap\" name=\"thickness\">\n        \
-         <string name=\"filename\" value=\"thickness.exr\"/>\n        \
-         <boolean name=\"raw\" value=\"true\"/>\n        \
-         <string name=\"filter_type\" value=\"bilinear\"/>\n    \
-         </texture>\n    \
-         <float name=\"substrate_ior\" value=\"{sn:.6}\"/>\n    \
-         <float name=\"substrate_k\" value=\"{sk:.6}\"/>\n\
-         </bsdf>\n",
-        method = fit.method,
-        subname = set.substrate_ior,
-        mean = stats.map(|s| format!("{:.2} nm", s.mean)).unwrap_or_else(|| "n/a".into()),
-        n = fit.film_ior,
-        sn = sub.re,
-        sk = sub.im,
-    )
-}
-
-/// glTF thickness texture: G = (d − min)/(max − min); invalid pixels take the median.
-pub fn gltf_texture(fit: &Fit) -> (Vec<u8>, f64, f64) {
-    let s = thickness_stats(&fit.thickness_nm);
-    let (lo, hi, med) = s
-        .map(|s| (s.min, s.max, s.median))
-        .unwrap_or((0.0, 0.0, 0.0));
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    let mut bytes = Vec::with_capacity(fit.thickness_nm.len() * 3);
-    for &d in &fit.thickness_nm {
-        let d = if d.is_finite() { d as f64 } else { med };
-        let g = (((d - lo) / span).clamp(0.0, 1.0) * 255.0).round() as u8;
-        bytes.extend_from_slice(&[0, g, 0]);
-    }
-    (bytes, lo, hi)
-}
-
-pub fn material_gltf(fit: &Fit, set: &CaptureSet, min: f64, max: f64, texture: &str) -> Value {
-    let sub = set.substrate_ior.at(550.0);
-    json!({
-        "asset": {"version": "2.0", "generator": "thinfilm estimate"},
-        "extensionsUsed": ["KHR_materials_iridescence", "KHR_materials_ior"],
-        "materials": [{
-            "name": "fitted_film",
-            "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.0},
-            "extensions": {
-                "KHR_materials_ior": {"ior": num(sub.re)},
-                "KHR_materials_iridescence": {
-                    "iridescenceFactor": 1.0,
-                    "iridescenceIor": num(fit.film_ior),
-                    "iridescenceThicknessMinimum": num(min),
-                    "iridescenceThicknessMaximum": num(max),
-                    "iridescenceThicknessTexture": {"index": 0}
-                }
-            }
-        }],
-        "textures": [{"source": 0, "sampler": 0}],
-        "samplers": [{"magFilter": 9729, "minFilter": 9729}],
-        "images": [{"uri": texture, "mimeType": "image/png"}]
-    })
-}
-
 /// Writes every output file of a fit into `out`, as one step (see
 /// [`crate::image_io::write_files_atomically`]): other files in `out` are left alone, and a
 /// failed or killed run leaves the previous outputs.
-pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> Result<()> {
+pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -> Result<()> {
     crate::image_io::write_files_atomically(out, |stage| write_outputs_into(stage, set, fit, json))
 }
 
-fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> Result<()> {
+fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -> Result<()> {
     let (w, h) = (fit.width, fit.height);
-    crate::image_io::write_exr_channels(
-        &out.join("thickness.exr"),
-        w,
-        h,
-        &[("thickness", &fit.thickness_nm)],
-    )
-    .context("writing thickness.exr")?;
     write_colormap_png(
         &out.join("thickness.png"),
         &fit.thickness_nm,
@@ -491,22 +366,8 @@ fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &Value) -> 
         "residual RMSE (reflectance)",
     )
     .context("writing residual.png")?;
-    let (tex, lo, hi) = gltf_texture(fit);
-    crate::image_io::write_png_rgb8(&out.join("thickness_gltf.png"), w, h, tex)
-        .context("writing thickness_gltf.png")?;
-    let xml = material_xml(fit, set);
-    crate::image_io::write_atomically(&out.join("material.xml"), |p| {
-        Ok(std::fs::write(p, xml.as_bytes())?)
-    })?;
-    let gltf =
-        serde_json::to_string_pretty(&material_gltf(fit, set, lo, hi, "thickness_gltf.png"))?;
-    crate::image_io::write_atomically(&out.join("material.gltf"), |p| {
-        Ok(std::fs::write(p, gltf.as_bytes())?)
-    })?;
-    let text = serde_json::to_string_pretty(json)?;
-    crate::image_io::write_atomically(&out.join("fit.json"), |p| {
-        Ok(std::fs::write(p, text.as_bytes())?)
-    })?;
+    fitted_material(set, fit).write_files(out, &format!("thinfilm estimate ({})", fit.method))?;
+    json.write(&out.join(crate::material::FIT_JSON))?;
     Ok(())
 }
 
@@ -578,32 +439,4 @@ pub fn fit_capture_dir(
         io_seconds: io.wall,
         io_cpu_seconds: io.cpu,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Selection-based percentiles equal interpolation between sorted order statistics.
-    #[test]
-    fn percentiles_match_sorted_definition() {
-        let data: Vec<f64> = (0..1001)
-            .map(|i| ((i * 7919) % 1009) as f64 * 0.5)
-            .collect();
-        let mut sorted = data.clone();
-        sorted.sort_by(f64::total_cmp);
-        for q in [0.0, 0.005, 0.05, 0.5, 0.95, 0.995, 1.0] {
-            let x = q * (sorted.len() - 1) as f64;
-            let i = x.floor() as usize;
-            let j = (i + 1).min(sorted.len() - 1);
-            let want = sorted[i] + (sorted[j] - sorted[i]) * (x - i as f64);
-            let mut v = data.clone();
-            assert_eq!(pct(&mut v, q), want, "q={q}");
-        }
-        let single = thickness_stats(&[f32::NAN, 3.0, f32::INFINITY]).unwrap();
-        assert_eq!((single.min, single.median, single.max), (3.0, 3.0, 3.0));
-        let s = thickness_stats(&[4.0, 1.0, 3.0, 2.0]).unwrap();
-        assert_eq!((s.min, s.median, s.max, s.mean), (1.0, 2.5, 4.0, 2.5));
-        assert!(thickness_stats(&[f32::NAN]).is_none());
-    }
 }

@@ -9,6 +9,7 @@ pub mod dispersion;
 pub mod film;
 pub mod film_f32;
 pub mod fresnel;
+pub mod gltf_iridescence;
 pub mod ior;
 pub mod stack;
 

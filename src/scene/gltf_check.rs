@@ -24,14 +24,14 @@ use serde_json::Value;
 use std::path::Path;
 
 /// A validated document with its buffers and decoded images.
-pub(super) type Imported = (
+pub(crate) type Imported = (
     gltf::Document,
     Vec<gltf::buffer::Data>,
     Vec<gltf::image::Data>,
 );
 
 /// Reads, validates and loads `path` (see the module docs).
-pub(super) fn import(path: &Path) -> Result<Imported> {
+pub(crate) fn import(path: &Path) -> Result<Imported> {
     let file = path.display().to_string();
     let bytes = std::fs::read(path).with_context(|| format!("reading glTF {file}"))?;
     if bytes.starts_with(b"glTF") {

@@ -107,23 +107,91 @@ struct Loader<'a> {
     bsdfs: Vec<BsdfDesc>,
 }
 
-impl Loader<'_> {
-    fn texture_image(&self, tex_index: usize) -> Result<(&gltf::image::Data, gltf::Texture<'_>)> {
-        let tex = self
-            .doc
-            .textures()
-            .nth(tex_index)
-            .with_context(|| format!("{}: texture {tex_index} does not exist", self.file))?;
-        let img = self.images.get(tex.source().index()).with_context(|| {
-            format!(
-                "{}: image {} was not loaded",
-                self.file,
-                tex.source().index()
-            )
-        })?;
-        Ok((img, tex))
-    }
+/// The grey conductor n = 1 + ik whose normal-incidence reflectance is the luminance F0 of
+/// a metal's linear base colour: R = ((n−1)² + k²)/((n+1)² + k²) gives k = 2·√(F0/(1−F0)).
+/// The hue of coloured metals is lost.
+pub(crate) fn grey_conductor(r: f32, g: f32, b: f32) -> Ior {
+    let f0 = (0.2126 * r + 0.7152 * g + 0.0722 * b).clamp(0.0, 0.999) as f64;
+    Ior::Constant(Complex64::new(1.0, 2.0 * (f0 / (1.0 - f0)).sqrt()))
+}
 
+/// Texture `tex_index` of `doc` and its decoded image.
+fn texture_image<'a>(
+    doc: &'a gltf::Document,
+    images: &'a [gltf::image::Data],
+    file: &str,
+    tex_index: usize,
+) -> Result<(&'a gltf::image::Data, gltf::Texture<'a>)> {
+    let tex = doc
+        .textures()
+        .nth(tex_index)
+        .with_context(|| format!("{file}: texture {tex_index} does not exist"))?;
+    let img = images
+        .get(tex.source().index())
+        .with_context(|| format!("{file}: image {} was not loaded", tex.source().index()))?;
+    Ok((img, tex))
+}
+
+/// The film of material `m`'s `KHR_materials_iridescence`, if its `iridescenceFactor` is
+/// ≥ 0.5 (a factor in (0, 0.5) is ignored with a warning: the film is on or off): the film
+/// index `iridescenceIor` (default 1.3) and the thickness in nm, `iridescenceThicknessMaximum`
+/// (default 400) or, with `iridescenceThicknessTexture`, its **G** channel v ∈ [0, 1] mapped
+/// through `value_range = (min, max)` (defaults 100, 400). The `material.gltf` reader
+/// ([`crate::material::gltf`]) shares it.
+pub(crate) fn iridescent_film(
+    m: &gltf::Material,
+    doc: &gltf::Document,
+    images: &[gltf::image::Data],
+    what: &str,
+) -> Result<Option<(f64, TextureDesc)>> {
+    let Some(v) = m.extension_value("KHR_materials_iridescence") else {
+        return Ok(None);
+    };
+    let num = |k: &str, d: f64| v.get(k).and_then(|x| x.as_f64()).unwrap_or(d);
+    let factor = num("iridescenceFactor", 0.0);
+    if factor < 0.5 {
+        if factor > 0.0 {
+            eprintln!("warning: {what}: iridescenceFactor {factor} < 0.5 is ignored (thin film is on/off)");
+        }
+        return Ok(None);
+    }
+    let film_n = v
+        .get("iridescenceIor")
+        .or_else(|| v.get("iridescenceIOR"))
+        .and_then(|x| x.as_f64())
+        .unwrap_or(1.3);
+    let tmin = num("iridescenceThicknessMinimum", 100.0) as f32;
+    let tmax = num("iridescenceThicknessMaximum", 400.0) as f32;
+    if !(film_n > 0.0 && tmin >= 0.0 && tmax >= 0.0) {
+        bail!("{what}: iridescence needs ior > 0 and thicknesses ≥ 0");
+    }
+    let thickness_nm = match v.get("iridescenceThicknessTexture") {
+        None => TextureDesc::Value(SpectrumDesc::Constant(tmax)),
+        Some(t) => {
+            let index = t
+                .get("index")
+                .and_then(|x| x.as_u64())
+                .with_context(|| format!("{what}: iridescenceThicknessTexture has no index"))?
+                as usize;
+            if t.get("texCoord").and_then(|x| x.as_u64()).unwrap_or(0) != 0 {
+                eprintln!(
+                    "warning: {what}: thickness texture uses texCoord ≠ 0; TEXCOORD_0 is used"
+                );
+            }
+            let (img, tex) = texture_image(doc, images, what, index)?;
+            // G channel, linear data (not colour).
+            let g = image_channel(img, 1).with_context(|| format!("{what}: thickness texture"))?;
+            let mut b = BitmapTexture::new(img.width as usize, img.height as usize, 1, g)?;
+            b.value_range = Some((tmin, tmax));
+            b.wrap = wrap_mode(tex.sampler().wrap_s());
+            b.filter = filter_of(&tex);
+            TextureDesc::Bitmap(Arc::new(b))
+        }
+    };
+    Ok(Some((film_n, thickness_nm)))
+}
+
+impl Loader<'_> {
     fn material(&mut self, m: &gltf::Material) -> Result<(usize, Option<SpectrumDesc>)> {
         if let Some(v) = self.materials.get(&m.index()) {
             return Ok(v.clone());
@@ -139,44 +207,9 @@ impl Loader<'_> {
         let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
         let alpha = roughness * roughness;
         let ior = m.ior().unwrap_or(1.5) as f64;
-        let irid = m.extension_value("KHR_materials_iridescence");
-        let factor = irid
-            .and_then(|v| v.get("iridescenceFactor"))
-            .and_then(|x| x.as_f64())
-            .unwrap_or(0.0);
-        let bsdf = if factor >= 0.5 {
-            let v = irid.unwrap();
-            let num = |k: &str, d: f64| v.get(k).and_then(|x| x.as_f64()).unwrap_or(d);
-            let film_n = v
-                .get("iridescenceIor")
-                .or_else(|| v.get("iridescenceIOR"))
-                .and_then(|x| x.as_f64())
-                .unwrap_or(1.3);
-            let tmin = num("iridescenceThicknessMinimum", 100.0) as f32;
-            let tmax = num("iridescenceThicknessMaximum", 400.0) as f32;
-            if !(film_n > 0.0 && tmin >= 0.0 && tmax >= 0.0) {
-                bail!("{what}: iridescence needs ior > 0 and thicknesses ≥ 0");
-            }
-            let thickness_nm = match v.get("iridescenceThicknessTexture") {
-                None => TextureDesc::Value(SpectrumDesc::Constant(tmax)),
-                Some(t) => {
-                    let index = t.get("index").and_then(|x| x.as_u64()).with_context(|| {
-                        format!("{what}: iridescenceThicknessTexture has no index")
-                    })? as usize;
-                    if t.get("texCoord").and_then(|x| x.as_u64()).unwrap_or(0) != 0 {
-                        eprintln!("warning: {what}: thickness texture uses texCoord ≠ 0; TEXCOORD_0 is used");
-                    }
-                    let (img, tex) = self.texture_image(index)?;
-                    // G channel, linear data (not colour).
-                    let g = image_channel(img, 1)
-                        .with_context(|| format!("{what}: thickness texture"))?;
-                    let mut b = BitmapTexture::new(img.width as usize, img.height as usize, 1, g)?;
-                    b.value_range = Some((tmin, tmax));
-                    b.wrap = wrap_mode(tex.sampler().wrap_s());
-                    b.filter = filter_of(&tex);
-                    TextureDesc::Bitmap(Arc::new(b))
-                }
-            };
+        let bsdf = if let Some((film_n, thickness_nm)) =
+            iridescent_film(m, self.doc, self.images, &what)?
+        {
             BsdfDesc::ThinFilm {
                 film_ior: Ior::real(film_n),
                 thickness_nm,
@@ -184,9 +217,6 @@ impl Loader<'_> {
                 alpha,
             }
         } else {
-            if factor > 0.0 {
-                eprintln!("warning: {what}: iridescenceFactor {factor} < 0.5 is ignored (thin film is on/off)");
-            }
             let transmission = m
                 .transmission()
                 .map(|t| t.transmission_factor())
@@ -199,11 +229,8 @@ impl Loader<'_> {
                     alpha,
                 }
             } else if pbr.metallic_factor() >= 0.5 {
-                let f0 = (0.2126 * base[0] + 0.7152 * base[1] + 0.0722 * base[2]).clamp(0.0, 0.999)
-                    as f64;
-                let k = 2.0 * (f0 / (1.0 - f0)).sqrt();
                 BsdfDesc::Conductor {
-                    eta: Ior::Constant(Complex64::new(1.0, k)),
+                    eta: grey_conductor(base[0], base[1], base[2]),
                     alpha_u: alpha,
                     alpha_v: alpha,
                 }
@@ -211,7 +238,12 @@ impl Loader<'_> {
                 let diffuse = match pbr.base_color_texture() {
                     None => TextureDesc::Value(SpectrumDesc::Rgb([base[0], base[1], base[2]])),
                     Some(info) => {
-                        let (img, tex) = self.texture_image(info.texture().index())?;
+                        let (img, tex) = texture_image(
+                            self.doc,
+                            self.images,
+                            &self.file,
+                            info.texture().index(),
+                        )?;
                         let planes: Vec<Vec<f32>> = (0..3)
                             .map(|c| image_channel(img, c.min(channel_count(img.format) - 1)))
                             .collect::<Result<_>>()?;

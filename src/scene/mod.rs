@@ -317,7 +317,7 @@ pub enum EmitterDesc {
     },
 }
 
-mod gltf_check;
+pub(crate) mod gltf_check;
 pub mod gltf_scene;
 pub mod meshio;
 pub mod mitsuba;

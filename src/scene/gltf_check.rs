@@ -468,7 +468,8 @@ const MATERIAL_DOMAINS: &[(&str, f64, f64)] = &[
     ("transmissionFactor", 0.0, 1.0),
     ("iridescenceFactor", 0.0, 1.0),
     ("emissiveStrength", 0.0, 1e6),
-    ("ior", 1.0, crate::limits::MAX_IOR),
+    // The substrate's index: below 1 for metals (the fit's material.gltf writes gold's 0.35).
+    ("ior", 1e-6, crate::limits::MAX_IOR),
     ("iridescenceIor", 1.0, crate::limits::MAX_IOR),
     ("iridescenceIOR", 1.0, crate::limits::MAX_IOR),
     (

@@ -34,9 +34,20 @@ pub enum Target {
     Glb,
     /// An EXR texture / image.
     Exr,
+    /// A Mitsuba `.serialized` mesh: the input is its version (`u16`) and its uncompressed
+    /// stream, which the target compresses into a file (the corrupt-container cases are in the
+    /// hostile corpus; mutating the stream itself reaches the parser).
+    Serialized,
+    /// A file a scene `<include>`s (it may include `leaf.xml`, or itself).
+    Include,
+    /// An integer-format bitmap texture: JPEG, BMP, TGA or PPM (by its magic bytes).
+    Image,
+    /// A render piece or a fitted thickness tile (an EXR with provenance attributes), merged
+    /// by `thinfilm merge` with a valid companion piece.
+    Provenance,
 }
 
-pub const ALL: [Target; 9] = [
+pub const ALL: [Target; 13] = [
     Target::EnviHeader,
     Target::EnviCube,
     Target::CaptureJson,
@@ -46,6 +57,10 @@ pub const ALL: [Target; 9] = [
     Target::Gltf,
     Target::Glb,
     Target::Exr,
+    Target::Serialized,
+    Target::Include,
+    Target::Image,
+    Target::Provenance,
 ];
 
 impl Target {
@@ -61,6 +76,10 @@ impl Target {
             Target::Gltf => "gltf",
             Target::Glb => "glb",
             Target::Exr => "exr",
+            Target::Serialized => "serialized",
+            Target::Include => "include",
+            Target::Image => "image",
+            Target::Provenance => "provenance",
         }
     }
 
@@ -109,7 +128,137 @@ pub fn prepare_assets(dir: &Path) -> anyhow::Result<()> {
         &[("R", &plane), ("G", &plane), ("B", &plane)],
     )?;
     thinfilm::image_io::write_png_rgb8(&dir.join("tex.png"), 2, 2, vec![200; 12])?;
+    std::fs::write(
+        dir.join("leaf.xml"),
+        r#"<scene version="3.0.0"><shape type="sphere"><float name="radius" value="0.5"/></shape></scene>"#,
+    )?;
+    let pixels: Vec<[f32; 3]> = (0..16).map(|i| [0.1 * (i % 4) as f32, 0.5, 1.0]).collect();
+    let image = thinfilm::image_io::RgbImage {
+        width: 4,
+        height: 4,
+        pixels,
+    };
+    thinfilm::render::provenance::write_exr(
+        &dir.join("piece_b.exr"),
+        &image,
+        None,
+        &render_info((16, 32)),
+    )?;
+    let y = [400.0f32; 8];
+    thinfilm::image_io::write_exr_channels_with_attributes(
+        &dir.join("tile_b.exr"),
+        4,
+        2,
+        &[("Y", &y)],
+        &tile_info((2, 4)).attributes(),
+    )?;
     Ok(())
+}
+
+fn render_info(sample_range: (u32, u32)) -> thinfilm::render::provenance::RenderInfo {
+    thinfilm::render::provenance::RenderInfo {
+        sample_range,
+        requested_range: sample_range,
+        seed: 7,
+        sampler: "independent".into(),
+        filter: "box".into(),
+        image_hash: 0xdead_beef,
+        version: "0".into(),
+    }
+}
+
+fn tile_info(rows: (usize, usize)) -> thinfilm::estimate::tiles::TileInfo {
+    thinfilm::estimate::tiles::TileInfo {
+        rows,
+        image_height: 4,
+        fit_hash: 0xdead_beef,
+        film_ior: 1.33,
+        version: "0".into(),
+    }
+}
+
+/// A `.serialized` mesh stream: `flags`, the counts and the records of two triangles
+/// (versions 3/4: positions, normals and uvs as f32; version 5: 8-float vertex records).
+fn serialized_stream(version: u16) -> Vec<u8> {
+    let mut b = version.to_le_bytes().to_vec();
+    let positions = [[0f32, 0., 0.], [1., 0., 0.], [0., 1., 0.], [1., 1., 0.]];
+    let uvs = [[0f32, 0.], [1., 0.], [0., 1.], [1., 1.]];
+    let f32s = |b: &mut Vec<u8>, v: &[f32]| v.iter().for_each(|x| b.extend(x.to_le_bytes()));
+    if version == 5 {
+        b.extend((0x1000u32 | 0x1 | 0x4).to_le_bytes());
+        b.extend(4u32.to_le_bytes());
+        b.extend(b"quad");
+        [4u64, 2, 0, 0]
+            .iter()
+            .for_each(|n| b.extend(n.to_le_bytes()));
+        for (p, uv) in positions.iter().zip(&uvs) {
+            f32s(&mut b, p);
+            f32s(&mut b, &[0., 0., 1.]);
+            f32s(&mut b, uv);
+        }
+        [0u32, 1, 2, 0, 1, 3, 2, 0]
+            .iter()
+            .for_each(|i| b.extend(i.to_le_bytes()));
+        b.extend(0u32.to_le_bytes()); // no custom attributes
+    } else {
+        b.extend((0x1000u32 | 0x1 | 0x2).to_le_bytes());
+        if version == 4 {
+            b.extend(b"quad\0");
+        }
+        [4u64, 2].iter().for_each(|n| b.extend(n.to_le_bytes()));
+        positions.iter().for_each(|p| f32s(&mut b, p));
+        positions.iter().for_each(|_| f32s(&mut b, &[0., 0., 1.]));
+        uvs.iter().for_each(|uv| f32s(&mut b, uv));
+        [0u32, 1, 2, 1, 3, 2]
+            .iter()
+            .for_each(|i| b.extend(i.to_le_bytes()));
+    }
+    b
+}
+
+/// A `.serialized` file of one mesh from a [`Target::Serialized`] input.
+fn serialized_file(input: &[u8]) -> Vec<u8> {
+    use std::io::Write;
+    let (version, stream) = input.split_at(input.len().min(2));
+    let mut out = vec![0x1C, 0x04];
+    out.extend(version);
+    out.resize(4, 0);
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+    let _ = z.write_all(stream);
+    out.extend(z.finish().unwrap_or_default());
+    let v3 = version.first() == Some(&3);
+    if v3 {
+        out.extend(0u32.to_le_bytes());
+    } else {
+        out.extend(0u64.to_le_bytes());
+    }
+    out.extend(1u32.to_le_bytes());
+    out
+}
+
+/// Tiny JPEG, BMP, TGA and PPM images.
+fn integer_images() -> Vec<Vec<u8>> {
+    use image::ImageFormat::{Bmp, Jpeg, Pnm, Tga};
+    let img = image::RgbImage::from_fn(5, 3, |x, y| image::Rgb([40 * x as u8, 80 * y as u8, 100]));
+    [Jpeg, Bmp, Tga, Pnm]
+        .into_iter()
+        .map(|f| {
+            let mut out = Vec::new();
+            img.write_to(&mut std::io::Cursor::new(&mut out), f)
+                .expect("encoding a seed image");
+            out
+        })
+        .collect()
+}
+
+/// The file extension of an integer-format image, from its magic bytes.
+fn image_extension(data: &[u8]) -> &'static str {
+    match data {
+        [0xFF, 0xD8, ..] => "jpg",
+        [b'B', b'M', ..] => "bmp",
+        [b'P', ..] => "ppm",
+        _ => "tga",
+    }
 }
 
 /// Valid inputs of each format to start mutating from (files of `prepare_assets` in `dir`).
@@ -147,6 +296,20 @@ property list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 
         Target::Gltf => vec![gltf_json(true).into_bytes()],
         Target::Glb => vec![glb()],
         Target::Exr => vec![std::fs::read(dir.join("tex.exr")).unwrap_or_default()],
+        Target::Serialized => [3, 4, 5].map(serialized_stream).to_vec(),
+        Target::Include => vec![
+            br#"<scene version="3.0.0"><include filename="leaf.xml"/>
+<bsdf type="thinfilm" id="f"><float name="thickness" value="300"/></bsdf>
+<shape type="rectangle"><ref id="f"/><transform name="to_world"><translate z="-1"/></transform></shape>
+</scene>"#
+                .to_vec(),
+            br#"<bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>"#.to_vec(),
+        ],
+        Target::Image => integer_images(),
+        Target::Provenance => vec![
+            std::fs::read(dir.join("piece_b.exr")).unwrap_or_default(),
+            std::fs::read(dir.join("tile_b.exr")).unwrap_or_default(),
+        ],
     }
 }
 
@@ -365,6 +528,63 @@ fn run_inner(target: Target, data: &[u8], dir: &Path) -> anyhow::Result<()> {
             let img = thinfilm::scene::load_rgb_image(&p)?;
             std::hint::black_box((channels.2.len(), img.pixels.len()));
         }
+        Target::Serialized => {
+            std::fs::write(dir.join("input.serialized"), serialized_file(data))?;
+            let xml = r#"<scene version="3.0.0"><shape type="serialized">
+<string name="filename" value="input.serialized"/></shape></scene>"#;
+            std::fs::write(dir.join("serialized.xml"), xml)?;
+            tiny_render(&thinfilm::scene::load(&dir.join("serialized.xml"), &[])?)?;
+        }
+        Target::Include => {
+            write("part.xml")?;
+            let xml = r#"<scene version="3.0.0"><include filename="part.xml"/>
+<shape type="sphere"><float name="radius" value="0.3"/></shape></scene>"#;
+            std::fs::write(dir.join("include.xml"), xml)?;
+            tiny_render(&thinfilm::scene::load(&dir.join("include.xml"), &[])?)?;
+        }
+        Target::Image => {
+            let p = write(&format!("input.{}", image_extension(data)))?;
+            let img = thinfilm::scene::load_rgb_image(&p)?;
+            std::hint::black_box(img.pixels.len());
+        }
+        Target::Provenance => merge_with_companion(&write("piece_a.exr")?, dir)?,
+    }
+    Ok(())
+}
+
+/// `thinfilm merge` of `piece` with the valid companion piece of its kind.
+fn merge_with_companion(piece: &Path, dir: &Path) -> anyhow::Result<()> {
+    use thinfilm::merge::{merge_renders, stitch_tiles, RenderPiece, TilePiece};
+    let exr = thinfilm::image_io::read_exr(piece)?;
+    let what = piece.display().to_string();
+    if exr
+        .attributes
+        .get(thinfilm::render::provenance::KIND)
+        .map(String::as_str)
+        == Some("fit")
+    {
+        let tile = |p: &Path, exr: thinfilm::image_io::ExrFile| -> anyhow::Result<TilePiece> {
+            let info =
+                thinfilm::estimate::tiles::TileInfo::from_attributes(&exr.attributes, &what)?;
+            Ok(TilePiece {
+                path: p.to_path_buf(),
+                info,
+                exr,
+            })
+        };
+        let b = dir.join("tile_b.exr");
+        let pieces = vec![
+            tile(piece, exr)?,
+            tile(&b, thinfilm::image_io::read_exr(&b)?)?,
+        ];
+        std::hint::black_box(stitch_tiles(pieces)?.channels.len());
+    } else {
+        let b = dir.join("piece_b.exr");
+        let pieces = vec![
+            RenderPiece::from_exr(piece, exr)?,
+            RenderPiece::from_exr(&b, thinfilm::image_io::read_exr(&b)?)?,
+        ];
+        std::hint::black_box(merge_renders(pieces)?.image.pixels.len());
     }
     Ok(())
 }

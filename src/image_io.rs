@@ -155,6 +155,21 @@ pub fn write_exr_channels(
     height: usize,
     channels: &[(&str, &[f32])],
 ) -> Result<()> {
+    write_exr_channels_with_attributes(path, width, height, channels, &[])
+}
+
+/// Header attributes of an EXR: `(name, text value)` pairs (OpenEXR `string` attributes, shown
+/// by any EXR header tool); thinfilm writes a render's or a fit's provenance in them.
+pub type Attributes = Vec<(String, String)>;
+
+/// [`write_exr_channels`] plus text attributes in the header.
+pub fn write_exr_channels_with_attributes(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: &[(&str, &[f32])],
+    attributes: &[(String, String)],
+) -> Result<()> {
     for (name, plane) in channels {
         if plane.len() != width * height {
             bail!(
@@ -172,6 +187,12 @@ pub fn write_exr_channels(
             .collect();
         let mut attrs = LayerAttributes::named("");
         attrs.layer_name = None;
+        for (name, value) in attributes {
+            let (Some(n), Some(v)) = (Text::new_or_none(name), Text::new_or_none(value)) else {
+                bail!("EXR attribute {name:?} = {value:?} is not Latin-1 text");
+            };
+            attrs.other.insert(n, AttributeValue::Text(v));
+        }
         let layer = Layer::new(
             (width, height),
             attrs,
@@ -194,13 +215,22 @@ pub type NamedPlane = (String, Vec<f32>);
 const MAX_EXR_EXPANSION: u64 = 2048;
 
 /// Checks an EXR header's declared pixels against the file size and the memory budget
-/// before the decoder allocates them (a flipped byte in a header can declare gigapixels).
-fn check_exr_header(path: &Path) -> Result<()> {
+/// before the decoder allocates them (a flipped byte in a header can declare gigapixels), and
+/// returns the bytes reading the file takes.
+pub fn exr_memory(path: &Path) -> Result<u64> {
+    crate::limits::contain_panics(path, || exr_memory_checked(path))
+}
+
+fn exr_memory_checked(path: &Path) -> Result<u64> {
+    if !path.is_file() {
+        bail!("EXR file {} does not exist", path.display());
+    }
     let file_bytes = std::fs::metadata(path)
         .with_context(|| format!("reading EXR {}", path.display()))?
         .len();
     let meta = exr::meta::MetaData::read_from_file(path, false)
         .map_err(|e| anyhow::anyhow!("{}: not a readable EXR header: {e}", path.display()))?;
+    let mut total = 0u64;
     for (i, h) in meta.headers.iter().enumerate() {
         let (w, ht) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
         let sample_bytes: u64 = h
@@ -230,24 +260,49 @@ fn check_exr_header(path: &Path) -> Result<()> {
         }
         // Decoded samples, their f32 copies and an RGB image made from them.
         let channels = h.channels.list.len() as u64;
+        let bytes = raw.saturating_add((w * ht).saturating_mul(4 * channels + 12));
         crate::limits::check_alloc(
             format!("{}: {w}×{ht} pixels × {channels} channels", path.display()),
-            raw.saturating_add((w * ht).saturating_mul(4 * channels + 12)),
+            bytes,
         )?;
+        total = total.saturating_add(bytes);
     }
-    Ok(())
+    Ok(total)
 }
 
 /// Reads every channel of the first layer as f32 planes: `(width, height, [(name, plane)])`.
 pub fn read_exr_channels(path: &Path) -> Result<(usize, usize, Vec<NamedPlane>)> {
-    crate::limits::contain_panics(path, || read_exr_channels_checked(path))
+    let e = read_exr(path)?;
+    Ok((e.width, e.height, e.channels))
 }
 
-fn read_exr_channels_checked(path: &Path) -> Result<(usize, usize, Vec<NamedPlane>)> {
-    if !path.is_file() {
-        bail!("EXR file {} does not exist", path.display());
+/// An EXR's first layer: its float planes and its text header attributes.
+#[derive(Debug, Clone)]
+pub struct ExrFile {
+    pub width: usize,
+    pub height: usize,
+    pub channels: Vec<NamedPlane>,
+    /// Text attributes of the header, by name (other attribute types are left out).
+    pub attributes: std::collections::BTreeMap<String, String>,
+}
+
+impl ExrFile {
+    /// The plane of channel `name`, if there is one.
+    pub fn channel(&self, name: &str) -> Option<&[f32]> {
+        self.channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.as_slice())
     }
-    check_exr_header(path)?;
+}
+
+/// Reads the first layer of an EXR with its text attributes.
+pub fn read_exr(path: &Path) -> Result<ExrFile> {
+    crate::limits::contain_panics(path, || read_exr_checked(path))
+}
+
+fn read_exr_checked(path: &Path) -> Result<ExrFile> {
+    exr_memory_checked(path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -275,7 +330,22 @@ fn read_exr_channels_checked(path: &Path) -> Result<(usize, usize, Vec<NamedPlan
     if channels.is_empty() {
         bail!("{}: the image has no channels", path.display());
     }
-    Ok((w, h, channels))
+    let attributes = image
+        .attributes
+        .other
+        .iter()
+        .chain(&layer.attributes.other)
+        .filter_map(|(k, v)| match v {
+            AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
+            _ => None,
+        })
+        .collect();
+    Ok(ExrFile {
+        width: w,
+        height: h,
+        channels,
+        attributes,
+    })
 }
 
 /// Reads one named channel (e.g. `thickness`).

@@ -141,6 +141,40 @@ pub fn check_index(what: impl Display, ior: &crate::optics::Ior) -> Result<()> {
     Ok(())
 }
 
+/// Reads a whole input file of kind `what` ("scene file", "capture set", …) whose parsed
+/// form takes up to `expansion` times its size in memory. Refuses, with the file's name, what
+/// is not a regular file (a folder, a FIFO or `/dev/zero` would block or never end) and files
+/// whose size times `expansion` exceeds the memory budget; reads at most that size, so a file
+/// that grows while it is read cannot exhaust memory either.
+pub fn read_file(path: &Path, what: &str, expansion: u64) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| anyhow!("{what} {}: {e}", path.display()))?;
+    if !meta.is_file() {
+        bail!("{what} {} is not a regular file", path.display());
+    }
+    let len = meta.len();
+    check_alloc(
+        format!("{what} {} ({len} bytes)", path.display()),
+        len.saturating_mul(expansion.max(1)),
+    )?;
+    let mut bytes = Vec::with_capacity(len as usize);
+    std::fs::File::open(path)
+        .and_then(|f| f.take(len).read_to_end(&mut bytes))
+        .map_err(|e| anyhow!("reading {what} {}: {e}", path.display()))?;
+    Ok(bytes)
+}
+
+/// [`read_file`] for a text file: invalid UTF-8 is an error naming the file and the byte.
+pub fn read_text(path: &Path, what: &str, expansion: u64) -> Result<String> {
+    String::from_utf8(read_file(path, what, expansion)?).map_err(|e| {
+        anyhow!(
+            "{what} {}: not UTF-8 text (invalid byte at offset {})",
+            path.display(),
+            e.utf8_error().valid_up_to()
+        )
+    })
+}
+
 thread_local! {
     /// > 0 while this thread runs inside [`contain_panics`]: the panic hook stays silent.
     static CONTAINED: Cell<u32> = const { Cell::new(0) };

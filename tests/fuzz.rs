@@ -354,6 +354,26 @@ fn fuzz_exr() {
 }
 
 #[test]
+fn fuzz_serialized() {
+    campaign(Target::Serialized);
+}
+
+#[test]
+fn fuzz_include() {
+    campaign(Target::Include);
+}
+
+#[test]
+fn fuzz_image() {
+    campaign(Target::Image);
+}
+
+#[test]
+fn fuzz_provenance() {
+    campaign(Target::Provenance);
+}
+
+#[test]
 fn seeds_are_accepted() {
     // The mutations start from valid files: each seed must load (and render or fit).
     let dir = tempfile::tempdir().unwrap();

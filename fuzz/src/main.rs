@@ -10,7 +10,7 @@ mod targets;
 use std::path::PathBuf;
 
 const USAGE: &str =
-    "usage: thinfilm-fuzz TARGET | thinfilm-fuzz seeds DIR\n  TARGET: envi-header, envi-cube, capture, xml, ply, obj, gltf, glb, exr";
+    "usage: thinfilm-fuzz TARGET | thinfilm-fuzz seeds DIR\n  TARGET: envi-header, envi-cube, capture, xml, ply, obj, gltf, glb, exr,\n          serialized, include, image, provenance";
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();

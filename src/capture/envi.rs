@@ -297,8 +297,7 @@ fn parse_list(value: &str) -> Vec<&str> {
 
 /// Reads and validates an ENVI header.
 pub fn read_header(path: &Path) -> Result<EnviHeader> {
-    let bytes =
-        std::fs::read(path).with_context(|| format!("reading ENVI header {}", path.display()))?;
+    let bytes = crate::limits::read_file(path, "ENVI header", 16)?;
     let text = String::from_utf8_lossy(&bytes);
     parse_header(&text, path)
 }

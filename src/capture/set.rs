@@ -314,8 +314,7 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     } else {
         (path.to_path_buf(), path.join("capture.json"))
     };
-    let text = std::fs::read_to_string(&json)
-        .with_context(|| format!("reading capture set {}", json.display()))?;
+    let text = crate::limits::read_text(&json, "capture set", 16)?;
     let j = json.display();
     let doc: Value = serde_json::from_str(&text).with_context(|| format!("{j}: not valid JSON"))?;
     // Checked by hand first so the message names the field and the allowed values.
@@ -494,8 +493,7 @@ pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
         dir.join("ground_truth")
     };
     let json = gt_dir.join("ground_truth.json");
-    let text = std::fs::read_to_string(&json)
-        .with_context(|| format!("reading ground truth {}", json.display()))?;
+    let text = crate::limits::read_text(&json, "ground truth", 16)?;
     let spec: GroundTruthFile = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a valid ground-truth document", json.display()))?;
     let j = json.display();
@@ -511,7 +509,7 @@ pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
         ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
     crate::limits::check_index(format!("{j}: substrate"), &substrate_ior)?;
     let exr = resolve(&gt_dir, &spec.thickness_exr);
-    let (w, h, thickness_nm) = crate::image_io::read_exr_channel(&exr, "thickness")?;
+    let (w, h, thickness_nm) = crate::material::read_thickness_exr(&exr)?;
     if (w, h) != (spec.width, spec.height) {
         bail!(
             "{}: is {w}×{h} but {j} says {}×{}",

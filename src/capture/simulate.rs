@@ -777,7 +777,12 @@ pub fn write_capture_set(cfg: &SimulateConfig, out: &Path) -> Result<SimulationS
 
     let gt_dir = out.join("ground_truth");
     let exr = gt_dir.join("thickness.exr");
-    crate::image_io::write_exr_channels(&exr, cfg.width, cfg.height, &[("thickness", &thickness)])?;
+    crate::image_io::write_exr_channels(
+        &exr,
+        cfg.width,
+        cfg.height,
+        &[(crate::material::THICKNESS_CHANNEL, &thickness)],
+    )?;
     let gt = json!({
         "format": GROUND_TRUTH_FORMAT,
         "film": ior_to_json(&cfg.film_ior),

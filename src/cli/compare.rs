@@ -1,24 +1,24 @@
 //! `thinfilm compare A.exr B.exr`: error metrics of A against the reference B (RMSE, relMSE,
-//! mean and 95th-percentile ΔE00, mean-colour bias) and an optional A | B | ΔE figure.
+//! mean and 95th-percentile ΔE00, mean-colour bias) and an optional A | B | ΔE figure. Images
+//! whose sizes differ by an integer factor are compared after box-downsampling the larger.
 
+use super::Output;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use thinfilm::compare::figure::{compose_comparison, ComparisonStyle};
-use thinfilm::compare::{check_same_size, compare_images, downsample_box};
+use thinfilm::compare::{compare_images, downsample_box, match_sizes};
 use thinfilm::image_io::read_exr_rgb;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Test image (linear sRGB EXR).
+    /// Test image (linear sRGB EXR). If its size is an integer multiple of the reference's
+    /// (or the other way round), the larger image is box-downsampled to the smaller first.
     pub a: PathBuf,
     /// Reference image (linear sRGB EXR); relative metrics are relative to it.
     pub b: PathBuf,
     /// Write an A | B | ΔE00 heat-map figure (PNG) here.
     #[arg(long)]
     pub figure: Option<PathBuf>,
-    /// Print the metrics as JSON instead of text.
-    #[arg(long)]
-    pub json: bool,
     /// Box-downsample both images by this integer factor first (averages out noise).
     #[arg(long, default_value_t = 1, value_parser = super::args::count)]
     pub downsample: usize,
@@ -30,11 +30,14 @@ pub struct Args {
     pub delta_e_max: Option<f64>,
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, report: Output) -> Result<()> {
     let (an, bn) = (args.a.display().to_string(), args.b.display().to_string());
     let a = read_exr_rgb(&args.a).with_context(|| format!("reading {an}"))?;
     let b = read_exr_rgb(&args.b).with_context(|| format!("reading {bn}"))?;
-    check_same_size(&a, &an, &b, &bn)?;
+    let (a, b, resized) = match_sizes(a, &an, b, &bn)?;
+    if let Some(note) = &resized {
+        report.log(format_args!("note: {note}"));
+    }
     let (a, b) = if args.downsample != 1 {
         (
             downsample_box(&a, args.downsample)?,
@@ -44,9 +47,9 @@ pub fn run(args: Args) -> Result<()> {
         (a, b)
     };
     let m = compare_images(&a, &b).with_context(|| format!("comparing {an} with {bn}"))?;
-    if args.json {
+    if report.json {
         let v = serde_json::json!({
-            "a": an, "b": bn, "downsample": args.downsample, "metrics": m,
+            "a": an, "b": bn, "resized": resized, "downsample": args.downsample, "metrics": m,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
@@ -80,7 +83,7 @@ pub fn run(args: Args) -> Result<()> {
         };
         let fig = compose_comparison(&a, &name(&args.a), &b, &name(&args.b), &m, &style)?;
         fig.save_png(path)?;
-        if !args.json {
+        if !report.json {
             println!("figure:        {}", path.display());
         }
     }

@@ -20,16 +20,13 @@ pub struct Args {
     /// Additive reflectance noise σ of the simulated captures.
     #[arg(long, allow_hyphen_values = true, default_value_t = 0.004, value_parser = super::args::non_negative)]
     noise: f64,
-    /// Hide the progress bar.
-    #[arg(long)]
-    quiet: bool,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
     let mut cfg = DemoConfig {
         out: args.out,
         noise_sigma: args.noise,
-        progress: !args.quiet,
+        progress: report.progress(),
         ..DemoConfig::default()
     };
     (cfg.width, cfg.height) = args.size;

@@ -1,10 +1,11 @@
 //! `thinfilm estimate CAPTURE_DIR --out DIR`: fit the film index and per-pixel thickness
 //! of a capture set and write the fitted material (see `crate::estimate`).
 
-use anyhow::{bail, Result};
+use super::Output;
+use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
-use thinfilm::estimate::{report, Method, Options};
+use thinfilm::estimate::{report as fit_report, Method, Options};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -45,9 +46,13 @@ pub struct Args {
     /// Ignore the headers' FWHM (no band integration in the model).
     #[arg(long)]
     pub no_band_integration: bool,
-    /// No progress bar.
-    #[arg(long)]
-    pub quiet: bool,
+    /// Fit only rows START:END of the capture (a band of a capture too large for one job).
+    /// With --film-ior the band's thickness equals the same rows of the whole fit, bit for
+    /// bit, and `thinfilm merge` stitches the bands' thickness.exr; without it the index is
+    /// fitted from the band's pixels (phase one of a huge capture: index from a band, then
+    /// every band with that index).
+    #[arg(long, value_parser = parse_rows, value_name = "START:END")]
+    pub rows: Option<(usize, usize)>,
 }
 
 /// Most steps a `grid` search may take along the index and along the thickness.
@@ -91,7 +96,13 @@ fn check_ranges(args: &Args) -> Result<()> {
     Ok(())
 }
 
-pub fn run(args: Args) -> Result<()> {
+fn parse_rows(s: &str) -> Result<(usize, usize), String> {
+    thinfilm::render::provenance::parse_range(s)
+        .map(|(a, b)| (a as usize, b as usize))
+        .map_err(|e| format!("{e:#}"))
+}
+
+pub fn run(args: Args, report: Output) -> Result<()> {
     let opts = Options {
         method: args.method,
         film_ior: args.film_ior,
@@ -103,24 +114,25 @@ pub fn run(args: Args) -> Result<()> {
         grid_thickness_step_nm: args.grid_thickness_step_nm,
         grid_pixel_stride: args.grid_pixel_stride,
         band_integration: !args.no_band_integration,
-        progress: !args.quiet,
+        progress: report.progress(),
+        rows: args.rows,
         ..Options::default()
     };
     check_ranges(&args)?;
     let t = Instant::now();
-    let report::FitRun {
+    let fit_report::FitRun {
         fit,
         delta_e: de,
         truth,
         ..
-    } = report::fit_capture_dir(
+    } = fit_report::fit_capture_dir(
         &args.capture_dir,
         &args.out,
         &opts,
         args.ground_truth.as_deref(),
     )?;
     let stats = thinfilm::stats::Summary::of_finite(&fit.thickness_nm);
-    println!(
+    report.text(format_args!(
         "{}: film index {:.4}{}, thickness mean {} nm, residual RMSE {}, ΔE*ab {} (written in {:.2} s to {})",
         fit.method,
         fit.film_ior,
@@ -130,15 +142,24 @@ pub fn run(args: Args) -> Result<()> {
         de.as_ref().map(|d| format!("{d:.2}")).unwrap_or_else(|e| format!("n/a ({e})")),
         t.elapsed().as_secs_f64(),
         args.out.display()
-    );
-    if let Some(t) = truth {
-        println!(
+    ));
+    if let Some(t) = &truth {
+        report.text(format_args!(
             "vs ground truth: |n error| {:.4}, thickness MAE {:.2} nm, mean error {:+.2} nm",
             t.film_ior_abs_error, t.thickness_mae_nm, t.thickness_mean_error_nm
-        );
+        ));
     }
     for w in &fit.warnings {
         eprintln!("warning: {w}");
+    }
+    // The document fit.json holds, plus where it went.
+    if report.json {
+        let path = args.out.join("fit.json");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading back {}", path.display()))?;
+        let mut v: serde_json::Value = serde_json::from_str(&text)?;
+        v["output"] = serde_json::json!(args.out);
+        report.json(&v)?;
     }
     Ok(())
 }

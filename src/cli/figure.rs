@@ -43,11 +43,12 @@ pub struct Args {
     seed: u64,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
     let settings = RenderSettings {
         resolution: args.resolution,
         spp: args.spp,
         seed: args.seed,
+        progress: report.progress(),
         ..RenderSettings::default()
     };
     if args.samples {
@@ -55,6 +56,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let cfg = thinfilm::demo::DemoConfig {
             out: out_dir.clone(),
             render: settings,
+            progress: report.progress(),
             ..Default::default()
         };
         let summary = thinfilm::demo::run(&cfg)?;

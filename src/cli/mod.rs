@@ -8,6 +8,7 @@ mod compare;
 mod demo;
 mod estimate;
 mod figure;
+mod merge;
 mod reflectance;
 mod render;
 mod simulate;
@@ -20,9 +21,69 @@ mod simulate;
 #[derive(Parser, Debug)]
 #[command(name = "thinfilm", version, about, long_about = None, propagate_version = true)]
 pub struct Cli {
+    #[command(flatten)]
+    pub output: Output,
     #[command(subcommand)]
     pub command: Command,
 }
+
+/// How a command reports: flags accepted by every subcommand, before or after its name.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct Output {
+    /// No progress bars and no log lines on stderr (results, warnings and errors still print).
+    /// Progress bars only ever appear on a terminal, for work longer than a second.
+    #[arg(long, global = true)]
+    pub quiet: bool,
+    /// Print one JSON document with the results on stdout instead of text (render, estimate,
+    /// merge, compare, simulate); the log goes to stderr.
+    #[arg(long, global = true)]
+    pub json: bool,
+}
+
+impl Output {
+    pub fn progress(self) -> bool {
+        !self.quiet && !self.json
+    }
+    /// A log line on stderr (hidden by `--quiet`).
+    pub fn log(self, line: impl std::fmt::Display) {
+        if !self.quiet {
+            eprintln!("{line}");
+        }
+    }
+    /// A result line on stdout (text mode only; `--json` prints one document instead).
+    pub fn text(self, line: impl std::fmt::Display) {
+        if !self.json {
+            println!("{line}");
+        }
+    }
+    /// Prints `value` as the JSON document of the run when `--json` was given.
+    pub fn json(self, value: &serde_json::Value) -> anyhow::Result<()> {
+        if self.json {
+            println!("{}", serde_json::to_string_pretty(value)?);
+        }
+        Ok(())
+    }
+    /// Refuses `--json` in commands that have no JSON summary.
+    pub fn no_json(self, command: &str) -> anyhow::Result<()> {
+        if self.json {
+            anyhow::bail!("--json: `thinfilm {command}` has no JSON summary (render, estimate, merge, compare and simulate do)");
+        }
+        Ok(())
+    }
+}
+
+/// Returned when Ctrl-C (or SIGTERM) stopped the work after saving what was done; the
+/// process exits with status 130, as a shell does for an interrupted command.
+#[derive(Debug)]
+pub struct Interrupted;
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("interrupted")
+    }
+}
+
+impl std::error::Error for Interrupted {}
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
@@ -42,20 +103,27 @@ pub enum Command {
     Compare(compare::Args),
     /// Render ground truth vs fitted teapots and compose a labelled figure.
     Figure(figure::Args),
+    /// Merge renders of disjoint sample ranges into one (exactly), or stitch thickness maps
+    /// fitted in row bands (`estimate --rows`) into the whole map.
+    Merge(merge::Args),
     /// Benchmarks: what accuracy costs in time.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
+    let out = cli.output;
     match cli.command {
-        Command::Demo(a) => demo::run(a),
-        Command::Reflectance(a) => reflectance::run(a),
-        Command::Simulate(a) => simulate::run(a),
-        Command::Estimate(a) => estimate::run(a),
-        Command::Render(a) => render::run(a),
-        Command::Compare(a) => compare::run(a),
-        Command::Figure(a) => figure::run(a),
-        Command::Bench(b) => bench::run(b),
+        Command::Demo(a) => out.no_json("demo").and_then(|()| demo::run(a, out)),
+        Command::Reflectance(a) => out
+            .no_json("reflectance (use --format json)")
+            .and_then(|()| reflectance::run(a)),
+        Command::Simulate(a) => simulate::run(a, out),
+        Command::Estimate(a) => estimate::run(a, out),
+        Command::Render(a) => render::run(a, out),
+        Command::Compare(a) => compare::run(a, out),
+        Command::Figure(a) => out.no_json("figure").and_then(|()| figure::run(a, out)),
+        Command::Merge(a) => merge::run(a, out),
+        Command::Bench(b) => out.no_json("bench").and_then(|()| bench::run(b)),
     }
 }

@@ -1,10 +1,16 @@
 //! `thinfilm render SCENE -o OUT.exr`: renders a Mitsuba 3 XML / glTF / OBJ / PLY scene with the
-//! spectral path tracer; writes linear sRGB EXR (`R`,`G`,`B` float32) and a tone-mapped PNG
-//! beside it, and prints time, samples/s and rays/s.
+//! spectral path tracer; writes linear sRGB EXR (`R`,`G`,`B` float32, the render's provenance
+//! in the header) and a tone-mapped PNG beside it, and prints time, samples/s and rays/s.
+//! Ctrl-C (or SIGTERM) saves the completed sample passes as `OUT.samples-A-B.exr` and prints
+//! the commands that finish the render exactly.
 
+use super::{Interrupted, Output};
 use anyhow::{bail, Context, Result};
-use std::path::PathBuf;
-use thinfilm::render::{render, RenderOptions};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use thinfilm::render::provenance::{self, RenderInfo};
+use thinfilm::render::{prepare, render_prepared, Cancel, RenderOptions};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -33,8 +39,9 @@ pub struct Args {
     /// Image size WxH (overrides the scene's film).
     #[arg(long, value_parser = parse_resolution)]
     pub resolution: Option<(u32, u32)>,
-    /// Render only global sample indices START:END (split a render; merge renders of
-    /// power-of-two-aligned ranges by sample-weighted mean to reproduce the full render exactly).
+    /// Render only global sample indices START:END, to split a render over processes or
+    /// machines; `thinfilm merge` puts the pieces together, bit-identical to one render when
+    /// the ranges are powers of two aligned like 0:16 16:32 32:64 64:128.
     #[arg(long, value_parser = parse_range)]
     pub sample_range: Option<(u32, u32)>,
     /// Scene parameter `key=value` (Mitsuba `-D`), fills `$key` / `<default name="key">`.
@@ -104,7 +111,75 @@ fn parse_define(s: &str) -> Result<(String, String), String> {
     Ok((k.trim().to_string(), v.to_string()))
 }
 
-pub fn run(args: Args) -> Result<()> {
+/// Raises the returned flag on Ctrl-C or SIGTERM (a batch system's time limit or `scancel`),
+/// so the render stops after the rows in flight and saves what it has; a second signal ends
+/// the process at once.
+fn cancel_on_interrupt() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let f = flag.clone();
+    let installed = ctrlc::set_handler(move || {
+        if f.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        eprintln!(
+            "\ninterrupt: finishing the rows in flight, then saving the completed sample passes \
+             (interrupt again to quit at once)"
+        );
+    });
+    if let Err(e) = installed {
+        eprintln!("note: Ctrl-C will not save a partial render ({e})");
+    }
+    flag
+}
+
+/// `out.exr` → `out.samples-A-B.exr`: where a piece of a split render goes.
+fn piece_path(output: &Path, (a, b): (u32, u32)) -> PathBuf {
+    let stem = output
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    output.with_file_name(format!("{stem}.samples-{a}-{b}.exr"))
+}
+
+/// This command line with the output and sample range replaced (for the resume hint).
+fn command_for(output: &Path, range: (u32, u32)) -> String {
+    let mut args: Vec<String> = Vec::new();
+    let mut skip = false;
+    for (i, a) in std::env::args().enumerate() {
+        if std::mem::take(&mut skip) {
+            continue;
+        }
+        if i == 0 {
+            args.push("thinfilm".into());
+            continue;
+        }
+        match a.as_str() {
+            "-o" | "--output" | "--sample-range" => skip = true,
+            _ if a.starts_with("--output=")
+                || a.starts_with("--sample-range=")
+                || (a.starts_with("-o") && a.len() > 2 && !a.starts_with("--")) => {}
+            _ => args.push(a),
+        }
+    }
+    args.push("--sample-range".into());
+    args.push(format!("{}:{}", range.0, range.1));
+    args.push("-o".into());
+    args.push(output.display().to_string());
+    args.iter()
+        .map(|a| {
+            if a.chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_./:=,+@%".contains(c))
+            {
+                a.clone()
+            } else {
+                format!("'{}'", a.replace('\'', r"'\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+pub fn run(args: Args, report: Output) -> Result<()> {
     let ext = args
         .output
         .extension()
@@ -125,39 +200,51 @@ pub fn run(args: Args) -> Result<()> {
         sample_range: args.sample_range,
         sampler: args.sampler,
         fresnel_splits: args.fresnel_splits,
-        progress: true,
+        progress: report.progress(),
+        cancel: Some(Cancel::on_flag(cancel_on_interrupt())),
     };
-    let out =
-        render(&scene, &options).with_context(|| format!("rendering {}", args.scene.display()))?;
-    eprintln!("effects:\n{}", out.effects);
-    thinfilm::image_io::write_exr_rgb(&args.output, &out.image)?;
-    let png = args.output.with_extension("png");
+    let t0 = std::time::Instant::now();
+    let prepared =
+        prepare(&scene, &options).with_context(|| format!("preparing {}", args.scene.display()))?;
+    let setup = t0.elapsed().as_secs_f64();
+    // The provenance hash formats the whole scene; it runs beside the render.
+    let (out, info) = std::thread::scope(|s| {
+        let info = s.spawn(|| RenderInfo::new(&scene, &prepared, prepared.sample_range));
+        let out = render_prepared(&prepared, &options);
+        (out, info.join())
+    });
+    let mut out = out.with_context(|| format!("rendering {}", args.scene.display()))?;
+    let mut info = info.map_err(|_| anyhow::anyhow!("hashing the scene failed"))?;
+    info.sample_range = out.sample_range;
+    out.stats.setup_seconds = setup;
+    report.log(format_args!("effects:\n{}", out.effects));
+    let path = if out.interrupted {
+        piece_path(&args.output, out.sample_range)
+    } else {
+        args.output.clone()
+    };
+    provenance::write_exr(&path, &out.image, out.filter_weights.as_deref(), &info)?;
+    let png = path.with_extension("png");
     thinfilm::image_io::write_png_tonemapped(&png, &out.image, args.exposure)?;
     let s = &out.stats;
-    println!(
-        "rendered {}×{} samples {}:{} in {:.3} s (+{:.3} s setup, {} threads, {} triangles)",
-        out.image.width,
-        out.image.height,
-        out.sample_range.0,
-        out.sample_range.1,
-        s.seconds,
-        s.setup_seconds,
-        s.threads,
-        s.triangles
-    );
-    println!(
+    let (r0, r1) = out.sample_range;
+    report.text(format_args!(
+        "rendered {}×{} samples {r0}:{r1} in {:.3} s (+{:.3} s setup, {} threads, {} triangles)",
+        out.image.width, out.image.height, s.seconds, s.setup_seconds, s.threads, s.triangles
+    ));
+    report.text(format_args!(
         "{:.3} Msamples/s, {:.3} Mrays/s ({} camera/bounce + {} shadow rays), {} thin-film evaluations",
         s.samples_per_second() / 1e6,
         s.rays_per_second() / 1e6,
         s.rays,
         s.shadow_rays,
         s.film_evals
-    );
+    ));
     if s.secondary_terminations > 0 {
-        println!(
+        report.text(format_args!(
             "dispersion: {} paths kept only their hero wavelength after a dispersive refraction",
             s.secondary_terminations
-        );
+        ));
     }
     if s.invalid_samples > 0 {
         eprintln!(
@@ -166,11 +253,57 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     if s.degenerate_triangles > 0 {
-        eprintln!(
+        report.log(format_args!(
             "note: {} degenerate triangles were skipped",
             s.degenerate_triangles
-        );
+        ));
     }
-    println!("wrote {} and {}", args.output.display(), png.display());
+    report.text(format_args!(
+        "wrote {} and {}",
+        path.display(),
+        png.display()
+    ));
+    let resume = if out.interrupted {
+        thinfilm::render::passes::remaining_nodes(out.requested_range, r1)
+    } else {
+        Vec::new()
+    };
+    report.json(&serde_json::json!({
+        "output": path,
+        "png": png,
+        "width": out.image.width,
+        "height": out.image.height,
+        "sample_range": [r0, r1],
+        "requested_range": [out.requested_range.0, out.requested_range.1],
+        "interrupted": out.interrupted,
+        "resume_sample_ranges": resume.iter().map(|&(a, b)| [a, b]).collect::<Vec<_>>(),
+        "image_hash": format!("{:016x}", info.image_hash),
+        "seconds": s.seconds,
+        "setup_seconds": s.setup_seconds,
+        "threads": s.threads,
+        "samples": s.samples,
+        "samples_per_second": s.samples_per_second(),
+        "rays_per_second": s.rays_per_second(),
+        "invalid_samples": s.invalid_samples,
+    }))?;
+    if out.interrupted {
+        let (q0, q1) = out.requested_range;
+        let mut pieces = vec![path.display().to_string()];
+        let mut lines = Vec::new();
+        for &range in &resume {
+            let piece = piece_path(&args.output, range);
+            lines.push(format!("  {}", command_for(&piece, range)));
+            pieces.push(piece.display().to_string());
+        }
+        eprintln!(
+            "interrupted: {} holds samples {r0}:{r1} of {q0}:{q1} (a whole number of \
+             power-of-two sample passes). To finish the render exactly, run\n{}\n  thinfilm merge {} -o {}",
+            path.display(),
+            lines.join("\n"),
+            pieces.join(" "),
+            args.output.display()
+        );
+        return Err(Interrupted.into());
+    }
     Ok(())
 }

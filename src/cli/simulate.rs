@@ -83,7 +83,7 @@ pub struct Options {
 }
 
 /// Builds the configuration: preset (or defaults), then every explicit option.
-pub fn config(args: &Options) -> anyhow::Result<SimulateConfig> {
+pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> {
     let mut cfg = match &args.preset {
         Some(p) => SimulateConfig::preset(p)?,
         None => SimulateConfig::default(),
@@ -147,16 +147,17 @@ pub fn config(args: &Options) -> anyhow::Result<SimulateConfig> {
     if let Some(v) = args.interleave {
         cfg.interleave = v;
     }
-    cfg.progress = true;
+    cfg.progress = progress;
     cfg.validate().context("simulate options")?;
     Ok(cfg)
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    let cfg = config(&args.options)?;
+pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
+    let cfg = config(&args.options, report.progress())?;
     let summary = write_capture_set(&cfg, &args.options.out)?;
     let stats = thinfilm::capture::simulate::thickness_stats(&summary.thickness_nm);
-    eprintln!(
+    let stat = |k: &str| stats[k].as_f64().unwrap_or(f64::NAN);
+    report.log(format_args!(
         "wrote {} ({} angles, {}×{} px, {} bands); ground truth {} (thickness mean {:.1} nm, range {:.1}–{:.1} nm)",
         summary.capture_json.display(),
         cfg.angles_deg.len(),
@@ -164,9 +165,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cfg.height,
         cfg.wavelengths_nm.len(),
         summary.ground_truth_json.display(),
-        stats["mean"].as_f64().unwrap_or(f64::NAN),
-        stats["min"].as_f64().unwrap_or(f64::NAN),
-        stats["max"].as_f64().unwrap_or(f64::NAN),
-    );
-    Ok(())
+        stat("mean"),
+        stat("min"),
+        stat("max"),
+    ));
+    report.json(&serde_json::json!({
+        "capture_json": summary.capture_json,
+        "ground_truth_json": summary.ground_truth_json,
+        "angles_deg": cfg.angles_deg,
+        "width": cfg.width,
+        "height": cfg.height,
+        "bands": cfg.wavelengths_nm.len(),
+        "thickness_nm": stats,
+    }))
 }

@@ -63,6 +63,51 @@ pub fn check_same_size(a: &RgbImage, a_label: &str, b: &RgbImage, b_label: &str)
     Ok(())
 }
 
+/// Brings two images to one size for comparison: equal sizes pass unchanged; when one is an
+/// integer multiple `k` of the other in both directions (a render at 4× the reference's
+/// resolution, say), the larger is box-downsampled by `k` (each output pixel the mean of a
+/// k×k block, which is what rendering at the smaller size estimates). Returns the images and,
+/// when it resized one, a sentence saying so. Other size differences are an error.
+pub fn match_sizes(
+    a: RgbImage,
+    a_label: &str,
+    b: RgbImage,
+    b_label: &str,
+) -> Result<(RgbImage, RgbImage, Option<String>)> {
+    let factor = |big: &RgbImage, small: &RgbImage| -> Option<usize> {
+        (small.width > 0
+            && small.height > 0
+            && big.width % small.width == 0
+            && big.height % small.height == 0
+            && big.width / small.width == big.height / small.height)
+            .then(|| big.width / small.width)
+    };
+    let note = |big: &RgbImage, label: &str, k: usize, small: &RgbImage| {
+        format!(
+            "{label} ({}×{}) box-downsampled by {k} to {}×{} to match the other image",
+            big.width, big.height, small.width, small.height
+        )
+    };
+    if (a.width, a.height) == (b.width, b.height) {
+        return Ok((a, b, None));
+    }
+    if let Some(k) = factor(&a, &b) {
+        let n = note(&a, a_label, k, &b);
+        return Ok((downsample_box(&a, k)?, b, Some(n)));
+    }
+    if let Some(k) = factor(&b, &a) {
+        let n = note(&b, b_label, k, &a);
+        return Ok((a, downsample_box(&b, k)?, Some(n)));
+    }
+    bail!(
+        "image sizes differ: {a_label} is {}×{}, {b_label} is {}×{} (sizes must be equal or          differ by one integer factor in both directions)",
+        a.width,
+        a.height,
+        b.width,
+        b.height
+    )
+}
+
 fn check_finite(img: &RgbImage, label: &str) -> Result<()> {
     if let Some(i) = img
         .pixels

@@ -12,5 +12,6 @@ pub mod references;
 
 pub use figure::{compose_comparison, Canvas, Colormap};
 pub use metrics::{
-    check_same_size, compare_images, delta_e00_map, downsample_box, ImageMetrics, RELMSE_EPSILON,
+    check_same_size, compare_images, delta_e00_map, downsample_box, match_sizes, ImageMetrics,
+    RELMSE_EPSILON,
 };

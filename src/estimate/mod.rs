@@ -21,6 +21,7 @@ pub mod peaks;
 pub mod report;
 pub mod synth;
 pub mod table;
+pub mod tiles;
 
 use crate::capture::CaptureSet;
 use anyhow::{bail, Result};
@@ -115,6 +116,9 @@ pub struct Options {
     /// Pixels used for the joint (n, d) refinement of `full`.
     pub joint_pixels: usize,
     pub progress: bool,
+    /// Fit only rows `[A, B)`: the index from their pixels (unless given), their thickness
+    /// exactly as in the whole fit ([`tiles`]). `None`: every row.
+    pub rows: Option<(usize, usize)>,
 }
 
 impl Default for Options {
@@ -132,6 +136,7 @@ impl Default for Options {
             band_integration: true,
             joint_pixels: 256,
             progress: false,
+            rows: None,
         }
     }
 }
@@ -146,8 +151,13 @@ pub struct Fit {
     /// How the index was obtained / why it has no uncertainty.
     pub film_ior_note: String,
     pub width: usize,
+    /// Rows in this fit (`rows.1 − rows.0`).
     pub height: usize,
-    /// Per pixel, nm, NaN where no thickness was fitted.
+    /// Rows `[A, B)` of the capture this fit covers (all of them unless `--rows`).
+    pub rows: (usize, usize),
+    /// What the thickness map is, for its EXR header (`thinfilm merge` stitches by it).
+    pub provenance: tiles::TileInfo,
+    /// Per pixel of `rows`, nm, NaN where no thickness was fitted.
     pub thickness_nm: Vec<f32>,
     /// Per pixel residual sum of squares and sample count.
     pub sse: Vec<f32>,
@@ -247,6 +257,9 @@ fn check_set(set: &CaptureSet) -> Result<()> {
 /// Runs the chosen estimator.
 pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     check_set(set)?;
+    if let Some(rows) = opts.rows {
+        tiles::check_rows(rows, set.height)?;
+    }
     if let Some(n) = opts.film_ior {
         if !(n.is_finite() && n > 0.0) {
             bail!("--film-ior must be a finite positive index, got {n}");
@@ -484,7 +497,9 @@ struct Thickness {
 /// Fits d for every pixel with the index fixed. Small images: global search everywhere.
 /// Large ones: global search on a seed lattice, propagation (GN from interpolated seeds)
 /// elsewhere, global search again only where the propagated fit is poor. Then order jumps
-/// are removed with the spatial smoothness of d (seed assumption 3).
+/// are removed with the spatial smoothness of d (seed assumption 3). With `opts.rows`, only
+/// those rows (and the halo their order resolution reads) are fitted, from the seeds of the
+/// whole image, so they come out exactly as in the whole fit ([`tiles`]); other rows stay NaN.
 fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> Thickness {
     let model = geom.model(n);
     let solver = DSolver::with_table(&model, geom, opts);
@@ -497,10 +512,12 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
     let mut d = vec![f32::NAN; w * h];
     let mut sse = vec![0f32; w * h];
     let mut samples = vec![0u32; w * h];
+    let (r0, r1) = tiles::compute_rows(fitted_rows(set, opts), h);
 
-    let pb = progress_bar(opts, w * h, "thickness");
-    // 1. Seeds.
-    let seeds: Vec<usize> = (0..h)
+    // 1. Seeds: every pixel of the computed rows when there is no propagation (stride 1),
+    // otherwise the lattice over the whole image (a band propagates from the same seeds).
+    let seed_rows = if stride == 1 { r0..r1 } else { 0..h };
+    let seeds: Vec<usize> = seed_rows
         .step_by(stride)
         .flat_map(|y| (0..w).step_by(stride).map(move |x| y * w + x))
         .collect();
@@ -518,7 +535,8 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
             },
         )
         .collect();
-    pb.inc(seeds.len() as u64);
+    let pb = progress_bar(opts, w * (r1 - r0), "thickness");
+    pb.inc((seeds.len() as u64).min(pb.length().unwrap_or(0)));
     for (p, dd, s, c) in seed_fits {
         d[p] = dd;
         sse[p] = s;
@@ -539,7 +557,7 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
         let typical = median(&mut seed_rmse).unwrap_or(0.0);
         // A fit this good is taken as the right order (no global search).
         let good_rmse = 2.0 * typical + 1e-4;
-        let rows: Vec<(usize, Vec<(f32, f32, u32)>)> = (0..h)
+        let rows: Vec<(usize, Vec<(f32, f32, u32)>)> = (r0..r1)
             .into_par_iter()
             .map_init(
                 || (vec![0f32; na * nb], vec![false; na]),
@@ -606,17 +624,15 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
                 samples[p] = c;
             }
         }
-    } else {
-        pb.inc((w * h - seeds.len()) as u64);
     }
     pb.finish_and_clear();
     // 3. Spatial order resolution: where d jumps from its neighbourhood median by more
     // than a fraction of a fringe, re-fit from the median and keep it when the fit is
     // about as good (an order jump with equal residual is the smoothness prior's call).
     for _ in 0..2 {
-        let med = median_filter(&d, w, h, 2);
+        let med = median_filter(&d, w, h, 2, (r0, r1));
         let tau = solver.scan_step * 2.0;
-        let changes: Vec<(usize, f32, f32)> = (0..w * h)
+        let changes: Vec<(usize, f32, f32)> = (r0 * w..r1 * w)
             .into_par_iter()
             .filter(|&p| {
                 d[p].is_finite() && med[p].is_finite() && (d[p] - med[p]).abs() as f64 > tau
@@ -643,6 +659,14 @@ fn fit_thickness(set: &CaptureSet, geom: &Geometry, n: f64, opts: &Options) -> T
             sse[p] = s;
         }
     }
+    // Keep the fitted rows only.
+    let (a, b) = fitted_rows(set, opts);
+    for v in [&mut d, &mut sse] {
+        v.truncate(b * w);
+        v.drain(..a * w);
+    }
+    samples.truncate(b * w);
+    samples.drain(..a * w);
     Thickness { d, sse, samples }
 }
 
@@ -679,12 +703,16 @@ fn interpolate_seed(
     (wsum > 0.0).then(|| acc / wsum)
 }
 
-/// Median over the (2r+1)² neighbourhood, ignoring NaN.
-fn median_filter(d: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+/// Median over the (2r+1)² neighbourhood, ignoring NaN, for the pixels of `rows` (NaN
+/// elsewhere).
+fn median_filter(d: &[f32], w: usize, h: usize, r: usize, rows: (usize, usize)) -> Vec<f32> {
     (0..w * h)
         .into_par_iter()
         .map_init(Vec::new, |buf: &mut Vec<f32>, p| {
             let (x, y) = (p % w, p / w);
+            if !(rows.0..rows.1).contains(&y) {
+                return f32::NAN;
+            }
             buf.clear();
             for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
                 for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
@@ -703,11 +731,22 @@ fn median_filter(d: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
         .collect()
 }
 
-/// Pixels usable for index estimation (≥ 2 angles).
-fn multi_angle_pixels(set: &CaptureSet) -> Vec<usize> {
-    (0..set.width * set.height)
+/// Pixels usable for index estimation (≥ 2 angles), of the fitted rows.
+fn multi_angle_pixels(set: &CaptureSet, opts: &Options) -> Vec<usize> {
+    row_pixels(set, opts)
         .filter(|&p| set.angles.iter().filter(|a| a.valid[p]).count() >= 2)
         .collect()
+}
+
+/// Rows `[A, B)` the fit covers.
+fn fitted_rows(set: &CaptureSet, opts: &Options) -> (usize, usize) {
+    opts.rows.unwrap_or((0, set.height))
+}
+
+/// Pixel indices of the fitted rows.
+fn row_pixels(set: &CaptureSet, opts: &Options) -> std::ops::Range<usize> {
+    let (a, b) = fitted_rows(set, opts);
+    a * set.width..b * set.width
 }
 
 /// Angle order by increasing n1 sinθ (peaks move to shorter wavelengths along it).
@@ -1003,7 +1042,7 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         (n, None, "given (--film-ior)".to_string())
     } else {
         let t = Stopwatch::start();
-        let pixels = multi_angle_pixels(set);
+        let pixels = multi_angle_pixels(set, opts);
         if pixels.is_empty() {
             bail!("no pixel is valid at two or more angles: the film index cannot be estimated");
         }
@@ -1065,6 +1104,7 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     t.stop("thickness", &mut stages);
     Ok(finish(
         set,
+        opts,
         Method::Full,
         n,
         sigma,
@@ -1075,9 +1115,11 @@ fn full(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     ))
 }
 
+/// The fit of the rows `opts.rows` (`th` holds exactly those rows).
 #[allow(clippy::too_many_arguments)]
 fn finish(
     set: &CaptureSet,
+    opts: &Options,
     method: Method,
     n: f64,
     sigma: Option<f64>,
@@ -1086,7 +1128,11 @@ fn finish(
     stages: Stages,
     warnings: Vec<String>,
 ) -> Fit {
-    let invalid = (0..set.width * set.height)
+    let rows = fitted_rows(set, opts);
+    let pixels = row_pixels(set, opts);
+    let count = pixels.len();
+    debug_assert_eq!(th.d.len(), count);
+    let invalid = pixels
         .filter(|&p| !set.angles.iter().any(|a| a.valid[p]))
         .count();
     let fitted = th.d.iter().filter(|d| d.is_finite()).count();
@@ -1096,10 +1142,16 @@ fn finish(
         film_ior_sigma: sigma.filter(|s| s.is_finite()),
         film_ior_note: note,
         width: set.width,
-        height: set.height,
-        unfitted_pixels: set.width * set.height
-            - invalid
-            - fitted.min(set.width * set.height - invalid),
+        height: rows.1 - rows.0,
+        rows,
+        provenance: tiles::TileInfo {
+            rows,
+            image_height: set.height,
+            fit_hash: tiles::fit_hash(set, n, opts),
+            film_ior: n,
+            version: env!("CARGO_PKG_VERSION").to_string(),
+        },
+        unfitted_pixels: count - invalid - fitted.min(count - invalid),
         thickness_nm: th.d,
         sse: th.sse,
         samples: th.samples,
@@ -1133,11 +1185,11 @@ fn paper(set: &CaptureSet, opts: &Options) -> Result<Fit> {
             })
             .collect()
     };
-    let all: Vec<usize> = (0..set.width * set.height).collect();
+    let all: Vec<usize> = row_pixels(set, opts).collect();
     let (n, note) = if let Some(n) = opts.film_ior {
         (n, "given (--film-ior)".to_string())
     } else {
-        let sub = spread(&multi_angle_pixels(set), 4096);
+        let sub = spread(&multi_angle_pixels(set, opts), 4096);
         let mut ests: Vec<f64> = sub
             .par_iter()
             .map_init(
@@ -1237,6 +1289,7 @@ fn paper(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     };
     Ok(finish(
         set,
+        opts,
         Method::Paper,
         n,
         None,
@@ -1253,7 +1306,7 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let geom = Geometry::from_capture(set, opts.band_integration);
     let px = Pixels::new(set);
     let (na, nb) = (set.angles.len(), set.bands());
-    let (w, h) = (set.width, set.height);
+    let w = set.width;
     let mut stages = Stages::default();
     let d_steps = ((opts.max_thickness_nm - opts.min_thickness_nm) / opts.grid_thickness_step_nm)
         .floor() as usize
@@ -1270,7 +1323,8 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         (n, "given (--film-ior)".to_string())
     } else {
         let stride = opts.grid_pixel_stride.max(1);
-        let sub: Vec<usize> = (0..h)
+        let (r0, r1) = fitted_rows(set, opts);
+        let sub: Vec<usize> = (r0..r1)
             .step_by(stride)
             .flat_map(|y| (0..w).step_by(stride).map(move |x| y * w + x))
             .filter(|&p| set.angles.iter().filter(|a| a.valid[p]).count() >= 2)
@@ -1318,7 +1372,7 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     t.stop("index_grid", &mut stages);
     let t = Stopwatch::start();
     let m = geom.model(n);
-    let res: Vec<(f32, f32, u32)> = (0..w * h)
+    let res: Vec<(f32, f32, u32)> = row_pixels(set, opts)
         .into_par_iter()
         .map_init(
             || (vec![0f32; na * nb], vec![false; na]),
@@ -1341,6 +1395,7 @@ fn grid(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let sigma = Some(opts.grid_ior_step / 12f64.sqrt());
     Ok(finish(
         set,
+        opts,
         Method::Grid,
         n,
         sigma,

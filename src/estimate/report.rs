@@ -54,6 +54,8 @@ pub fn mean_delta_e(
         .collect();
     let pixels = super::spread(&fitted, max_pixels);
     let nb = set.bands();
+    // Fit pixel p is capture pixel p + offset (a fit of rows A:B starts at row A).
+    let offset = fit.rows.0 * set.width;
     let lab = |s: &[f32]| {
         let mut xyz = [0.0; 3];
         for (w, &v) in wts.iter().zip(s) {
@@ -72,9 +74,10 @@ pub fn mean_delta_e(
                 || vec![0f32; nb],
                 |r, &p| {
                     let (mut sum, mut count) = (0.0, 0usize);
+                    let q = p + offset;
                     for (a, ang) in set.angles.iter().enumerate() {
-                        let y = &ang.reflectance[p * nb..(p + 1) * nb];
-                        if !ang.valid[p] || y.iter().any(|v| !v.is_finite()) {
+                        let y = &ang.reflectance[q * nb..(q + 1) * nb];
+                        if !ang.valid[q] || y.iter().any(|v| !v.is_finite()) {
                             continue;
                         }
                         model.spectrum(a, fit.thickness_nm[p] as f64, r);
@@ -166,6 +169,7 @@ pub fn fit_json(
         bands: set.bands(),
         width: fit.width,
         height: fit.height,
+        rows: (fit.rows != (0, fit.provenance.image_height)).then_some([fit.rows.0, fit.rows.1]),
         thickness_nm: MapStats::from(stats),
         thickness_nm_reason: stats.is_none().then(|| "no pixel was fitted".into()),
         pixels: PixelCounts {
@@ -366,26 +370,33 @@ fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -
         "residual RMSE (reflectance)",
     )
     .context("writing residual.png")?;
-    fitted_material(set, fit).write_files(out, &format!("thinfilm estimate ({})", fit.method))?;
+    fitted_material(set, fit).write_files_with_provenance(
+        out,
+        &format!("thinfilm estimate ({})", fit.method),
+        &fit.provenance.attributes(),
+    )?;
     json.write(&out.join(crate::material::FIT_JSON))?;
     Ok(())
 }
 
-/// Ground-truth errors from a loaded [`GroundTruth`] (sizes must match).
+/// Ground-truth errors from a loaded [`GroundTruth`] (the capture's size; a fit of some
+/// rows is compared with those rows).
 pub fn truth_from_ground_truth(fit: &Fit, gt: &GroundTruth) -> Result<TruthErrors> {
-    if gt.width != fit.width || gt.height != fit.height {
+    let image_height = fit.provenance.image_height;
+    if gt.width != fit.width || gt.height != image_height {
         anyhow::bail!(
             "ground truth is {}×{} but the capture is {}×{}",
             gt.width,
             gt.height,
             fit.width,
-            fit.height
+            image_height
         );
     }
+    let (a, b) = fit.rows;
     Ok(truth_errors(
         fit,
         gt.film_ior.at(550.0).re,
-        &gt.thickness_nm,
+        &gt.thickness_nm[a * gt.width..b * gt.width],
     ))
 }
 

@@ -65,6 +65,10 @@ pub struct FitFile {
     /// Size of the thickness map, pixels.
     pub width: usize,
     pub height: usize,
+    /// Rows `[A, B)` of the capture the map covers, when the fit covered only those
+    /// (`thinfilm estimate --rows`); absent: every row.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rows: Option<[usize; 2]>,
     /// Statistics of the fitted thickness map (nm).
     pub thickness_nm: MapStats,
     /// Why `thickness_nm` holds nulls.
@@ -145,8 +149,7 @@ pub struct TruthComparison {
 impl FitFile {
     /// Reads and checks `fit.json`: errors name the file and the field.
     pub fn read(path: &Path) -> Result<Self> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = crate::limits::read_text(path, "fit file", 16)?;
         let fit: FitFile = serde_json::from_str(&text)
             .with_context(|| format!("{}: not a valid {FIT_FORMAT} document", path.display()))?;
         if fit.format != FIT_FORMAT {
@@ -230,6 +233,7 @@ mod tests {
             bands: 81,
             width: 4,
             height: 3,
+            rows: None,
             thickness_nm: MapStats::from(Summary::of_finite(&[400.0, 410.0])),
             thickness_nm_reason: None,
             pixels: PixelCounts {

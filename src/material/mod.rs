@@ -117,11 +117,23 @@ impl FilmMaterial {
     /// Writes the material files of a fit folder: `thickness.exr`, `material.xml` (whose
     /// comment starts with `note`), `material.gltf` and its `thickness_gltf.png`.
     pub fn write_files(&self, dir: &Path, note: &str) -> Result<()> {
-        crate::image_io::write_exr_channels(
+        self.write_files_with_provenance(dir, note, &[])
+    }
+
+    /// [`Self::write_files`], with text attributes in `thickness.exr`'s header (a fit's
+    /// provenance, which `thinfilm merge` reads to stitch row bands).
+    pub fn write_files_with_provenance(
+        &self,
+        dir: &Path,
+        note: &str,
+        thickness_attributes: &[(String, String)],
+    ) -> Result<()> {
+        crate::image_io::write_exr_channels_with_attributes(
             &dir.join(THICKNESS_EXR),
             self.width,
             self.height,
             &[(THICKNESS_CHANNEL, &self.thickness_nm)],
+            thickness_attributes,
         )
         .with_context(|| format!("writing {THICKNESS_EXR}"))?;
         let xml = mitsuba::write(self, THICKNESS_EXR, note);

@@ -33,7 +33,7 @@ pub(crate) type Imported = (
 /// Reads, validates and loads `path` (see the module docs).
 pub(crate) fn import(path: &Path) -> Result<Imported> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).with_context(|| format!("reading glTF {file}"))?;
+    let bytes = crate::limits::read_file(path, "glTF", 4)?;
     if bytes.starts_with(b"glTF") {
         check_glb(&bytes, &file)?;
     }

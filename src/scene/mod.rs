@@ -321,6 +321,7 @@ pub(crate) mod gltf_check;
 pub mod gltf_scene;
 pub mod meshio;
 pub mod mitsuba;
+pub mod serialized;
 pub mod shapes;
 pub mod sky;
 pub mod teapot;

@@ -7,7 +7,9 @@
 //!   Bilinear: p = uv·(W,H) − ½, interpolate texels ⌊p⌋ and ⌊p⌋+1 (each wrapped);
 //!   nearest: texel ⌊uv·(W,H)⌋ wrapped.
 //! - Wrap: `repeat` (modulo), `mirror` (period 2W, reflected), `clamp` (to the edge texel).
-//! - 8-bit PNGs are sRGB-decoded to linear unless `raw`; float images (EXR, HDR) are kept.
+//! - 8/16-bit images (PNG, JPEG, BMP, TGA, PPM/PGM) are sRGB-decoded to linear unless `raw`,
+//!   as Mitsuba's `Bitmap` readers mark them sRGB; float images (EXR, HDR) are kept. Alpha is
+//!   dropped; grey images become equal RGB (the same spectrum as Mitsuba's one channel).
 
 use super::{BitmapTexture, TextureFilter, WrapMode};
 use crate::image_io::{self, RgbImage};
@@ -187,16 +189,20 @@ impl BitmapTexture {
     /// `.hdr`: RGB float. `.png`: 8/16-bit, sRGB-decoded unless `raw`.
     pub fn load(path: &Path, raw: bool) -> Result<Self> {
         let ext = extension(path);
+        // Checks of the decoded texels (e.g. a 0×0 image) name the file too.
+        let new = |w, h, c, data| {
+            BitmapTexture::new(w, h, c, data).with_context(|| path.display().to_string())
+        };
         let mut tex = match ext.as_str() {
             "exr" => {
                 let (w, h, channels) = image_io::read_exr_channels(path)?;
                 let find = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, p)| p);
                 if let (Some(r), Some(g), Some(b)) = (find("R"), find("G"), find("B")) {
                     let data = (0..w * h).flat_map(|i| [r[i], g[i], b[i]]).collect();
-                    BitmapTexture::new(w, h, 3, data)?
+                    new(w, h, 3, data)?
                 } else if channels.len() == 1 || find("Y").is_some() {
                     let plane = find("Y").unwrap_or(&channels[0].1).clone();
-                    BitmapTexture::new(w, h, 1, plane)?
+                    new(w, h, 1, plane)?
                 } else {
                     let names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
                     bail!(
@@ -206,14 +212,15 @@ impl BitmapTexture {
                     );
                 }
             }
-            "hdr" | "png" => {
+            e if e == "hdr" || INTEGER_FORMATS.contains(&e) => {
                 let img = load_rgb_image_raw(path, raw)?;
                 let data = img.pixels.iter().flatten().copied().collect();
-                BitmapTexture::new(img.width, img.height, 3, data)?
+                new(img.width, img.height, 3, data)?
             }
             _ => bail!(
-                "{}: unsupported texture format '.{ext}' (use .exr, .hdr or .png)",
-                path.display()
+                "{}: unsupported texture format '.{ext}' ({})",
+                path.display(),
+                SUPPORTED
             ),
         };
         tex.path = Some(path.to_path_buf());
@@ -221,13 +228,18 @@ impl BitmapTexture {
     }
 }
 
+/// Integer-valued image formats, read through the `image` crate and sRGB-decoded unless raw.
+const INTEGER_FORMATS: &[&str] = &["png", "jpg", "jpeg", "bmp", "tga", "ppm", "pgm"];
+const SUPPORTED: &str = "use .exr, .hdr, .png, .jpg, .bmp, .tga or .ppm";
+
 fn extension(path: &Path) -> String {
     path.extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default()
 }
 
-/// Loads an RGB image as linear values: EXR (R,G,B or Y), Radiance HDR, PNG (sRGB-decoded).
+/// Loads an RGB image as linear values: EXR (R,G,B or Y), Radiance HDR, or an integer
+/// format (PNG, JPEG, BMP, TGA, PPM; sRGB-decoded).
 pub fn load_rgb_image(path: &Path) -> Result<RgbImage> {
     load_rgb_image_raw(path, false)
 }
@@ -259,9 +271,9 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
                 pixels,
             })
         }
-        "png" => {
+        e if INTEGER_FORMATS.contains(&e) => {
             let img = image_io::read_image(path, 24)
-                .with_context(|| format!("reading PNG {}", path.display()))?
+                .with_context(|| format!("reading image {}", path.display()))?
                 .to_rgb16();
             let (w, h) = (img.width() as usize, img.height() as usize);
             let pixels = img
@@ -284,7 +296,7 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
             })
         }
         other => bail!(
-            "{}: unsupported image format '.{other}' (use .exr, .hdr or .png)",
+            "{}: unsupported image format '.{other}' ({SUPPORTED})",
             path.display()
         ),
     }
@@ -346,5 +358,9 @@ mod tests {
         assert!(BitmapTexture::new(2, 1, 1, vec![0.0]).is_err());
         assert!(BitmapTexture::load(Path::new("/nonexistent/x.png"), false).is_err());
         assert!(BitmapTexture::load(Path::new("x.jpg"), false).is_err());
+        assert!(BitmapTexture::load(Path::new("x.pfm"), false)
+            .unwrap_err()
+            .to_string()
+            .contains("unsupported"));
     }
 }

@@ -895,6 +895,253 @@ for cid, data, expect in [
     rel = write(f"gltf/{cid}.glb", data)
     case(f"glb_{cid}", expect, f"render {{C}}/{rel} -o {{O}}/out.exr --spp 1 --resolution 8x8")
 
+# ------------------------------------------------------------------------ serialized meshes
+
+
+def serialized_mesh(version=4, vertices=3, faces=1, flags=0x1000, body=None, name=b"tri\0", idx=(0, 1, 2),
+                    coords=(0, 0, 0, 1, 0, 0, 0, 1, 0)):
+    """One Mitsuba .serialized mesh (header + zlib stream): positions only, single precision."""
+    if body is None:
+        body = struct.pack("<I", flags) + (name if version == 4 else b"")
+        body += struct.pack("<QQ", vertices, faces)
+        body += struct.pack(f"<{len(coords)}f", *coords) + struct.pack(f"<{len(idx)}I", *idx)
+    return struct.pack("<HH", 0x041C, version) + zlib.compress(body)
+
+
+def serialized_file(meshes, version=4, table=None, count=None):
+    out, offs = b"", []
+    for m in meshes:
+        offs.append(len(out))
+        out += m
+    for o in (table if table is not None else offs):
+        out += struct.pack("<I" if version == 3 else "<Q", o)
+    return out + struct.pack("<I", len(meshes) if count is None else count)
+
+
+def serialized_case(cid, data, expect, index=0, filename=None):
+    if data is not None:
+        write(f"serialized/{cid}.serialized", data)
+    fname = filename or f"../serialized/{cid}.serialized"
+    rel = write(f"xml/serialized_{cid}.xml", xml_scene(
+        f'<shape type="serialized"><string name="filename" value="{fname}"/>'
+        f'<integer name="shape_index" value="{index}"/></shape>'))
+    case(f"serialized_{cid}", expect, f"render {{C}}/{rel} -o {{O}}/out.exr")
+
+
+serialized_case("ok", serialized_file([serialized_mesh()]), "ok")
+serialized_case("second_mesh", serialized_file([serialized_mesh(), serialized_mesh()]), "ok", index=1)
+serialized_case("bad_magic", b"\x1d\x04" + serialized_file([serialized_mesh()])[2:], "fail:bad_magic.serialized|magic")
+serialized_case("version_9", serialized_file([serialized_mesh()])[:2] + b"\x09\0" + serialized_file([serialized_mesh()])[4:],
+                "fail:version_9.serialized|version 9")
+serialized_case("truncated", serialized_file([serialized_mesh()])[:20], "fail:truncated.serialized")
+serialized_case("empty", b"", "fail:empty.serialized")
+serialized_case("garbage", bytes(range(256)) * 8, "fail:garbage.serialized")
+# Counts far beyond what the few compressed bytes can expand to (zlib: at most 1032:1).
+serialized_case("count_bomb", serialized_file([serialized_mesh(vertices=100_000_000, faces=100_000_000)]),
+                "fail:count_bomb.serialized|100000000 vertices|1032")
+serialized_case("count_past_limit", serialized_file([serialized_mesh(vertices=2**40)]),
+                "fail:count_past_limit.serialized|vertex count")
+serialized_case("count_u64_max", serialized_file([serialized_mesh(faces=2**64 - 1)]),
+                "fail:count_u64_max.serialized|face count")
+# A real decompression bomb: 40 MB of zeros in ~40 KB, declared as 3.3 M vertices — more
+# than the stream holds once its faces are counted.
+bomb = struct.pack("<I", 0x1000) + b"\0" + struct.pack("<QQ", 3_300_000, 3_300_000) + b"\0" * 40_000_000
+serialized_case("zlib_bomb", struct.pack("<HH", 0x041C, 4) + zlib.compress(bomb, 9) + struct.pack("<QI", 0, 1),
+                "fail:zlib_bomb.serialized")
+serialized_case("index_out_of_range", serialized_file([serialized_mesh(idx=(0, 1, 7))]),
+                "fail:index_out_of_range.serialized|vertex 7")
+serialized_case("coords_nan", serialized_file([serialized_mesh(coords=(float("nan"),) + (0,) * 8)]),
+                "fail:coords_nan.serialized")
+serialized_case("name_unterminated", serialized_file([serialized_mesh(name=b"x" * 70000)]),
+                "fail:name_unterminated.serialized|name")
+serialized_case("shape_index_past_end", serialized_file([serialized_mesh()]), "fail:shape_index_past_end.serialized|shape_index 5",
+                index=5)
+serialized_case("shape_index_negative", serialized_file([serialized_mesh()]), "fail:shape_index", index=-1)
+serialized_case("offset_past_end", serialized_file([serialized_mesh(), serialized_mesh()], table=[0, 2**62]),
+                "fail:offset_past_end.serialized|offset", index=1)
+serialized_case("count_table_huge", serialized_file([serialized_mesh()], count=2**32 - 1),
+                "fail:count_table_huge.serialized", index=7)
+serialized_case("v5_tangents", serialized_mesh(version=5, body=struct.pack("<II", 0x1002, 0)) + struct.pack("<QI", 0, 1),
+                "fail:v5_tangents.serialized|tangents")
+serialized_case("directory", None, "fail:not a regular file", filename="../serialized")
+serialized_case("missing", None, "fail:missing.serialized", filename="missing.serialized")
+
+# ----------------------------------------------------------------------------------- include
+
+
+def include_case(cid, files, expect):
+    for name, text in files.items():
+        write(f"include/{cid}/{name}", text)
+    case(f"include_{cid}", expect, f"render {{C}}/include/{cid}/main.xml -o {{O}}/out.exr")
+
+
+INC = '<include filename="{}"/>'
+include_case("ok", {"main.xml": xml_scene(INC.format("part.xml")), "part.xml": f"<scene version='3.0.0'>{SPHERE}</scene>"},
+             "ok")
+include_case("self", {"main.xml": xml_scene(SPHERE + INC.format("main.xml"))}, "fail:main.xml|cycle")
+include_case("mutual", {"main.xml": xml_scene(SPHERE + INC.format("a.xml")),
+                        "a.xml": "<scene version='3.0.0'>" + INC.format("b.xml") + "</scene>",
+                        "b.xml": "<scene version='3.0.0'>" + INC.format("a.xml") + "</scene>"}, "fail:cycle|a.xml")
+chain = {"main.xml": xml_scene(SPHERE + INC.format("d0.xml"))}
+for i in range(20):
+    chain[f"d{i}.xml"] = "<scene version='3.0.0'>" + INC.format(f"d{i + 1}.xml") + "</scene>"
+chain["d20.xml"] = "<scene version='3.0.0'/>"
+include_case("too_deep", chain, "fail:nested deeper than 15")
+# Ten includes of a file that includes ten … nine levels: 10⁹ expansions without a cap.
+fan = {"main.xml": xml_scene(SPHERE + INC.format("f0.xml") * 10)}
+for i in range(9):
+    fan[f"f{i}.xml"] = "<scene version='3.0.0'>" + INC.format(f"f{i + 1}.xml") * 10 + "</scene>"
+fan["f9.xml"] = "<scene version='3.0.0'><shape type='sphere'/></scene>"
+include_case("exponential", fan, "fail:<include> expansions")
+include_case("missing", {"main.xml": xml_scene(SPHERE + INC.format("nope.xml"))}, "fail:main.xml|nope.xml")
+include_case("directory", {"main.xml": xml_scene(SPHERE + INC.format("sub")), "sub/x.txt": "x"},
+             "fail:main.xml|not a regular file")
+include_case("dev_zero", {"main.xml": xml_scene(SPHERE + INC.format("/dev/zero"))}, "fail:/dev/zero|not a regular file")
+include_case("malformed", {"main.xml": xml_scene(SPHERE + INC.format("bad.xml")), "bad.xml": "<scene version='3.0.0'><shape"},
+             "fail:bad.xml|malformed")
+include_case("binary", {"main.xml": xml_scene(SPHERE + INC.format("bin.xml")), "bin.xml": bytes(range(256))},
+             "fail:bin.xml|UTF-8")
+include_case("nan_inside", {"main.xml": xml_scene(INC.format("part.xml")),
+                            "part.xml": "<scene version='3.0.0'><shape type='sphere'><float name='radius' value='nan'/></shape></scene>"},
+             "fail:part.xml|radius")
+
+# ------------------------------------------------------------------- JPEG / BMP / TGA / PPM
+
+
+def jpeg_sof(w, h):
+    """A JPEG header whose frame declares w×h pixels, with no scan data."""
+    sof = struct.pack(">BHHB", 8, h, w, 3) + b"\x01\x22\x00\x02\x11\x00\x03\x11\x00"
+    return b"\xff\xd8" + b"\xff\xc0" + struct.pack(">H", len(sof) + 2) + sof + b"\xff\xd9"
+
+
+def bmp(w, h, bpp=24, data=b""):
+    info = struct.pack("<IiiHHIIiiII", 40, w, h, 1, bpp, 0, 0, 2835, 2835, 0, 0)
+    return b"BM" + struct.pack("<IHHI", 54 + len(data), 0, 0, 54) + info + data
+
+
+def tga(w, h, data=b""):
+    return struct.pack("<BBBHHBHHHHBB", 0, 0, 2, 0, 0, 0, 0, 0, w, h, 24, 0) + data
+
+
+IMAGES = {
+    "ok.bmp": bmp(2, 2, data=b"\x80" * 16),
+    "ok.tga": tga(2, 2, b"\x80" * 12),
+    "ok.ppm": b"P6\n2 2\n255\n" + b"\x80" * 12,
+    "huge.jpg": jpeg_sof(65500, 65500),
+    "truncated.jpg": jpeg_sof(16, 16)[:-2],
+    "garbage.jpg": b"\xff\xd8" + bytes(range(256)) * 4,
+    "huge.bmp": bmp(100000, 100000),
+    "negative_height.bmp": bmp(4, -2**31 + 1),
+    "truncated.bmp": bmp(64, 64, data=b"\0" * 10),
+    "huge.tga": tga(65535, 65535),
+    "truncated.tga": tga(64, 64, b"\0" * 10),
+    "huge.ppm": b"P6\n60000 60000\n255\n" + b"\0" * 16,
+    "overflow.ppm": b"P6\n18446744073709551617 3\n255\n" + b"\0" * 16,
+    "zero.ppm": b"P6\n0 0\n255\n",
+    "maxval_huge.ppm": b"P6\n2 2\n99999999\n" + b"\0" * 24,
+    "truncated.ppm": b"P6\n64 64\n255\n" + b"\0" * 10,
+    "huge.pgm": b"P5\n65536 65536\n255\n",
+}
+for name, data in IMAGES.items():
+    write(f"img/{name}", data)
+    stem = name.replace(".", "_")
+    rel = write(f"xml/img_{stem}.xml", xml_scene(
+        '<shape type="sphere"><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+        f'<string name="filename" value="../img/{name}"/></texture></bsdf></shape>'))
+    case(f"img_bitmap_{stem}", "ok" if name.startswith("ok.") else f"fail:{name}", f"render {{C}}/{rel} -o {{O}}/out.exr")
+
+# ------------------------------------------------------------- EXR provenance (thinfilm merge)
+
+
+def exr_with_attrs(attrs, w=4, h=2, channels=("B", "G", "R")):
+    """An EXR whose header carries text attributes (`string`) beside the required ones."""
+    plain = exr_bytes(w, h, channels=channels)
+    extra = b"".join(exr_attr(k, "string", v.encode()) for k, v in attrs.items())
+    # The header ends at the first NUL that follows the last attribute: insert before it.
+    end = plain.index(b"screenWindowWidth\0float\0") + len(b"screenWindowWidth\0float\0") + 8
+    head, rest = plain[:end], plain[end + 1:]
+    # Offsets in the line table move by the inserted bytes.
+    table = struct.unpack(f"<{h}Q", rest[:8 * h])
+    table = struct.pack(f"<{h}Q", *(o + len(extra) for o in table))
+    return head + extra + b"\0" + table + rest[8 * h:]
+
+
+def render_attrs(rng="0:16", **over):
+    a, b = (int(v) for v in rng.split(":"))
+    attrs = {"thinfilm.kind": "render", "thinfilm.sampleRange": rng, "thinfilm.spp": str(b - a),
+             "thinfilm.requestedRange": rng, "thinfilm.seed": "1", "thinfilm.sampler": "independent",
+             "thinfilm.filter": "box", "thinfilm.imageHash": "00000000deadbeef", "thinfilm.version": "0"}
+    attrs.update(over)
+    return {k: v for k, v in attrs.items() if v is not None}
+
+
+def tile_attrs(rows="0:2", **over):
+    attrs = {"thinfilm.kind": "fit", "thinfilm.rows": rows, "thinfilm.imageHeight": "4",
+             "thinfilm.fitHash": "00000000deadbeef", "thinfilm.filmIor": "1.33", "thinfilm.version": "0"}
+    attrs.update(over)
+    return {k: v for k, v in attrs.items() if v is not None}
+
+
+MERGE = {
+    "a": render_attrs("0:16"),
+    "b": render_attrs("16:32"),
+    "c_overlap": render_attrs("8:24"),
+    "d_gap": render_attrs("40:48"),
+    "e_other_hash": render_attrs("16:32", **{"thinfilm.imageHash": "1111111111111111"}),
+    "kind_banana": render_attrs(**{"thinfilm.kind": "banana"}),
+    "range_reversed": render_attrs(**{"thinfilm.sampleRange": "16:0"}),
+    "range_huge": render_attrs(**{"thinfilm.sampleRange": "0:99999999999"}),
+    "range_text": render_attrs(**{"thinfilm.sampleRange": "lots"}),
+    "spp_disagrees": render_attrs(**{"thinfilm.spp": "17"}),
+    "hash_not_hex": render_attrs(**{"thinfilm.imageHash": "zz"}),
+    "seed_missing": render_attrs(**{"thinfilm.seed": None}),
+    "seed_negative": render_attrs(**{"thinfilm.seed": "-1"}),
+    "tent_no_weights": render_attrs(**{"thinfilm.filter": "tent"}),
+}
+for name, attrs in MERGE.items():
+    write(f"merge/{name}.exr", exr_with_attrs(attrs))
+write("merge/b_wide.exr", exr_with_attrs(render_attrs("16:32"), w=5))
+write("merge/b_no_r.exr", exr_with_attrs(render_attrs("16:32"), channels=("B", "G")))
+write("merge/t0.exr", exr_with_attrs(tile_attrs("0:2"), channels=("Y",)))
+write("merge/t1.exr", exr_with_attrs(tile_attrs("2:4"), channels=("Y",)))
+write("merge/t1_ior_nan.exr", exr_with_attrs(tile_attrs("2:4", **{"thinfilm.filmIor": "nan"}), channels=("Y",)))
+write("merge/t1_rows_outside.exr", exr_with_attrs(tile_attrs("2:4", **{"thinfilm.imageHeight": "3"}), channels=("Y",)))
+write("merge/t1_height_huge.exr", exr_with_attrs(tile_attrs("2:4", **{"thinfilm.imageHeight": "4000000000"}), channels=("Y",)))
+write("merge/t1_other_fit.exr", exr_with_attrs(tile_attrs("2:4", **{"thinfilm.fitHash": "1"}), channels=("Y",)))
+write("merge/plain.exr", exr_bytes(4, 2))
+M = "{C}/merge/"
+for cid, pieces, expect, extra in [
+    ("ok", "a b", "ok", ""),
+    ("tiles_ok", "t0 t1", "ok", ""),
+    ("overlap", "a c_overlap", "fail:overlap|c_overlap.exr", ""),
+    ("gap", "a b d_gap", "fail:missing|d_gap.exr", ""),
+    ("other_hash", "a e_other_hash", "fail:different images|e_other_hash.exr", ""),
+    ("other_size", "a b_wide", "fail:b_wide.exr", ""),
+    ("no_r", "a b_no_r", "fail:b_no_r.exr|'R'", ""),
+    ("plain_exr", "plain a", "fail:plain.exr|thinfilm.kind", ""),
+    ("kind_banana", "kind_banana", "fail:kind_banana.exr|banana", ""),
+    ("range_reversed", "range_reversed", "fail:range_reversed.exr|thinfilm.sampleRange", ""),
+    ("range_huge", "range_huge", "fail:range_huge.exr|thinfilm.sampleRange", ""),
+    ("range_text", "range_text", "fail:range_text.exr|thinfilm.sampleRange", ""),
+    ("spp_disagrees", "spp_disagrees", "fail:spp_disagrees.exr|thinfilm.spp", ""),
+    ("hash_not_hex", "hash_not_hex", "fail:hash_not_hex.exr|thinfilm.imageHash", ""),
+    ("seed_missing", "seed_missing", "fail:seed_missing.exr|thinfilm.seed", ""),
+    ("seed_negative", "seed_negative", "fail:seed_negative.exr|thinfilm.seed", ""),
+    ("tent_no_weights", "tent_no_weights", "fail:tent_no_weights.exr|filter_weight", ""),
+    ("tile_ior_nan", "t0 t1_ior_nan", "fail:t1_ior_nan.exr|thinfilm.filmIor", ""),
+    ("tile_rows_outside", "t0 t1_rows_outside", "fail:t1_rows_outside.exr|rows", ""),
+    ("tile_height_huge", "t0 t1_height_huge", "fail:t1_height_huge.exr", ""),
+    ("tile_other_fit", "t0 t1_other_fit", "fail:t1_other_fit.exr|different fits", ""),
+    ("tile_and_render", "t0 a", "fail:a.exr", ""),
+    ("huge_window", "../exr/huge_window", "fail:huge_window.exr", ""),
+    ("missing", "a nope", "fail:nope.exr", ""),
+    ("exposure_nan", "a b", "fail:--exposure", "--exposure nan"),
+]:
+    args = " ".join(M + p + ".exr" for p in pieces.split())
+    case(f"merge_{cid}", expect, f"merge {args} -o {{O}}/merged.exr {extra}".strip())
+case("merge_output_is_input", "fail:also an input", f"merge {M}a.exr {M}b.exr -o {M}a.exr")
+case("merge_output_png", "fail:merged.png", f"merge {M}a.exr {M}b.exr -o {{O}}/merged.png")
+
 # -------------------------------------------------------------------------------- manifest
 
 with open(os.path.join(OUT, "cases.txt"), "w") as f:

@@ -1,5 +1,5 @@
-"""A `thinfilm` BSDF for Mitsuba 3, written in Python, with the parameters of thinfilm's own
-thin-film BSDF (see shared docs design.md, "The thin-film BSDF in scene files"):
+"""thinfilm's BSDFs for Mitsuba 3, written in Python, with the parameters of thinfilm's own
+thin-film BSDF (scenes/README.md lists them):
 
     <bsdf type="thinfilm">
       <float name="film_ior" value="1.37"/>         film index n2 (real)
@@ -18,7 +18,7 @@ Smooth: a delta reflection with weight R(theta_i). Rough: a GGX microfacet BRDF
 f = R(wi.h) D(h) G(wi, wo) / (4 cos_i cos_o), sampled from GGX visible normals, with
 Mitsuba's separable Smith G (as in its roughconductor).
 
-Multilayer coatings (thinfilm's `thinfilm` with a `layers` string, issue 9):
+Multilayer coatings (thinfilm's `thinfilm` with a `layers` string):
 
     <bsdf type="thinfilm">
       <string name="layers" value="MgF2:99.6"/>     index:thickness_nm, top first; (A:1, B:2)xN repeats
@@ -40,8 +40,14 @@ Coated glass (`coateddielectric`: float `int_ior`, `ext_ior` (default 1.000277),
 `coating` of lossless layers on the outside): R from the stack seen from the side the light
 arrives on, T = 1 - R, Snell refraction between the bulk media, Mitsuba dielectric weights.
 
+Install (from the repository root; Mitsuba 3 itself comes from `pip install mitsuba`):
+
+    pip install ./tools/mitsuba
+
 Use: `import thinfilm_mitsuba; thinfilm_mitsuba.setup(variant)` after which scene files with
-`<bsdf type="thinfilm">`, `"thinfilm_bubble"` and `"coateddielectric"` load.
+`<bsdf type="thinfilm">`, `"thinfilm_bubble"` and `"coateddielectric"` load, including the
+`material.xml` that `thinfilm estimate` writes (its thickness.exr has one channel `Y`, which
+Mitsuba's `bitmap` texture reads as-is with `raw="true"`).
 """
 
 import math
@@ -148,11 +154,13 @@ def airy_reflectance(dr, lambda_nm, cos_i, film_ior, thickness_nm, substrate_ior
 
 # --- dispersive materials (the Rust library's data file) and transfer-matrix stacks ---
 
-DIELECTRICS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "src", "optics", "data", "dielectrics.txt")
+# The Rust library's src/optics/data/dielectrics.txt, shipped inside the package (a symbolic
+# link in the repository, copied when the package is installed).
+DIELECTRICS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "dielectrics.txt")
 
 
 def _load_dielectrics():
-    """name (lower case, and aliases) -> (model, coefficients) from src/optics/data/dielectrics.txt."""
+    """name (lower case, and aliases) -> (model, coefficients) from dielectrics.txt."""
     out = {}
     with open(DIELECTRICS) as f:
         for line in f:

@@ -1,0 +1,335 @@
+//! Putting split work back together: renders of disjoint sample ranges into the render of
+//! their union ([`merge_renders`]), and thickness tiles fitted row band by row band into the
+//! whole map ([`stitch_tiles`]). Pieces are recognised and checked by the provenance in their
+//! EXR headers ([`crate::render::provenance`], [`crate::estimate::tiles`]).
+//!
+//! Renders merge exactly: a box-filtered render of `n` samples is the sum of its samples in a
+//! fixed tree ([`crate::render::passes`]) divided by `n`. When every piece is a node of that
+//! tree and holds a power-of-two number of samples (its mean times its count is then its sum,
+//! bit for bit), adding the pieces' sums in the tree's order and dividing by the total
+//! reproduces the single render bit for bit. Other splits are merged as the sample-weighted
+//! mean, which agrees with the single render up to float rounding (~1e-7 relative), and the
+//! result says so; tent- and Gaussian-filtered renders carry their per-pixel filter weights
+//! and merge as the weight-weighted mean, also up to rounding.
+
+use crate::estimate::tiles::TileInfo;
+use crate::image_io::{ExrFile, RgbImage};
+use crate::render::passes::is_tree_node;
+use crate::render::provenance::{RenderInfo, FILTER_WEIGHT_CHANNEL};
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+
+/// One rendered piece, read from an EXR written by `thinfilm render`.
+#[derive(Debug, Clone)]
+pub struct RenderPiece {
+    pub path: PathBuf,
+    pub info: RenderInfo,
+    pub image: RgbImage,
+    /// Per-pixel filter weight sums (tent / Gaussian filters).
+    pub filter_weights: Option<Vec<f32>>,
+}
+
+impl RenderPiece {
+    pub fn from_exr(path: &Path, exr: ExrFile) -> Result<Self> {
+        let what = path.display().to_string();
+        let info = RenderInfo::from_attributes(&exr.attributes, &what)?;
+        let plane = |c: &str| {
+            exr.channel(c)
+                .with_context(|| format!("{what}: no channel '{c}'"))
+        };
+        let (r, g, b) = (plane("R")?, plane("G")?, plane("B")?);
+        let pixels = (0..exr.width * exr.height)
+            .map(|i| [r[i], g[i], b[i]])
+            .collect();
+        let filter_weights = exr.channel(FILTER_WEIGHT_CHANNEL).map(<[f32]>::to_vec);
+        if info.filter != "box" && filter_weights.is_none() {
+            bail!(
+                "{what}: a {} -filtered render without its '{FILTER_WEIGHT_CHANNEL}' channel cannot be merged",
+                info.filter
+            );
+        }
+        Ok(RenderPiece {
+            path: path.to_path_buf(),
+            info,
+            image: RgbImage {
+                width: exr.width,
+                height: exr.height,
+                pixels,
+            },
+            filter_weights,
+        })
+    }
+}
+
+/// The merged render.
+#[derive(Debug, Clone)]
+pub struct MergedRender {
+    pub image: RgbImage,
+    pub filter_weights: Option<Vec<f32>>,
+    pub info: RenderInfo,
+    /// True when the result is bit-identical to a single render of the merged range.
+    pub exact: bool,
+    /// Why the merge is or is not exact, for the log.
+    pub note: String,
+}
+
+/// Merges renders of disjoint, contiguous sample ranges of the same image (same scene hash,
+/// resolution and settings; see the module documentation for exactness).
+pub fn merge_renders(mut pieces: Vec<RenderPiece>) -> Result<MergedRender> {
+    if pieces.is_empty() {
+        bail!("nothing to merge");
+    }
+    pieces.sort_by_key(|p| p.info.sample_range);
+    let first = &pieces[0];
+    for p in &pieces[1..] {
+        if p.info.image_hash != first.info.image_hash {
+            bail!(
+                "{} and {} are renders of different images (image hash {:016x} vs {:016x}: \
+                 the scene, a -D value, the resolution, seed, sampler, max_depth, Fresnel splits \
+                 or the thinfilm version differ)",
+                first.path.display(),
+                p.path.display(),
+                first.info.image_hash,
+                p.info.image_hash
+            );
+        }
+        if (p.image.width, p.image.height) != (first.image.width, first.image.height) {
+            bail!(
+                "{} is {}×{} but {} is {}×{}",
+                p.path.display(),
+                p.image.width,
+                p.image.height,
+                first.path.display(),
+                first.image.width,
+                first.image.height
+            );
+        }
+    }
+    for w in pieces.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        let (ra, rb) = (a.info.sample_range, b.info.sample_range);
+        if rb.0 < ra.1 {
+            bail!(
+                "sample ranges overlap: {} holds {}:{} and {} holds {}:{}",
+                a.path.display(),
+                ra.0,
+                ra.1,
+                b.path.display(),
+                rb.0,
+                rb.1
+            );
+        }
+        if rb.0 > ra.1 {
+            bail!(
+                "samples {}:{} are missing between {} ({}:{}) and {} ({}:{}); render them with \
+                 --sample-range {}:{} and merge again",
+                ra.1,
+                rb.0,
+                a.path.display(),
+                ra.0,
+                ra.1,
+                b.path.display(),
+                rb.0,
+                rb.1,
+                ra.1,
+                rb.0
+            );
+        }
+    }
+    let range = (
+        pieces[0].info.sample_range.0,
+        pieces[pieces.len() - 1].info.sample_range.1,
+    );
+    let px = first.image.pixels.len();
+    let filtered = first.filter_weights.is_some();
+    // Per-piece film accumulators [Σ w·rgb, Σ w] recovered from the stored means.
+    let accum = |p: &RenderPiece| -> Vec<[f32; 4]> {
+        let n = p.info.spp() as f32;
+        (0..px)
+            .map(|i| {
+                let w = p.filter_weights.as_ref().map_or(n, |wt| wt[i]);
+                let c = p.image.pixels[i];
+                [c[0] * w, c[1] * w, c[2] * w, w]
+            })
+            .collect()
+    };
+    let tree_exact = !filtered
+        && pieces
+            .iter()
+            .all(|p| is_tree_node(range, p.info.sample_range) && p.info.spp().is_power_of_two());
+    let (acc, exact, note) = if pieces.len() == 1 {
+        let p = &pieces[0];
+        (accum(p), true, "a single piece: copied".to_string())
+    } else if tree_exact {
+        (
+            tree_combine(range, &pieces, &accum),
+            true,
+            "every piece is a power-of-two node of the render's summation tree: bit-identical \
+             to a single render of the merged range"
+                .to_string(),
+        )
+    } else {
+        let mut acc = vec![[0.0f32; 4]; px];
+        for p in &pieces {
+            for (d, s) in acc.iter_mut().zip(accum(p)) {
+                for k in 0..4 {
+                    d[k] += s[k];
+                }
+            }
+        }
+        let why = if filtered {
+            format!(
+                "{}-filtered renders merge by their filter weights, equal to a single render up \
+                 to float rounding",
+                first.info.filter
+            )
+        } else {
+            "sample-weighted mean, equal to a single render up to float rounding (bit-identical \
+             needs power-of-two ranges aligned like 0:16, 16:32, 32:64)"
+                .to_string()
+        };
+        (acc, false, why)
+    };
+    let mut image = RgbImage::new(first.image.width, first.image.height);
+    let total = (range.1 - range.0) as f32;
+    for (dst, p) in image.pixels.iter_mut().zip(&acc) {
+        // The film divides the box filter's sum by the sample count (as f32).
+        let w = if filtered { p[3] } else { total };
+        *dst = if w > 0.0 {
+            [p[0] / w, p[1] / w, p[2] / w]
+        } else {
+            [0.0; 3]
+        };
+    }
+    let mut info = first.info.clone();
+    info.sample_range = range;
+    info.requested_range = range;
+    Ok(MergedRender {
+        image,
+        filter_weights: filtered.then(|| acc.iter().map(|p| p[3]).collect()),
+        info,
+        exact,
+        note,
+    })
+}
+
+/// Sum of the pieces' accumulators over `[lo, hi)` in the film's tree order. Every piece is
+/// a node of the tree of `[lo, hi)` (checked by the caller).
+fn tree_combine(
+    (lo, hi): (u32, u32),
+    pieces: &[RenderPiece],
+    accum: &dyn Fn(&RenderPiece) -> Vec<[f32; 4]>,
+) -> Vec<[f32; 4]> {
+    if let Some(p) = pieces.iter().find(|p| p.info.sample_range == (lo, hi)) {
+        return accum(p);
+    }
+    let n = hi - lo;
+    let half = if n.is_power_of_two() {
+        n / 2
+    } else {
+        1 << (u32::BITS - 1 - n.leading_zeros())
+    };
+    let mid = lo + half;
+    let mut a = tree_combine((lo, mid), pieces, accum);
+    let b = tree_combine((mid, hi), pieces, accum);
+    for (d, s) in a.iter_mut().zip(b) {
+        for k in 0..4 {
+            d[k] += s[k];
+        }
+    }
+    a
+}
+
+/// One fitted row band, read from a tile EXR written by `thinfilm estimate --rows`.
+#[derive(Debug, Clone)]
+pub struct TilePiece {
+    pub path: PathBuf,
+    pub info: TileInfo,
+    pub exr: ExrFile,
+}
+
+/// Stitched tiles: every channel of the tiles over the whole image.
+#[derive(Debug, Clone)]
+pub struct Stitched {
+    pub width: usize,
+    pub height: usize,
+    pub channels: Vec<(String, Vec<f32>)>,
+    pub info: TileInfo,
+}
+
+/// Stitches row tiles of one fit (same fit hash, width and height, the same channels) that
+/// cover every row exactly once.
+pub fn stitch_tiles(mut tiles: Vec<TilePiece>) -> Result<Stitched> {
+    if tiles.is_empty() {
+        bail!("nothing to merge");
+    }
+    tiles.sort_by_key(|t| t.info.rows);
+    let first = &tiles[0];
+    let names: Vec<&str> = first.exr.channels.iter().map(|(n, _)| n.as_str()).collect();
+    let (width, height) = (first.exr.width, first.info.image_height);
+    for t in &tiles {
+        if t.info.fit_hash != first.info.fit_hash {
+            bail!(
+                "{} and {} are tiles of different fits (fit hash {:016x} vs {:016x}: the capture, \
+                 --film-ior or another fit option differ)",
+                first.path.display(),
+                t.path.display(),
+                first.info.fit_hash,
+                t.info.fit_hash
+            );
+        }
+        let t_names: Vec<&str> = t.exr.channels.iter().map(|(n, _)| n.as_str()).collect();
+        if t_names != names {
+            bail!(
+                "{} has channels {} but {} has {}",
+                t.path.display(),
+                t_names.join(", "),
+                first.path.display(),
+                names.join(", ")
+            );
+        }
+        let (a, b) = t.info.rows;
+        if t.exr.width != width || t.exr.height != b - a || t.info.image_height != height {
+            bail!(
+                "{}: a {}×{} tile of rows {a}:{b} of a {}-row image does not fit a {width}×{height} image",
+                t.path.display(),
+                t.exr.width,
+                t.exr.height,
+                t.info.image_height
+            );
+        }
+    }
+    let mut next = 0;
+    for t in &tiles {
+        let (a, b) = t.info.rows;
+        if a < next {
+            bail!("{}: rows {a}:{b} overlap another tile", t.path.display());
+        }
+        if a > next {
+            bail!("rows {next}:{a} are missing: no tile covers them");
+        }
+        next = b;
+    }
+    if next < height {
+        bail!("rows {next}:{height} are missing: no tile covers them");
+    }
+    let channels = names
+        .iter()
+        .enumerate()
+        .map(|(c, name)| {
+            let mut plane = Vec::with_capacity(width * height);
+            for t in &tiles {
+                plane.extend_from_slice(&t.exr.channels[c].1);
+            }
+            (name.to_string(), plane)
+        })
+        .collect();
+    let mut info = first.info.clone();
+    info.rows = (0, height);
+    Ok(Stitched {
+        width,
+        height,
+        channels,
+        info,
+    })
+}

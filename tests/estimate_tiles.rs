@@ -1,0 +1,163 @@
+//! A capture fitted in row bands (`thinfilm estimate --rows`, known index) and stitched by
+//! `thinfilm merge` equals the whole fit bit for bit — on a capture large enough that the
+//! thickness stage propagates from a seed lattice and resolves orders spatially, with bands
+//! that do not line up with that lattice. Tiles of different fits are refused.
+
+use std::path::Path;
+use std::process::{Command, Output};
+use thinfilm::capture::simulate::{write_capture_set, SimulateConfig};
+use thinfilm::image_io::read_exr;
+
+fn thinfilm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(out: Output) -> String {
+    assert!(
+        out.status.success(),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn estimate(cap: &Path, out: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "estimate",
+        cap.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    ok(thinfilm(&args));
+}
+
+fn thickness_bits(path: &Path) -> Vec<u32> {
+    read_exr(path)
+        .unwrap()
+        .channel("Y")
+        .expect("thickness.exr has one channel named Y")
+        .iter()
+        .map(|v| v.to_bits())
+        .collect()
+}
+
+#[test]
+fn stitched_row_bands_equal_the_whole_fit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    // 60×44 px: the seed lattice has stride 2, so rows propagate from seeds. One angle, a
+    // strongly varying film and heavy noise make order jumps that the spatial order
+    // resolution repairs near the band edges (without the halo rows, 154 pixels differ).
+    let mut cfg = SimulateConfig::preset("sample1").unwrap();
+    (cfg.width, cfg.height) = (60, 44);
+    cfg.noise_sigma = 0.06;
+    cfg.thickness_variation = 0.4;
+    cfg.angles_deg = vec![30.0];
+    cfg.wavelengths_nm = (0..41).map(|i| 400.0 + 8.0 * i as f64).collect();
+    write_capture_set(&cfg, &cap).unwrap();
+    let n = "1.37";
+    let whole = tmp.path().join("whole");
+    estimate(&cap, &whole, &["--film-ior", n]);
+    let bands = ["0:7", "7:23", "23:24", "24:44"];
+    let mut tiles = Vec::new();
+    for (i, rows) in bands.iter().enumerate() {
+        let out = tmp.path().join(format!("band{i}"));
+        estimate(&cap, &out, &["--film-ior", n, "--rows", rows]);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+        let (a, b) = rows.split_once(':').unwrap();
+        assert_eq!(v["rows"][0].as_u64().unwrap().to_string(), a);
+        assert_eq!(
+            v["height"].as_u64().unwrap(),
+            b.parse::<u64>().unwrap() - a.parse::<u64>().unwrap()
+        );
+        tiles.push(out.join("thickness.exr"));
+    }
+    let stitched = tmp.path().join("stitched.exr");
+    let mut args = vec!["merge", "-o", stitched.to_str().unwrap()];
+    args.extend(tiles.iter().rev().map(|t| t.to_str().unwrap()));
+    let text = ok(thinfilm(&args));
+    assert!(text.contains("stitched 4 row bands"), "{text}");
+    let want = thickness_bits(&whole.join("thickness.exr"));
+    assert!(
+        want.iter()
+            .filter(|&&b| f32::from_bits(b).is_finite())
+            .count()
+            > 2000
+    );
+    assert_eq!(thickness_bits(&stitched), want);
+    assert_eq!(
+        read_exr(&stitched).unwrap().attributes,
+        read_exr(&whole.join("thickness.exr")).unwrap().attributes
+    );
+
+    // A band fitted with another index does not belong to this fit.
+    let other = tmp.path().join("other");
+    estimate(&cap, &other, &["--film-ior", "1.38", "--rows", "23:24"]);
+    let bad = thinfilm(&[
+        "merge",
+        tiles[0].to_str().unwrap(),
+        tiles[1].to_str().unwrap(),
+        other.join("thickness.exr").to_str().unwrap(),
+        tiles[3].to_str().unwrap(),
+        "-o",
+        tmp.path().join("bad.exr").to_str().unwrap(),
+    ]);
+    assert!(!bad.status.success());
+    let e = String::from_utf8_lossy(&bad.stderr);
+    assert!(e.contains("different fits") && e.contains("other"), "{e}");
+    // Missing rows are named.
+    let gap = thinfilm(&[
+        "merge",
+        tiles[0].to_str().unwrap(),
+        tiles[3].to_str().unwrap(),
+        "-o",
+        tmp.path().join("gap.exr").to_str().unwrap(),
+    ]);
+    let e = String::from_utf8_lossy(&gap.stderr);
+    assert!(
+        !gap.status.success() && e.contains("rows 7:24 are missing"),
+        "{e}"
+    );
+}
+
+/// Without a given index, a band fits its own index (phase one of a huge capture) and reports
+/// it; `--rows` outside the capture is refused naming the option.
+#[test]
+fn a_band_fits_its_own_index_and_bad_rows_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let mut cfg = SimulateConfig::preset("sample1").unwrap();
+    (cfg.width, cfg.height) = (24, 40);
+    cfg.noise_sigma = 0.004;
+    write_capture_set(&cfg, &cap).unwrap();
+    let out = tmp.path().join("band");
+    let json = ok(thinfilm(&[
+        "estimate",
+        cap.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--rows",
+        "10:20",
+        "--json",
+    ]));
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert!((v["film_ior"].as_f64().unwrap() - 1.37).abs() < 0.01, "{v}");
+    assert_eq!(v["pixels"]["valid"].as_u64().unwrap(), 24 * 10);
+    let bad = thinfilm(&[
+        "estimate",
+        cap.to_str().unwrap(),
+        "--out",
+        tmp.path().join("x").to_str().unwrap(),
+        "--rows",
+        "30:41",
+    ]);
+    let e = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && e.contains("--rows 30:41"), "{e}");
+}

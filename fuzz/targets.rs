@@ -138,20 +138,18 @@ pub fn prepare_assets(dir: &Path) -> anyhow::Result<()> {
         height: 4,
         pixels,
     };
-    thinfilm::render::provenance::write_exr(
-        &dir.join("piece_b.exr"),
-        &image,
-        None,
-        &render_info((16, 32)),
-    )?;
-    let y = [400.0f32; 8];
-    thinfilm::image_io::write_exr_channels_with_attributes(
-        &dir.join("tile_b.exr"),
-        4,
-        2,
-        &[("Y", &y)],
-        &tile_info((2, 4)).attributes(),
-    )?;
+    // Two pieces of a render and two row tiles of a fit: `_a` is mutated, `_b` its companion.
+    for (name, range, rows) in [("a", (0, 16), (0, 2)), ("b", (16, 32), (2, 4))] {
+        let piece = dir.join(format!("piece_{name}.exr"));
+        thinfilm::render::provenance::write_exr(&piece, &image, None, &render_info(range))?;
+        thinfilm::image_io::write_exr_channels_with_attributes(
+            &dir.join(format!("tile_{name}.exr")),
+            4,
+            2,
+            &[("Y", &[400.0f32; 8])],
+            &tile_info(rows).attributes(),
+        )?;
+    }
     Ok(())
 }
 
@@ -303,12 +301,14 @@ property list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 
 <shape type="rectangle"><ref id="f"/><transform name="to_world"><translate z="-1"/></transform></shape>
 </scene>"#
                 .to_vec(),
-            br#"<bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf>"#.to_vec(),
+            br#"<scene version="3.0.0"><bsdf type="diffuse" id="d"><rgb name="reflectance" value="0.5"/></bsdf>
+<shape type="disk"><ref id="d"/></shape><include filename="leaf.xml"/></scene>"#
+                .to_vec(),
         ],
         Target::Image => integer_images(),
         Target::Provenance => vec![
-            std::fs::read(dir.join("piece_b.exr")).unwrap_or_default(),
-            std::fs::read(dir.join("tile_b.exr")).unwrap_or_default(),
+            std::fs::read(dir.join("piece_a.exr")).unwrap_or_default(),
+            std::fs::read(dir.join("tile_a.exr")).unwrap_or_default(),
         ],
     }
 }
@@ -547,7 +547,7 @@ fn run_inner(target: Target, data: &[u8], dir: &Path) -> anyhow::Result<()> {
             let img = thinfilm::scene::load_rgb_image(&p)?;
             std::hint::black_box(img.pixels.len());
         }
-        Target::Provenance => merge_with_companion(&write("piece_a.exr")?, dir)?,
+        Target::Provenance => merge_with_companion(&write("input_piece.exr")?, dir)?,
     }
     Ok(())
 }

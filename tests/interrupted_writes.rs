@@ -174,3 +174,74 @@ fn killed_estimates_leave_complete_fits() {
     let mid = interrupt(make, &out, 6);
     assert!(mid >= 3, "only {mid} kills landed while writing");
 }
+
+/// Ctrl-C saves the samples a render has so far beside its output (`img.samples-A-B.exr`);
+/// that save goes through the same temporary-and-rename path: a kill while it is written
+/// leaves no truncated piece, and the output's own name is never taken by a partial image.
+/// (Each run writes into an empty folder and is killed as soon as any file appears in it, so
+/// a save written in place would be caught half-written.)
+#[test]
+fn ctrl_c_partial_saves_are_atomic_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene: PathBuf =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/hostile/corpus/xml/ok_sphere.xml");
+    let render = |out: &Path, spp: &str| {
+        let mut c = bin();
+        c.arg("render").arg(&scene).arg("-o").arg(out);
+        c.args(["--spp", spp, "--resolution", "384x288"]);
+        c
+    };
+    let entries = |d: &Path| -> Vec<PathBuf> {
+        std::fs::read_dir(d)
+            .map(|r| r.flatten().map(|e| e.path()).collect())
+            .unwrap_or_default()
+    };
+    let (mut saves_seen, mut killed_mid_save) = (0, 0);
+    let mut last = PathBuf::new();
+    for (k, wait_ms) in [2000u64, 3000, 4500, 6000].into_iter().enumerate() {
+        let out_dir = dir.path().join(format!("run{k}"));
+        std::fs::create_dir_all(&out_dir).unwrap();
+        let out = out_dir.join("img.exr");
+        let mut child = render(&out, "65536").spawn().unwrap();
+        std::thread::sleep(Duration::from_millis(wait_ms));
+        // SAFETY: sends SIGINT to the child this test spawned.
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+        let t = Instant::now();
+        loop {
+            if !entries(&out_dir).is_empty() {
+                saves_seen += 1;
+                std::thread::sleep(Duration::from_millis(k as u64));
+                killed_mid_save += usize::from(writing(&out_dir));
+                let _ = child.kill();
+                break;
+            }
+            if child.try_wait().unwrap().is_some() || t.elapsed() > Duration::from_secs(60) {
+                break;
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+        assert!(!out.exists(), "a partial render took the output's name");
+        for p in entries(&out_dir) {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            if !name.starts_with('.') {
+                if let Err(e) = complete(&p) {
+                    panic!("Ctrl-C then kill {k}: {name} is not a complete file: {e}");
+                }
+            }
+        }
+        last = out;
+    }
+    eprintln!("{saves_seen} partial saves started, {killed_mid_save} killed while writing");
+    assert!(
+        saves_seen > 0,
+        "no Ctrl-C reached a render after its first pass"
+    );
+    // The next write into the folder removes the temporaries of a killed save.
+    assert!(render(&last, "1").status().unwrap().success());
+    assert!(
+        !writing(last.parent().unwrap()),
+        "temporaries of killed saves were not removed"
+    );
+}

@@ -61,37 +61,36 @@ const MAX_GRID_THICKNESS_STEPS: f64 = 1e6;
 
 /// Relations between options that clap checks one by one.
 fn check_ranges(args: &Args) -> Result<()> {
-    if args.min_thickness_nm >= args.max_thickness_nm {
-        bail!(
-            "--min-thickness-nm {} must be below --max-thickness-nm {}",
-            args.min_thickness_nm,
-            args.max_thickness_nm
-        );
+    for (what, lo, hi) in [
+        ("thickness-nm", args.min_thickness_nm, args.max_thickness_nm),
+        ("film-ior", args.min_film_ior, args.max_film_ior),
+    ] {
+        if lo >= hi {
+            bail!("--min-{what} {lo} must be below --max-{what} {hi}");
+        }
     }
-    if args.min_film_ior >= args.max_film_ior {
-        bail!(
-            "--min-film-ior {} must be below --max-film-ior {}",
-            args.min_film_ior,
-            args.max_film_ior
-        );
-    }
-    let ior_steps = (args.max_film_ior - args.min_film_ior) / args.grid_ior_step;
-    if ior_steps > MAX_GRID_IOR_STEPS {
-        bail!(
-            "--grid-ior-step {} makes {ior_steps:.0} steps over [{}, {}]; at most {MAX_GRID_IOR_STEPS}",
+    let grids = [
+        (
+            "grid-ior-step",
             args.grid_ior_step,
             args.min_film_ior,
-            args.max_film_ior
-        );
-    }
-    let d_steps = (args.max_thickness_nm - args.min_thickness_nm) / args.grid_thickness_step_nm;
-    if d_steps > MAX_GRID_THICKNESS_STEPS {
-        bail!(
-            "--grid-thickness-step-nm {} makes {d_steps:.0} steps over [{}, {}] nm; at most {MAX_GRID_THICKNESS_STEPS}",
+            args.max_film_ior,
+        ),
+        (
+            "grid-thickness-step-nm",
             args.grid_thickness_step_nm,
             args.min_thickness_nm,
-            args.max_thickness_nm
-        );
+            args.max_thickness_nm,
+        ),
+    ];
+    for ((opt, step, lo, hi), most) in grids
+        .into_iter()
+        .zip([MAX_GRID_IOR_STEPS, MAX_GRID_THICKNESS_STEPS])
+    {
+        let steps = (hi - lo) / step;
+        if steps > most {
+            bail!("--{opt} {step} makes {steps:.0} steps over [{lo}, {hi}]; at most {most}");
+        }
     }
     Ok(())
 }

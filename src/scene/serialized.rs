@@ -405,6 +405,17 @@ mod tests {
         out
     }
 
+    /// A mesh: its header (`version`) and the zlib-compressed `body`.
+    fn compressed(version: u16, body: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        out.extend(MAGIC.to_le_bytes());
+        out.extend(version.to_le_bytes());
+        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
+        e.write_all(body).unwrap();
+        out.extend(e.finish().unwrap());
+        out
+    }
+
     /// Concatenated meshes plus the end-of-file offset table.
     fn file(version: u16, meshes: &[Vec<u8>]) -> Vec<u8> {
         let mut out = Vec::new();
@@ -471,12 +482,7 @@ mod tests {
             body.extend(i.to_le_bytes());
         }
         body.extend(0u32.to_le_bytes()); // no attributes
-        let mut mesh = Vec::new();
-        mesh.extend(MAGIC.to_le_bytes());
-        mesh.extend(5u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        mesh.extend(e.finish().unwrap());
+        let mesh = compressed(5, &body);
         let s = parse(&file(5, &[mesh]), 0).unwrap();
         assert!(s.face_normals);
         assert_eq!(s.mesh.indices, vec![[0, 2, 1]]);
@@ -512,12 +518,7 @@ mod tests {
         for i in [0u32, 0, 5] {
             body.extend(i.to_le_bytes());
         }
-        let mut m = Vec::new();
-        m.extend(MAGIC.to_le_bytes());
-        m.extend(4u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        m.extend(e.finish().unwrap());
+        let m = compressed(4, &body);
         let e = parse(&file(4, &[m]), 0).unwrap_err().to_string();
         assert!(e.contains("refers to vertex 5"), "{e}");
         // A huge vertex count fails cleanly.
@@ -525,12 +526,7 @@ mod tests {
         body.extend(0x1000u32.to_le_bytes());
         body.extend(b"\0");
         body.extend(u64::MAX.to_le_bytes());
-        let mut m = Vec::new();
-        m.extend(MAGIC.to_le_bytes());
-        m.extend(4u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        m.extend(e.finish().unwrap());
+        let m = compressed(4, &body);
         assert!(parse(&file(4, &[m]), 0)
             .unwrap_err()
             .to_string()
@@ -546,12 +542,7 @@ mod tests {
         body.extend(b"\0");
         body.extend((100_000_000u64).to_le_bytes());
         body.extend((100_000_000u64).to_le_bytes());
-        let mut m = Vec::new();
-        m.extend(MAGIC.to_le_bytes());
-        m.extend(4u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        m.extend(e.finish().unwrap());
+        let m = compressed(4, &body);
         let e = format!("{:#}", parse(&file(4, &[m]), 0).unwrap_err());
         assert!(
             e.contains("100000000 vertices") && e.contains("1032:1"),

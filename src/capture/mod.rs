@@ -196,11 +196,11 @@ pub struct GroundTruth {
 /// Loads `dir/capture.json` and its cubes.
 /// `dir` may also be the path of the `capture.json` itself.
 pub fn load_capture_set(dir: &Path) -> anyhow::Result<CaptureSet> {
-    set::load_capture_set(dir)
+    crate::limits::contain_panics(dir, || set::load_capture_set(dir))
 }
 
 /// Loads `dir/ground_truth.json` + `dir/thickness.exr` (`dir` is the `ground_truth` folder
 /// or the capture folder that contains it).
 pub fn load_ground_truth(dir: &Path) -> anyhow::Result<GroundTruth> {
-    set::load_ground_truth(dir)
+    crate::limits::contain_panics(dir, || set::load_ground_truth(dir))
 }

@@ -132,6 +132,30 @@ pub fn ior_from_json(v: &Value, what: &str) -> Result<Ior> {
     }
 }
 
+/// Largest `ambient_ior` accepted (dense immersion liquids reach ~1.8; 3 leaves room).
+const MAX_AMBIENT_IOR: f64 = 3.0;
+
+/// Most angles a capture set may list. Goniometric captures use tens; the fit's cost grows
+/// with the square of the count (angle pairs), so thousands would stall it.
+const MAX_ANGLES: usize = 64;
+
+/// Two captures at the same incident angle add no information about the index and make the
+/// angle pairs of the fit degenerate: refuse them, naming both entries.
+fn check_distinct_angles(angles: &[AngleEntry], json: &impl std::fmt::Display) -> Result<()> {
+    for (i, a) in angles.iter().enumerate() {
+        if let Some(k) = angles[..i]
+            .iter()
+            .position(|b| (a.incident_deg - b.incident_deg).abs() < 1e-9)
+        {
+            bail!(
+                "{json}: angles[{i}].incident_deg = {} repeats angles[{k}] (average repeated captures into one cube)",
+                a.incident_deg
+            );
+        }
+    }
+    Ok(())
+}
+
 fn resolve(dir: &Path, name: &str) -> PathBuf {
     let p = Path::new(name);
     if p.is_absolute() {
@@ -339,8 +363,7 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     } else {
         (path.to_path_buf(), path.join("capture.json"))
     };
-    let text = std::fs::read_to_string(&json)
-        .with_context(|| format!("reading capture set {}", json.display()))?;
+    let text = crate::limits::read_text(&json, "capture set", 16)?;
     let j = json.display();
     let doc: Value = serde_json::from_str(&text).with_context(|| format!("{j}: not valid JSON"))?;
     // Checked by hand first so the message names the field and the allowed values.
@@ -354,7 +377,9 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         }
         None => bail!("{j}: missing field 'polarization' (s, p or unpolarized)"),
     }
-    let spec: CaptureFile = serde_json::from_value(doc)
+    drop(doc);
+    // Typed from the text (not the parsed value) so that errors carry a line and column.
+    let spec: CaptureFile = serde_json::from_str(&text)
         .with_context(|| format!("{j}: not a valid {CAPTURE_FORMAT} document"))?;
     if spec.format != CAPTURE_FORMAT {
         bail!(
@@ -368,11 +393,28 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         Ior::Constant(c) if c.im == 0.0 => c.re,
         other => bail!("{j}: ambient_ior must be a real number (light arrives through a lossless medium), got {other}"),
     };
+    // Air, water, immersion oils: a transparent medium light can arrive through.
+    crate::limits::check_range(
+        format!("{j}: ambient_ior"),
+        ambient_ior,
+        1.0,
+        MAX_AMBIENT_IOR,
+    )?;
     let substrate_ior =
         ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
+    crate::limits::check_index(format!("{j}: substrate"), &substrate_ior)?;
     if spec.angles.is_empty() {
         bail!("{j}: 'angles' is empty");
     }
+    if spec.angles.len() > MAX_ANGLES {
+        bail!(
+            "{j}: 'angles' lists {} captures; at most {MAX_ANGLES} are supported",
+            spec.angles.len()
+        );
+    }
+    check_distinct_angles(&spec.angles, &j)?;
+    // Decoded bytes of the angles loaded so far, against the memory budget.
+    let mut decoded = 0u64;
     // Only the first header is kept (its mapping is dropped as soon as it is decoded).
     let mut first: Option<envi::EnviHeader> = None;
     let mut angles = Vec::with_capacity(spec.angles.len());
@@ -387,6 +429,9 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         }
         let file = open_named(&json, &dir, &format!("{field}.cube"), &a.cube)?;
         let h = &file.header;
+        h.check_decode_budget(decoded)
+            .with_context(|| format!("{j}: {field}.cube"))?;
+        decoded += h.decoded_bytes();
         let Some(wl) = &h.wavelengths_nm else {
             bail!(
                 "{}: header has no 'wavelength' field (a capture needs band wavelengths)",
@@ -466,8 +511,19 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
             first = Some(file.header);
         }
     }
-    let first = first.expect("angles is non-empty");
-    let h = first;
+    let Some(h) = first else {
+        bail!("{j}: 'angles' is empty");
+    };
+    let samples = (h.samples * h.lines * h.bands * angles.len()) as u64;
+    if invalid.total() >= samples {
+        bail!(
+            "{j}: no usable sample in any cube ({} NaN/inf, {} equal to the ignore value, {} saturated, {} with a bad white/dark reference)",
+            invalid.non_finite,
+            invalid.ignore_value,
+            invalid.saturated,
+            invalid.bad_reference
+        );
+    }
     Ok(CaptureSet {
         polarization: spec.polarization,
         radiometry: spec.radiometry,
@@ -510,8 +566,7 @@ pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
         dir.join("ground_truth")
     };
     let json = gt_dir.join("ground_truth.json");
-    let text = std::fs::read_to_string(&json)
-        .with_context(|| format!("reading ground truth {}", json.display()))?;
+    let text = crate::limits::read_text(&json, "ground truth", 16)?;
     let spec: GroundTruthFile = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a valid ground-truth document", json.display()))?;
     let j = json.display();
@@ -522,8 +577,10 @@ pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
         );
     }
     let film_ior = ior_from_json(&spec.film, "film").with_context(|| format!("{j}"))?;
+    crate::limits::check_index(format!("{j}: film"), &film_ior)?;
     let substrate_ior =
         ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
+    crate::limits::check_index(format!("{j}: substrate"), &substrate_ior)?;
     let exr = resolve(&gt_dir, &spec.thickness_exr);
     let (w, h, thickness_nm) = crate::material::read_thickness_exr(&exr)?;
     if (w, h) != (spec.width, spec.height) {

@@ -267,12 +267,41 @@ impl SimulateConfig {
 
     /// Rejects configurations that would produce NaN or nonsense.
     pub fn validate(&self) -> Result<()> {
-        if !(self.thickness_nm.is_finite() && self.thickness_nm >= 0.0) {
+        use crate::limits::{check_alloc, check_range, size_product, MAX_THICKNESS_NM};
+        check_range("thickness (nm)", self.thickness_nm, 0.0, MAX_THICKNESS_NM)?;
+        check_range("ambient index", self.ambient_ior, 1.0, 3.0)?;
+        check_range("noise sigma", self.noise_sigma, 0.0, 10.0)?;
+        if let Some(i) =
+            (1..self.angles_deg.len()).find(|&i| self.angles_deg[..i].contains(&self.angles_deg[i]))
+        {
+            bail!("incident angle {}° is given twice", self.angles_deg[i]);
+        }
+        // Spectrometers have a few hundred bands; the simulation's cost grows with each.
+        if self.wavelengths_nm.len() > 2048 || self.angles_deg.len() > 64 {
             bail!(
-                "thickness must be finite and ≥ 0 nm, got {}",
-                self.thickness_nm
+                "{} wavelengths and {} angles: at most 2048 wavelengths and 64 angles",
+                self.wavelengths_nm.len(),
+                self.angles_deg.len()
             );
         }
+        // One angle's cube is in memory at a time (f32 plus its encoded copy ≤ 8 bytes).
+        let samples = size_product(
+            "image size",
+            &[
+                ("width", self.width as u64),
+                ("height", self.height as u64),
+                ("bands", self.wavelengths_nm.len() as u64),
+            ],
+        )?;
+        check_alloc(
+            format!(
+                "image size {}×{} with {} bands",
+                self.width,
+                self.height,
+                self.wavelengths_nm.len()
+            ),
+            samples.saturating_mul(12),
+        )?;
         if !(0.0..=1.0).contains(&self.thickness_variation) {
             bail!(
                 "thickness variation must be a fraction in [0, 1], got {}",
@@ -331,12 +360,16 @@ impl SimulateConfig {
                     self.white_counts
                 );
             }
-            if !(self.read_noise.is_finite() && self.read_noise >= 0.0) {
-                bail!("read noise must be finite and ≥ 0, got {}", self.read_noise);
+            if !(self.read_noise.is_finite() && (0.0..=65535.0).contains(&self.read_noise)) {
+                bail!(
+                    "read noise must be in [0, 65535] counts, got {}",
+                    self.read_noise
+                );
             }
         }
         self.realism.validate()?;
         for (what, ior) in [("film", &self.film_ior), ("substrate", &self.substrate_ior)] {
+            crate::limits::check_index(format!("{what} index"), ior)?;
             let film = ThinFilm {
                 ambient_ior: self.ambient_ior,
                 film_ior: ior.at(self.wavelengths_nm[0]),

@@ -20,13 +20,13 @@ pub struct Args {
     #[arg(long)]
     pub figure: Option<PathBuf>,
     /// Box-downsample both images by this integer factor first (averages out noise).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::args::count)]
     pub downsample: usize,
     /// Linear exposure for the figure's tone mapping.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1.0, value_parser = super::args::non_negative_f32)]
     pub exposure: f32,
     /// Colour-bar maximum of the ΔE00 heat map (default: a round number ≥ the 99th percentile).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub delta_e_max: Option<f64>,
 }
 

@@ -2,7 +2,7 @@
 //! of a capture set and write the fitted material (see `crate::estimate`).
 
 use super::Output;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
 use thinfilm::capture::spectra::{load_spectra, SpectraSetup};
@@ -67,25 +67,25 @@ pub struct Args {
     /// Ground truth folder (from `thinfilm simulate`) to report errors against.
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
-    /// Largest thickness considered, nm.
-    #[arg(long, default_value_t = 2000.0)]
+    /// Largest thickness considered, nm (at most 20000).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 2000.0, value_parser = super::args::thickness_nm)]
     pub max_thickness_nm: f64,
     /// Smallest thickness considered, nm.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.0, value_parser = super::args::thickness_nm)]
     pub min_thickness_nm: f64,
-    /// Index range for `grid` (and `full`'s fallback scan).
-    #[arg(long, default_value_t = 1.1)]
+    /// Index range for `grid` (and `full`'s fallback scan), within [1, 10].
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1.1, value_parser = super::args::film_index)]
     pub min_film_ior: f64,
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 3.0, value_parser = super::args::film_index)]
     pub max_film_ior: f64,
-    /// `grid` index step.
-    #[arg(long, default_value_t = 0.01)]
+    /// `grid` index step (at most 100000 steps over the index range).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.01, value_parser = super::args::positive)]
     pub grid_ior_step: f64,
-    /// `grid` thickness step, nm.
-    #[arg(long, default_value_t = 2.0)]
+    /// `grid` thickness step, nm (at most 1000000 steps over the thickness range).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 2.0, value_parser = super::args::positive)]
     pub grid_thickness_step_nm: f64,
-    /// `grid` searches the index on every k-th pixel (x and y).
-    #[arg(long, default_value_t = 1)]
+    /// `grid` searches the index on every k-th pixel (x and y), k ≥ 1.
+    #[arg(long, default_value_t = 1, value_parser = super::args::count)]
     pub grid_pixel_stride: usize,
     /// Ignore the headers' FWHM (no band integration in the model).
     #[arg(long)]
@@ -98,6 +98,46 @@ pub struct Args {
     pub rows: Option<(usize, usize)>,
 }
 
+/// Most steps a `grid` search may take along the index and along the thickness.
+const MAX_GRID_IOR_STEPS: f64 = 1e5;
+const MAX_GRID_THICKNESS_STEPS: f64 = 1e6;
+
+/// Relations between options that clap checks one by one.
+fn check_ranges(args: &Args) -> Result<()> {
+    for (what, lo, hi) in [
+        ("thickness-nm", args.min_thickness_nm, args.max_thickness_nm),
+        ("film-ior", args.min_film_ior, args.max_film_ior),
+    ] {
+        if lo >= hi {
+            bail!("--min-{what} {lo} must be below --max-{what} {hi}");
+        }
+    }
+    let grids = [
+        (
+            "grid-ior-step",
+            args.grid_ior_step,
+            args.min_film_ior,
+            args.max_film_ior,
+        ),
+        (
+            "grid-thickness-step-nm",
+            args.grid_thickness_step_nm,
+            args.min_thickness_nm,
+            args.max_thickness_nm,
+        ),
+    ];
+    for ((opt, step, lo, hi), most) in grids
+        .into_iter()
+        .zip([MAX_GRID_IOR_STEPS, MAX_GRID_THICKNESS_STEPS])
+    {
+        let steps = (hi - lo) / step;
+        if steps > most {
+            bail!("--{opt} {step} makes {steps:.0} steps over [{lo}, {hi}]; at most {most}");
+        }
+    }
+    Ok(())
+}
+
 fn parse_rows(s: &str) -> Result<(usize, usize), String> {
     thinfilm::render::provenance::parse_range(s)
         .map(|(a, b)| (a as usize, b as usize))
@@ -105,6 +145,7 @@ fn parse_rows(s: &str) -> Result<(usize, usize), String> {
 }
 
 pub fn run(args: Args, report: Output) -> Result<()> {
+    check_ranges(&args)?;
     let opts = Options {
         method: args.method,
         film_ior: args.film_ior,
@@ -127,9 +168,6 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         rows: args.rows,
         ..Options::default()
     };
-    if !(opts.grid_ior_step > 0.0 && opts.grid_thickness_step_nm > 0.0) {
-        anyhow::bail!("--grid-ior-step and --grid-thickness-step-nm must be > 0");
-    }
     let t = Instant::now();
     let fit_report::FitRun {
         fit,

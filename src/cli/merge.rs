@@ -6,7 +6,9 @@ use super::Output;
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 use thinfilm::estimate::tiles::TileInfo;
-use thinfilm::image_io::{read_exr, write_exr_channels_with_attributes, write_png_tonemapped};
+use thinfilm::image_io::{
+    exr_memory, read_exr, write_exr_channels_with_attributes, write_png_tonemapped,
+};
 use thinfilm::merge::{merge_renders, stitch_tiles, RenderPiece, TilePiece};
 use thinfilm::render::provenance::{self, KIND};
 
@@ -30,7 +32,7 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Exposure multiplier for the PNG of a merged render.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1.0, value_parser = super::args::non_negative_f32)]
     pub exposure: f32,
 }
 
@@ -38,11 +40,20 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     if args.output.extension().and_then(|e| e.to_str()) != Some("exr") {
         bail!("output {} must end in .exr", args.output.display());
     }
-    let mut files = Vec::with_capacity(args.pieces.len());
+    // Every piece is held at once (plus the merged image): check their sum before reading.
+    let mut bytes = 0u64;
     for p in &args.pieces {
         if p == &args.output {
             bail!("the output {} is also an input", p.display());
         }
+        bytes = bytes.saturating_add(exr_memory(p)?);
+    }
+    thinfilm::limits::check_alloc(
+        format!("merging {} pieces", args.pieces.len()),
+        bytes.saturating_add(bytes / args.pieces.len() as u64),
+    )?;
+    let mut files = Vec::with_capacity(args.pieces.len());
+    for p in &args.pieces {
         files.push(read_exr(p)?);
     }
     let kind = files[0].attributes.get(KIND).cloned().with_context(|| {

@@ -1,6 +1,7 @@
 //! `thinfilm simulate`: parse options into a [`SimulateConfig`] and write a capture set.
 //! All physics lives in `thinfilm::capture::simulate`.
 
+use anyhow::Context;
 use std::path::PathBuf;
 use thinfilm::capture::envi::Interleave;
 use thinfilm::capture::simulate::{
@@ -26,22 +27,22 @@ pub struct Options {
     #[arg(long, value_parser = ["sample1", "sample2", "sample3"])]
     pub preset: Option<String>,
     /// Film index: number, n+ki, or material name [default: 1.37].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::index)]
     pub film_ior: Option<Ior>,
     /// Mean film thickness, nm [default: 400].
-    #[arg(long, value_name = "NM")]
+    #[arg(long, allow_hyphen_values = true, value_name = "NM", value_parser = super::args::thickness_nm)]
     pub thickness: Option<f64>,
     /// Relative amplitude of the smooth thickness field, 0–1 [default: 0.05].
     #[arg(long, value_name = "FRACTION")]
     pub thickness_variation: Option<f64>,
     /// Substrate index: number, n+ki, or material name [default: 1.64 (PET)].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::index)]
     pub substrate_ior: Option<Ior>,
     /// Substrate extinction coefficient k (added to a numeric --substrate-ior).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub substrate_k: Option<f64>,
-    /// Ambient index [default: 1].
-    #[arg(long)]
+    /// Ambient index, in [1, 3] [default: 1].
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::ambient_index)]
     pub ambient_ior: Option<f64>,
     /// Incident angles in degrees, comma-separated [default: 10,20,30,40,50].
     #[arg(long)]
@@ -50,28 +51,28 @@ pub struct Options {
     #[arg(long)]
     pub wavelengths: Option<String>,
     /// Gaussian band FWHM in nm; 0 samples band centres [default: 4].
-    #[arg(long, value_name = "NM")]
+    #[arg(long, allow_hyphen_values = true, value_name = "NM", value_parser = super::args::non_negative)]
     pub fwhm: Option<f64>,
     /// Additive Gaussian noise, reflectance units [default: 0].
-    #[arg(long, value_name = "SIGMA")]
+    #[arg(long, allow_hyphen_values = true, value_name = "SIGMA", value_parser = super::args::non_negative)]
     pub noise: Option<f64>,
     /// Write uint16 raw counts with white and dark reference cubes (shot + read noise).
     #[arg(long)]
     pub raw_counts: bool,
     /// Raw mode: white signal at the spectrum's peak, counts [default: 40000].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub white_counts: Option<f64>,
     /// Raw mode: dark level, counts [default: 800].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub dark_counts: Option<f64>,
     /// Raw mode: read noise, counts [default: 3].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub read_noise: Option<f64>,
     /// s, p or unpolarized [default: s].
     #[arg(long)]
     pub polarization: Option<Polarization>,
     /// Image size WxH [default: 64x64].
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = super::args::size)]
     pub size: Option<(usize, usize)>,
     /// Random seed [default: 1].
     #[arg(long)]
@@ -110,20 +111,6 @@ pub struct Options {
     pub angle_maps: bool,
 }
 
-fn parse_size(s: &str) -> Result<(usize, usize), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("size '{s}' must be WxH, e.g. 256x256"))?;
-    let parse = |t: &str| {
-        t.trim()
-            .parse::<usize>()
-            .ok()
-            .filter(|&v| v > 0)
-            .ok_or_else(|| format!("size '{s}': '{t}' is not a positive integer"))
-    };
-    Ok((parse(w)?, parse(h)?))
-}
-
 /// Builds the configuration: preset (or defaults), then every explicit option.
 pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> {
     let mut cfg = match &args.preset {
@@ -143,9 +130,6 @@ pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> 
         cfg.substrate_ior = v.clone();
     }
     if let Some(k) = args.substrate_k {
-        if !(k.is_finite() && k >= 0.0) {
-            anyhow::bail!("--substrate-k must be finite and ≥ 0, got {k}");
-        }
         cfg.substrate_ior = match &cfg.substrate_ior {
             Ior::Constant(c) => Ior::Constant(Complex64::new(c.re, k)),
             Ior::Material(m) => anyhow::bail!(
@@ -158,10 +142,10 @@ pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> 
         cfg.ambient_ior = v;
     }
     if let Some(v) = &args.angles {
-        cfg.angles_deg = parse_angles(v)?;
+        cfg.angles_deg = parse_angles(v).context("--angles")?;
     }
     if let Some(v) = &args.wavelengths {
-        cfg.wavelengths_nm = parse_wavelengths(v)?;
+        cfg.wavelengths_nm = parse_wavelengths(v).context("--wavelengths")?;
     }
     if let Some(v) = args.fwhm {
         cfg.fwhm_nm = v;
@@ -213,7 +197,7 @@ pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> 
     }
     r.write_angle_maps |= args.angle_maps;
     cfg.progress = progress;
-    cfg.validate()?;
+    cfg.validate().context("simulate options")?;
     Ok(cfg)
 }
 

@@ -376,10 +376,14 @@ pub fn write_colormap_png(
     crate::image_io::write_png_rgb8(path, iw, ih, buf)
 }
 
-/// Writes every output file of a fit into `out`.
+/// Writes every output file of a fit into `out`, as one step (see
+/// [`crate::image_io::write_files_atomically`]): other files in `out` are left alone, and a
+/// failed or killed run leaves the previous outputs.
 pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -> Result<()> {
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("creating output folder {}", out.display()))?;
+    crate::image_io::write_files_atomically(out, |stage| write_outputs_into(stage, set, fit, json))
+}
+
+fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -> Result<()> {
     let (w, h) = (fit.width, fit.height);
     write_colormap_png(
         &out.join("thickness.png"),

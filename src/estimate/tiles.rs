@@ -80,6 +80,12 @@ impl TileInfo {
                 .with_context(|| format!("{what}: '{FILM_IOR}'"))?,
             version: get(VERSION)?.to_string(),
         };
+        crate::limits::check_range(
+            format!("{what}: '{FILM_IOR}'"),
+            info.film_ior,
+            f64::MIN_POSITIVE,
+            crate::limits::MAX_IOR,
+        )?;
         if info.rows.1 > info.image_height {
             bail!(
                 "{what}: rows {}:{} lie outside an image of {} rows",

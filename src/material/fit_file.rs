@@ -236,8 +236,7 @@ pub struct TruthComparison {
 impl FitFile {
     /// Reads and checks `fit.json`: errors name the file and the field.
     pub fn read(path: &Path) -> Result<Self> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = crate::limits::read_text(path, "fit file", 16)?;
         let fit: FitFile = serde_json::from_str(&text)
             .with_context(|| format!("{}: not a valid {FIT_FORMAT} document", path.display()))?;
         if fit.format != FIT_FORMAT {

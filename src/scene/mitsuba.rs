@@ -23,7 +23,7 @@ use super::{
     TextureDesc, TextureFilter, TriangleMesh, WrapMode,
 };
 use crate::optics::{dispersion, Complex64, Ior};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use roxmltree::{Document, Node};
 use std::collections::{HashMap, HashSet};
@@ -71,8 +71,7 @@ pub fn mitsuba_ior(name: &str) -> Option<f64> {
 /// directories (the last declared first), then the scene file's directory, then the current
 /// directory.
 pub fn load_file(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading scene file {}", path.display()))?;
+    let text = crate::limits::read_text(path, "scene file", 16)?;
     let base = path
         .parent()
         .map(Path::to_path_buf)
@@ -109,6 +108,7 @@ pub fn load_str(
             base_dir.to_path_buf(),
         )],
         include_stack: Vec::new(),
+        included_bytes: 0,
         search_paths,
         params: Vec::new(),
         pending: HashMap::new(),
@@ -119,6 +119,7 @@ pub fn load_str(
         emitters: Vec::new(),
         sensor: None,
         integrator: None,
+        depth: 0,
         instanced_triangles: 0,
         direct_strategies: None,
     };
@@ -238,6 +239,9 @@ struct Ctx<'a, 'i> {
     files: Vec<SourceFile>,
     /// Canonical paths of the `<include>` files being expanded (cycle detection).
     include_stack: Vec<PathBuf>,
+    /// Bytes of every included file read so far (an include tree without cycles can still
+    /// expand exponentially: ten includes of a file that includes ten …).
+    included_bytes: u64,
     /// Mitsuba's file resolver: directories searched in order for relative file names.
     search_paths: Vec<PathBuf>,
     /// `$name` substitutions, longest name first (Mitsuba substitutes in that order).
@@ -258,6 +262,8 @@ struct Ctx<'a, 'i> {
     /// A `direct` integrator's strategies (emitter sampling, BSDF sampling), checked against
     /// the scene's lights and BSDFs once everything is loaded.
     direct_strategies: Option<(Node<'a, 'i>, u32, bool)>,
+    /// Objects being parsed around the current one (nesting depth).
+    depth: usize,
 }
 
 /// A node's identity across documents: (document address, node id).
@@ -300,6 +306,10 @@ struct Param {
 /// Mitsuba's include depth limit (`ParserConfig::max_include_depth`).
 const MAX_INCLUDE_DEPTH: usize = 15;
 
+/// Most `<include>` expansions in one scene (real scenes use a few dozen; without a cap, a
+/// tree of repeated includes 15 deep expands ten-fold per level).
+const MAX_INCLUDES: usize = 10_000;
+
 /// A child element of an object after `<include>` expansion, with the property name an
 /// `<include name="…">` gives an included non-scene object.
 #[derive(Clone)]
@@ -323,6 +333,48 @@ const SCENE_ACCEL_PROPS: &[&str] = &[
     "kd_exact_primitive_threshold",
 ];
 
+/// Deepest nesting of objects (a BSDF inside a BSDF inside a shape …) accepted; real scenes
+/// stay below 5, and the parser recurses once per level.
+const MAX_NESTING: usize = 32;
+
+/// Physical domains of numeric parameters, by name: Mitsuba gives each name one meaning
+/// across plugins, so one table checks every plugin's parameters as they are collected —
+/// finite, and inside these closed ranges (`(names, lowest, highest)`). Spectra and RGB
+/// values are checked component by component.
+const DOMAINS: &[(&[&str], f64, f64)] = &[
+    (
+        &[
+            "reflectance",
+            "diffuse_reflectance",
+            "specular_reflectance",
+            "specular_transmittance",
+            "transmittance",
+            "color0",
+            "color1",
+            "radiance",
+            "intensity",
+            "irradiance",
+            "scale",
+        ],
+        0.0,
+        f32::MAX as f64,
+    ),
+    (
+        &["radius", "near_clip", "far_clip"],
+        f32::MIN_POSITIVE as f64,
+        f32::MAX as f64,
+    ),
+    (&["stddev"], f32::MIN_POSITIVE as f64, 32.0),
+    (&["alpha", "alpha_u", "alpha_v"], 0.0, 10.0),
+    (
+        &["int_ior", "ext_ior", "film_ior", "substrate_ior", "eta"],
+        f32::MIN_POSITIVE as f64,
+        crate::limits::MAX_IOR,
+    ),
+    (&["k", "substrate_k"], 0.0, crate::limits::MAX_EXTINCTION),
+    (&["thickness"], 0.0, crate::limits::MAX_THICKNESS_NM),
+];
+
 const OBJECT_TAGS: &[&str] = &[
     "medium",
     "phase",
@@ -338,8 +390,13 @@ const OBJECT_TAGS: &[&str] = &[
     "rfilter",
 ];
 
+/// A number as scene files may hold it: finite and within single precision (the renderer's
+/// geometry and spectra are f32; `1e39` would silently become infinity).
 fn parse_f64(s: &str) -> Option<f64> {
-    s.trim().parse::<f64>().ok()
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && v.abs() <= f32::MAX as f64)
 }
 
 /// Splits "1, 2, 3" or "1 2 3".
@@ -492,15 +549,30 @@ impl<'a, 'i> Ctx<'a, 'i> {
     /// [`resolve_path`](Self::resolve_path) with `first` searched before the resolver.
     fn resolve_in(&self, node: Node, file: &str, first: &[PathBuf]) -> Result<PathBuf> {
         let p = Path::new(file);
+        let not_a_file = |f: &Path| {
+            self.err(
+                node,
+                format!(
+                    "'{}' is not a regular file (a folder or a device)",
+                    f.display()
+                ),
+            )
+        };
         if p.is_absolute() {
             if p.is_file() {
                 return Ok(p.to_path_buf());
+            }
+            if p.exists() {
+                return Err(not_a_file(p));
             }
             return Err(self.err(node, format!("file '{file}' not found")));
         }
         let dirs: Vec<&PathBuf> = first.iter().chain(&self.search_paths).collect();
         if let Some(found) = dirs.iter().map(|d| d.join(p)).find(|f| f.is_file()) {
             return Ok(found);
+        }
+        if let Some(other) = dirs.iter().map(|d| d.join(p)).find(|f| f.exists()) {
+            return Err(not_a_file(&other));
         }
         let looked: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
         Err(self.err(
@@ -572,9 +644,24 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 format!("<include> nested deeper than {MAX_INCLUDE_DEPTH} files"),
             ));
         }
+        if self.files.len() > MAX_INCLUDES {
+            return Err(self.err(
+                node,
+                format!("more than {MAX_INCLUDES} <include> expansions in one scene"),
+            ));
+        }
         let label = path.display().to_string();
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| self.err(node, format!("reading included file {label}: {e}")))?;
+        let text = crate::limits::read_text(&path, "included file", 16)
+            .map_err(|e| self.err(node, format!("{e:#}")))?;
+        self.included_bytes += text.len() as u64;
+        crate::limits::check_alloc(
+            format!(
+                "the files <include>d so far ({} bytes)",
+                self.included_bytes
+            ),
+            self.included_bytes.saturating_mul(16),
+        )
+        .map_err(|e| self.err(node, format!("{e:#}")))?;
         let text: &'i str = self.texts.alloc(text);
         let doc: &'a Document<'i> =
             self.docs.alloc(Document::parse(text).map_err(|e| {
@@ -960,7 +1047,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "float" => {
                 self.check_attrs(node, &["name", "value", "id"])?;
                 let v = self.req_attr(node, "value")?;
-                Val::Float(parse_f64(&v).ok_or_else(|| bad(self, "a number", &v))?)
+                Val::Float(parse_f64(&v).ok_or_else(|| bad(self, "a finite number", &v))?)
             }
             "integer" => {
                 self.check_attrs(node, &["name", "value", "id"])?;
@@ -1043,9 +1130,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let mut out = [default; 3];
         for (k, key) in ["x", "y", "z"].iter().enumerate() {
             if let Some(v) = self.attr(node, key)? {
-                out[k] = parse_f64(&v)
-                    .ok_or_else(|| self.err(node, format!("{key}=\"{v}\" is not a number")))?
-                    as f32;
+                out[k] = parse_f64(&v).ok_or_else(|| {
+                    self.err(node, format!("{key}=\"{v}\" is not a finite number"))
+                })? as f32;
             }
         }
         Ok(Vec3::from(out))
@@ -1073,7 +1160,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 if c.tag_name().name() == "float" && c.attribute("name") == Some("scale") {
                     let v = self.req_attr(c, "value")?;
                     scale = parse_f64(&v)
-                        .ok_or_else(|| self.err(c, format!("'{v}' is not a number")))?
+                        .ok_or_else(|| self.err(c, format!("'{v}' is not a finite number")))?
                         as f32;
                 } else {
                     return Err(self.err(c, "unsupported parameter of a d65 spectrum (only scale)"));
@@ -1121,7 +1208,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     };
                     let angle = self.req_attr(c, "angle")?;
                     let angle = parse_f64(&angle)
-                        .ok_or_else(|| self.err(c, format!("angle=\"{angle}\" is not a number")))?;
+                        .ok_or_else(|| self.err(c, format!("angle=\"{angle}\" is not a finite number")))?;
                     if axis == Vec3::ZERO {
                         return Err(self.err(c, "rotation axis is zero"));
                     }
@@ -1236,6 +1323,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             } else {
                 name
             };
+            self.check_domain(c, &name, &val)?;
             // Unnamed nested objects ("<bsdf>") are checked by the plugin that takes them.
             if !name.starts_with('<') && list.iter().any(|p: &Prop| p.name == name) {
                 return Err(self.err(c, format!("parameter '{name}' given twice")));
@@ -1251,6 +1339,53 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     fn parse_object(&mut self, node: Node<'a, 'i>) -> Result<Val> {
+        if self.depth >= MAX_NESTING {
+            return Err(self.err(node, format!("objects nested more than {MAX_NESTING} deep")));
+        }
+        self.depth += 1;
+        let val = self.parse_object_inner(node);
+        self.depth -= 1;
+        val
+    }
+
+    /// Checks a parameter's value against its name's entry in [`DOMAINS`] (and an index
+    /// given as text against the physical index range).
+    fn check_domain(&self, node: Node, name: &str, val: &Val) -> Result<()> {
+        let Some(&(_, lo, hi)) = DOMAINS.iter().find(|(names, _, _)| names.contains(&name)) else {
+            return Ok(());
+        };
+        let values: Vec<f64> = match val {
+            Val::Float(v) => vec![*v],
+            Val::Int(v) => vec![*v as f64],
+            Val::Rgb(c) => c.iter().map(|&x| x as f64).collect(),
+            Val::Spectrum(s) | Val::Texture(TextureDesc::Value(s)) => match s {
+                SpectrumDesc::Constant(v) | SpectrumDesc::D65 { scale: v } => vec![*v as f64],
+                SpectrumDesc::Rgb(c) => c.iter().map(|&x| x as f64).collect(),
+                SpectrumDesc::Tabulated(t) => t.iter().map(|p| p.1 as f64).collect(),
+            },
+            Val::Str(s) if lo > 0.0 && mitsuba_ior(s).is_none() => {
+                // An index written as text ("1.5", "2+0.1i", "cauchy:…"): physical range.
+                if let Ok(ior) = s.parse::<Ior>() {
+                    crate::limits::check_index(format!("parameter '{name}'"), &ior)
+                        .map_err(|e| self.err(node, e))?;
+                }
+                Vec::new()
+            }
+            _ => Vec::new(),
+        };
+        if let Some(v) = values
+            .iter()
+            .find(|v| !(v.is_finite() && **v >= lo && **v <= hi))
+        {
+            return Err(self.err(
+                node,
+                format!("parameter '{name}' = {v} is outside [{lo}, {hi}]"),
+            ));
+        }
+        Ok(())
+    }
+
+    fn parse_object_inner(&mut self, node: Node<'a, 'i>) -> Result<Val> {
         let tag = node.tag_name().name();
         if node.parent().is_some_and(|p| p.is_root()) {
             // The root element of an included file carries the scene version.
@@ -2102,12 +2237,14 @@ impl<'a, 'i> Ctx<'a, 'i> {
     ) -> Result<TriangleMesh> {
         let mut to_world = *to_world;
         let mut file_face_normals = false;
+        let mut what = self.loc(p.node);
         let mut mesh = match p.plugin.as_str() {
             "obj" | "ply" | "serialized" => {
                 let file = p
                     .string(self, "filename")?
                     .ok_or_else(|| self.err(p.node, "missing parameter 'filename'"))?;
                 let path = self.resolve_path(p.node, &file)?;
+                what = format!("{what}: mesh {}", path.display());
                 let loaded = match p.plugin.as_str() {
                     // Mitsuba flips OBJ texture coordinates by default (v ↦ 1 − v), PLY not.
                     "obj" => super::meshio::load_obj(&path).map(|m| (m, true)),
@@ -2168,7 +2305,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         if flip_normals {
             mesh.flip();
         }
-        mesh.validate(&self.loc(p.node))?;
+        mesh.validate(&what)?;
         Ok(mesh)
     }
 
@@ -2324,7 +2461,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let width = p.int(self, "width", 768)?;
         let height = p.int(self, "height", 576)?;
         if !(1..=65536).contains(&width) || !(1..=65536).contains(&height) {
-            return Err(self.err(p.node, format!("film size {width}×{height} out of range")));
+            return Err(self.err(
+                p.node,
+                format!("film width {width} × height {height}: each must be in 1..=65536"),
+            ));
         }
         // A crop window other than the whole film is not supported.
         let crop = [
@@ -2375,8 +2515,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "box" => ReconstructionFilter::Box,
             "tent" => {
                 let radius = p.float(self, "radius", 1.0)? as f32;
-                if !(radius > 0.0) {
-                    return Err(self.err(p.node, "tent radius must be > 0"));
+                // The filter's footprint is allocated per image row: keep it to pixels.
+                if !(radius > 0.0 && radius <= 32.0) {
+                    return Err(self.err(
+                        p.node,
+                        format!("tent radius {radius} must be in (0, 32] pixels"),
+                    ));
                 }
                 ReconstructionFilter::Tent { radius }
             }
@@ -2795,6 +2939,7 @@ fn combine_ior(label: &str, n: &Spectral, k: &Spectral) -> Ior {
 /// of the dispersion library (`MgF2`, `TiO2`, `SiO2`, …). A group in parentheses followed by
 /// `xN` repeats N times: `(TiO2:52, SiO2:94)x6, TiO2:52` is a 13-layer quarter-wave mirror.
 pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> {
+    const MAX_LAYERS: usize = 10_000;
     fn items(text: &str) -> std::result::Result<Vec<&str>, String> {
         let mut out = Vec::new();
         let (mut depth, mut start) = (0i32, 0);
@@ -2846,6 +2991,9 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
                 }
                 let mut group = Vec::new();
                 parse(&body[..close], &mut group, level + 1)?;
+                if out.len() + group.len().saturating_mul(count) > MAX_LAYERS {
+                    return Err(format!("'{item}' makes more than {MAX_LAYERS} layers"));
+                }
                 for _ in 0..count {
                     out.extend(group.iter().cloned());
                 }
@@ -2869,9 +3017,11 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
                 .trim()
                 .parse()
                 .map_err(|e| format!("layer '{item}': {e}"))?;
+            crate::limits::check_index(format!("layer '{item}'"), &ior)
+                .map_err(|e| e.to_string())?;
             out.push((ior, d));
-            if out.len() > 10_000 {
-                return Err("more than 10000 layers".into());
+            if out.len() > MAX_LAYERS {
+                return Err(format!("more than {MAX_LAYERS} layers"));
             }
         }
         Ok(())
@@ -2960,8 +3110,7 @@ fn check_tabulated(pairs: Vec<(f32, f32)>) -> std::result::Result<SpectrumDesc, 
 
 /// Reads a `.spd` file: lines "λ value" (whitespace or comma separated), `#` comments.
 pub fn read_spd(path: &Path) -> Result<SpectrumDesc> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading spectrum file {}", path.display()))?;
+    let text = crate::limits::read_text(path, "spectrum file", 16)?;
     let mut pairs = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
@@ -3114,6 +3263,17 @@ impl<'a, 'i> Props<'a, 'i> {
         match self.take(name) {
             None => Ok(Mat4::IDENTITY),
             Some(q) => match q.val {
+                // A singular object or camera transform has no inverse: normals and camera
+                // rays would be NaN. (`to_uv` may legitimately collapse a texture.)
+                Val::Transform(m)
+                    if name == "to_world"
+                        && !(m.determinant().is_normal() && m.inverse().is_finite()) =>
+                {
+                    Err(ctx.err(
+                        q.node,
+                        "to_world is singular (a zero scale or a degenerate matrix)",
+                    ))
+                }
                 Val::Transform(m) => Ok(m),
                 _ => Err(Self::type_err(ctx, &q, "a <transform>")),
             },

@@ -7,7 +7,6 @@ use crate::estimate::{report, Method, Options};
 use crate::figure::{self, RenderSettings, SampleRow};
 use crate::material::FilmMaterial;
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -187,16 +186,10 @@ pub fn run(cfg: &DemoConfig) -> Result<DemoSummary> {
     std::fs::create_dir_all(&cfg.out).with_context(|| format!("creating {}", cfg.out.display()))?;
     // simulate + 2 fits per sample, one figure per sample, the Fig. 6 figure.
     let steps = SAMPLES.len() as u64 * 4 + 1;
-    let bar = if cfg.progress {
-        ProgressBar::new(steps)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} (eta {eta})",
-        )
-        .expect("valid template"),
+    let bar = crate::progress::bar(
+        cfg.progress,
+        steps,
+        "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} ({eta} left)",
     );
     let mut samples = Vec::new();
     let mut figures = Vec::new();

@@ -5,6 +5,7 @@ use super::Output;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
+use thinfilm::estimate::tiles::RowBand;
 use thinfilm::estimate::{report as fit_report, Method, Options};
 
 #[derive(clap::Args, Debug)]
@@ -53,6 +54,10 @@ pub struct Args {
     /// every band with that index).
     #[arg(long, value_parser = parse_rows, value_name = "START:END")]
     pub rows: Option<(usize, usize)>,
+    /// Fit band K of N equal row bands (K from 0; e.g. a job array's task index and count):
+    /// the same as --rows with that band's rows.
+    #[arg(long, value_parser = super::parse_part, value_name = "K/N", conflicts_with = "rows")]
+    pub part: Option<(usize, usize)>,
 }
 
 fn parse_rows(s: &str) -> Result<(usize, usize), String> {
@@ -74,7 +79,11 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         grid_pixel_stride: args.grid_pixel_stride,
         band_integration: !args.no_band_integration,
         progress: report.progress(),
-        rows: args.rows,
+        rows: match (args.rows, args.part) {
+            (Some((a, b)), _) => Some(RowBand::Rows(a, b)),
+            (None, Some((index, count))) => Some(RowBand::Part { index, count }),
+            (None, None) => None,
+        },
         ..Options::default()
     };
     if !(opts.grid_ior_step > 0.0 && opts.grid_thickness_step_nm > 0.0) {

@@ -116,9 +116,9 @@ pub struct Options {
     /// Pixels used for the joint (n, d) refinement of `full`.
     pub joint_pixels: usize,
     pub progress: bool,
-    /// Fit only rows `[A, B)`: the index from their pixels (unless given), their thickness
+    /// Fit only a band of rows: the index from its pixels (unless given), its thickness
     /// exactly as in the whole fit ([`tiles`]). `None`: every row.
-    pub rows: Option<(usize, usize)>,
+    pub rows: Option<tiles::RowBand>,
 }
 
 impl Default for Options {
@@ -257,8 +257,8 @@ fn check_set(set: &CaptureSet) -> Result<()> {
 /// Runs the chosen estimator.
 pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     check_set(set)?;
-    if let Some(rows) = opts.rows {
-        tiles::check_rows(rows, set.height)?;
+    if let Some(band) = opts.rows {
+        band.resolve(set.height)?;
     }
     if let Some(n) = opts.film_ior {
         if !(n.is_finite() && n > 0.0) {
@@ -291,14 +291,10 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
 }
 
 fn progress_bar(opts: &Options, len: usize, what: &str) -> indicatif::ProgressBar {
-    if !opts.progress {
-        return indicatif::ProgressBar::hidden();
-    }
-    let pb = indicatif::ProgressBar::new(len as u64);
-    pb.set_style(
-        indicatif::ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} px ({eta} left)")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let pb = crate::progress::bar(
+        opts.progress,
+        len as u64,
+        "{msg:>12} [{bar:40}] {pos}/{len} px ({eta} left)",
     );
     pb.set_message(what.to_string());
     pb
@@ -740,7 +736,9 @@ fn multi_angle_pixels(set: &CaptureSet, opts: &Options) -> Vec<usize> {
 
 /// Rows `[A, B)` the fit covers.
 fn fitted_rows(set: &CaptureSet, opts: &Options) -> (usize, usize) {
-    opts.rows.unwrap_or((0, set.height))
+    opts.rows
+        .and_then(|b| b.resolve(set.height).ok())
+        .unwrap_or((0, set.height))
 }
 
 /// Pixel indices of the fitted rows.

@@ -34,7 +34,7 @@ fn furnace_scene(shape: &str, bsdf: &str) -> String {
                 <transform name="to_world"><lookat origin="0, -4, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
                 <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
             </sensor>
-            <emitter type="constant"><float name="radiance" value="1"/></emitter>
+            <emitter type="constant"><spectrum name="radiance" value="1"/></emitter>
             <shape type="{shape}">{bsdf}</shape>
         </scene>"#
     )

@@ -27,7 +27,7 @@
 use super::{
     look_at, shapes, BitmapTexture, BsdfDesc, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
     IntegratorSettings, Polarizer, ReconstructionFilter, SamplerKind, Scene, Shape, SpectrumDesc,
-    TextureDesc, TextureFilter, WrapMode,
+    TextureDesc, TextureFilter, TriangleMesh, WrapMode,
 };
 use crate::optics::{dispersion, Complex64, Ior};
 use anyhow::{anyhow, bail, Context, Result};
@@ -36,6 +36,7 @@ use roxmltree::{Document, Node};
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use typed_arena::Arena;
 
 /// Mitsuba 3's named refractive indices (`include/mitsuba/render/ior.h`), used for
 /// `dielectric`/`plastic` `int_ior`/`ext_ior` strings. Constants, as in Mitsuba.
@@ -73,7 +74,9 @@ pub fn mitsuba_ior(name: &str) -> Option<f64> {
         .map(|&(_, v)| v)
 }
 
-/// Loads a Mitsuba XML file; relative paths inside resolve against its directory.
+/// Loads a Mitsuba XML file. Relative file names resolve as in Mitsuba: against the `<path>`
+/// directories (the last declared first), then the scene file's directory, then the current
+/// directory.
 pub fn load_file(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("reading scene file {}", path.display()))?;
@@ -93,18 +96,38 @@ pub fn load_str(
     defaults: &[(String, String)],
     file_name: &str,
 ) -> Result<Scene> {
-    let doc = Document::parse(text).map_err(|e| anyhow!("{file_name}: malformed XML: {e}"))?;
+    // Included files are parsed while the scene is walked; the arenas keep every file's text
+    // and document alive for as long as the nodes borrowed from them.
+    let texts: Arena<String> = Arena::new();
+    let docs: Arena<Document> = Arena::new();
+    let text: &str = texts.alloc(text.to_string());
+    let doc: &Document =
+        docs.alloc(Document::parse(text).map_err(|e| anyhow!("{file_name}: malformed XML: {e}"))?);
+    let mut search_paths = vec![base_dir.to_path_buf()];
+    if let Ok(cwd) = std::env::current_dir() {
+        search_paths.push(cwd);
+    }
     let mut ctx = Ctx {
-        doc: &doc,
-        file: file_name.to_string(),
-        base_dir: base_dir.to_path_buf(),
-        params: HashMap::new(),
+        texts: &texts,
+        docs: &docs,
+        files: vec![SourceFile::new(
+            doc,
+            file_name.to_string(),
+            base_dir.to_path_buf(),
+        )],
+        include_stack: Vec::new(),
+        search_paths,
+        params: Vec::new(),
+        pending: HashMap::new(),
+        built: HashSet::new(),
         ids: HashMap::new(),
         bsdfs: Vec::new(),
         shapes: Vec::new(),
         emitters: Vec::new(),
         sensor: None,
         integrator: None,
+        instanced_triangles: 0,
+        direct_strategies: None,
     };
     ctx.parse_scene(doc.root_element(), defaults)
 }
@@ -148,6 +171,20 @@ enum Val {
     Film(FilmSettings),
     Sampler(u32, u64, SamplerKind),
     Rfilter(ReconstructionFilter),
+    Shapes(Shapes),
+    /// A reference to a `shapegroup` (the child of an `instance`).
+    ShapeGroup(Arc<Vec<Shape>>),
+    Sensor(Box<Sensor>),
+    Integrator(IntegratorSettings),
+}
+
+/// What a `<shape>` element yields.
+#[derive(Debug, Clone)]
+enum Shapes {
+    /// Shapes of the scene: one, or several for an `instance` of a multi-shape group.
+    Plain(Vec<Shape>),
+    /// A `shapegroup`: shapes drawn only through `instance`s.
+    Group(Vec<Shape>),
 }
 
 impl Val {
@@ -168,6 +205,9 @@ impl Val {
             Val::Film(_) => "film",
             Val::Sampler(..) => "sampler",
             Val::Rfilter(_) => "rfilter",
+            Val::Shapes(_) | Val::ShapeGroup(_) => "shape",
+            Val::Sensor(_) => "sensor",
+            Val::Integrator(_) => "integrator",
         }
     }
 }
@@ -180,6 +220,8 @@ enum Named {
     Value(Val),
     Shape,
     Emitter,
+    /// The shapes of a `shapegroup`, in the group's space.
+    ShapeGroup(Arc<Vec<Shape>>),
 }
 
 struct Prop<'a, 'i> {
@@ -197,19 +239,101 @@ struct Props<'a, 'i> {
 }
 
 struct Ctx<'a, 'i> {
-    doc: &'a Document<'i>,
-    file: String,
-    base_dir: PathBuf,
-    params: HashMap<String, String>,
+    /// Texts and parsed documents of the scene file and every file it includes.
+    texts: &'i Arena<String>,
+    docs: &'a Arena<Document<'i>>,
+    files: Vec<SourceFile>,
+    /// Canonical paths of the `<include>` files being expanded (cycle detection).
+    include_stack: Vec<PathBuf>,
+    /// Mitsuba's file resolver: directories searched in order for relative file names.
+    search_paths: Vec<PathBuf>,
+    /// `$name` substitutions, longest name first (Mitsuba substitutes in that order).
+    params: Vec<Param>,
+    /// Top-level objects with an `id`, not built yet: a `<ref>` may name an object declared
+    /// later in the file (Mitsuba resolves references after parsing).
+    pending: HashMap<String, Node<'a, 'i>>,
+    /// Top-level objects already built on demand by a forward `<ref>`.
+    built: HashSet<NodeKey>,
     ids: HashMap<String, Named>,
     bsdfs: Vec<BsdfDesc>,
     shapes: Vec<Shape>,
     emitters: Vec<EmitterDesc>,
     sensor: Option<Sensor>,
     integrator: Option<IntegratorSettings>,
+    /// Triangles added by flattening `instance`s so far.
+    instanced_triangles: usize,
+    /// A `direct` integrator's strategies (emitter sampling, BSDF sampling), checked against
+    /// the scene's lights and BSDFs once everything is loaded.
+    direct_strategies: Option<(Node<'a, 'i>, bool, bool)>,
 }
 
+/// A node's identity across documents: (document address, node id).
+type NodeKey = (usize, roxmltree::NodeId);
+
+fn node_key(node: Node) -> NodeKey {
+    (node.document() as *const Document as usize, node.id())
+}
+
+/// One parsed XML file: its document (by address), name for messages and directory.
+struct SourceFile {
+    doc: usize,
+    label: String,
+    dir: PathBuf,
+    /// Written for Mitsuba 0.x (`version` < 2.0): parameter names are upgraded.
+    v1: bool,
+}
+
+impl SourceFile {
+    fn new(doc: &Document, label: String, dir: PathBuf) -> Self {
+        SourceFile {
+            doc: doc as *const Document as usize,
+            label,
+            dir,
+            v1: false,
+        }
+    }
+}
+
+/// A `$name` parameter: from `-D` (`cli`) or a `<default>`.
+struct Param {
+    name: String,
+    value: String,
+    cli: bool,
+    /// Also declared by a `<default>` (for `-D` checks).
+    declared: bool,
+    used: std::cell::Cell<bool>,
+}
+
+/// Mitsuba's include depth limit (`ParserConfig::max_include_depth`).
+const MAX_INCLUDE_DEPTH: usize = 15;
+
+/// A child element of an object after `<include>` expansion, with the property name an
+/// `<include name="…">` gives an included non-scene object.
+#[derive(Clone)]
+struct Child<'a, 'i> {
+    node: Node<'a, 'i>,
+    name: Option<String>,
+}
+
+/// Scene properties Mitsuba's `Scene` accepts for its acceleration structure (Embree,
+/// kd-tree); they do not change the image.
+const SCENE_ACCEL_PROPS: &[&str] = &[
+    "embree_use_robust_intersections",
+    "kd_intersection_cost",
+    "kd_traversal_cost",
+    "kd_empty_space_bonus",
+    "kd_stop_prims",
+    "kd_max_depth",
+    "kd_min_max_bins",
+    "kd_clip",
+    "kd_retract_bad_splits",
+    "kd_exact_primitive_threshold",
+];
+
 const OBJECT_TAGS: &[&str] = &[
+    "medium",
+    "phase",
+    "volume",
     "shape",
     "bsdf",
     "texture",
@@ -236,9 +360,18 @@ fn parse_list(s: &str) -> Option<Vec<f64>> {
 impl<'a, 'i> Ctx<'a, 'i> {
     // ---------------------------------------------------------------- messages and attributes
 
+    fn file_of(&self, doc: &Document) -> &SourceFile {
+        let addr = doc as *const Document as usize;
+        self.files
+            .iter()
+            .find(|f| f.doc == addr)
+            .unwrap_or(&self.files[0])
+    }
+
     fn loc(&self, node: Node) -> String {
-        let p = self.doc.text_pos_at(node.range().start);
-        format!("{}:{}:{}", self.file, p.row, p.col)
+        let doc = node.document();
+        let p = doc.text_pos_at(node.range().start);
+        format!("{}:{}:{}", self.file_of(doc).label, p.row, p.col)
     }
 
     fn describe(node: Node) -> String {
@@ -258,10 +391,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
     fn check_attrs(&self, node: Node, allowed: &[&str]) -> Result<()> {
         for a in node.attributes() {
             if !allowed.contains(&a.name()) {
-                let p = self.doc.text_pos_at(a.range().start);
+                let doc = node.document();
+                let p = doc.text_pos_at(a.range().start);
                 bail!(
                     "{}:{}:{}: {}: unknown attribute '{}' (allowed: {})",
-                    self.file,
+                    self.file_of(doc).label,
                     p.row,
                     p.col,
                     Self::describe(node),
@@ -286,58 +420,222 @@ impl<'a, 'i> Ctx<'a, 'i> {
             .ok_or_else(|| self.err(node, format!("missing attribute '{name}'")))
     }
 
-    /// Replaces `$name` (longest declared name first, as Mitsuba does) by its value.
+    /// Mitsuba's parameter substitution (`parser.cpp`): every `$name` of every parameter,
+    /// longest name first, is replaced by its value unless escaped as `\$`; a `$` left over
+    /// is an undefined parameter; `\$` then becomes `$`.
     fn substitute(&self, node: Node, value: &str) -> Result<String> {
         if !value.contains('$') {
             return Ok(value.to_string());
         }
-        let mut out = String::new();
-        let mut rest = value;
-        while let Some(pos) = rest.find('$') {
-            out.push_str(&rest[..pos]);
-            let after = &rest[pos + 1..];
-            let ident_len = after
-                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-                .unwrap_or(after.len());
-            let name = &after[..ident_len];
-            if name.is_empty() {
-                return Err(self.err(node, format!("stray '$' in attribute value \"{value}\"")));
-            }
-            match self.params.get(name) {
-                Some(v) => out.push_str(v),
-                None => {
-                    return Err(self.err(
-                        node,
-                        format!(
-                            "undefined parameter ${name} (declare <default name=\"{name}\" value=\"…\"/> or pass -D {name}=…)"
-                        ),
-                    ))
+        let mut out = value.to_string();
+        for p in &self.params {
+            let key = format!("${}", p.name);
+            let mut pos = 0;
+            while let Some(found) = out[pos..].find(&key) {
+                let at = pos + found;
+                if at > 0 && out.as_bytes()[at - 1] == b'\\' {
+                    pos = at + key.len();
+                } else {
+                    out.replace_range(at..at + key.len(), &p.value);
+                    p.used.set(true);
+                    pos = at + p.value.len();
                 }
             }
-            rest = &after[ident_len..];
         }
-        out.push_str(rest);
-        Ok(out)
-    }
-
-    fn resolve_path(&self, node: Node, file: &str) -> Result<PathBuf> {
-        let p = Path::new(file);
-        let full = if p.is_absolute() {
-            p.to_path_buf()
-        } else {
-            self.base_dir.join(p)
-        };
-        if !full.is_file() {
+        let bytes = out.as_bytes();
+        for (i, _) in out.match_indices('$') {
+            if i > 0 && bytes[i - 1] == b'\\' {
+                continue;
+            }
+            let name: String = out[i + 1..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
             return Err(self.err(
                 node,
-                format!("file '{file}' not found (looked for {})", full.display()),
+                if name.is_empty() {
+                    format!("stray '$' in attribute value \"{value}\"")
+                } else {
+                    format!(
+                        "undefined parameter ${name} (declare <default name=\"{name}\" value=\"…\"/> or pass -D {name}=…)"
+                    )
+                },
             ));
         }
-        Ok(full)
+        Ok(out.replace("\\$", "$"))
+    }
+
+    /// Adds a parameter unless one of that name exists (a `-D` value or an earlier
+    /// `<default>` wins, as in Mitsuba).
+    fn add_param(&mut self, name: &str, value: &str, cli: bool) {
+        if let Some(p) = self.params.iter_mut().find(|p| p.name == name) {
+            p.declared |= !cli;
+            return;
+        }
+        let at = self
+            .params
+            .iter()
+            .position(|p| p.name.len() < name.len())
+            .unwrap_or(self.params.len());
+        self.params.insert(
+            at,
+            Param {
+                name: name.to_string(),
+                value: value.to_string(),
+                cli,
+                declared: !cli,
+                used: std::cell::Cell::new(false),
+            },
+        );
+    }
+
+    /// Mitsuba's file resolver: an absolute name as is, otherwise the first of the search
+    /// directories (`<path>` entries, the scene's directory, the current directory) where
+    /// it exists.
+    fn resolve_path(&self, node: Node, file: &str) -> Result<PathBuf> {
+        self.resolve_in(node, file, &[])
+    }
+
+    /// [`resolve_path`](Self::resolve_path) with `first` searched before the resolver.
+    fn resolve_in(&self, node: Node, file: &str, first: &[PathBuf]) -> Result<PathBuf> {
+        let p = Path::new(file);
+        if p.is_absolute() {
+            if p.is_file() {
+                return Ok(p.to_path_buf());
+            }
+            return Err(self.err(node, format!("file '{file}' not found")));
+        }
+        let dirs: Vec<&PathBuf> = first.iter().chain(&self.search_paths).collect();
+        if let Some(found) = dirs.iter().map(|d| d.join(p)).find(|f| f.is_file()) {
+            return Ok(found);
+        }
+        let looked: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+        Err(self.err(
+            node,
+            format!(
+                "file '{file}' not found (searched {}; add a <path value=\"…\"/> or fix the name)",
+                looked.join(", ")
+            ),
+        ))
     }
 
     fn elements(node: Node<'a, 'i>) -> impl Iterator<Item = Node<'a, 'i>> {
         node.children().filter(|c| c.is_element())
+    }
+
+    /// The element children of `node` in document order, with `<include>`s replaced by the
+    /// included file's elements and `<default>`s registered (Mitsuba allows both anywhere).
+    /// `<path>` is only allowed as a child of the root element (handled before the walk).
+    fn children(&mut self, node: Node<'a, 'i>) -> Result<Vec<Child<'a, 'i>>> {
+        let mut out = Vec::new();
+        for c in Self::elements(node) {
+            match c.tag_name().name() {
+                "default" => {
+                    self.check_attrs(c, &["name", "value"])?;
+                    let name = self.req_attr(c, "name")?;
+                    let value = self.req_attr(c, "value")?;
+                    if name.is_empty() {
+                        return Err(self.err(c, "<default>: name must not be empty"));
+                    }
+                    self.add_param(&name, &value, false);
+                }
+                "include" => out.extend(self.include(c)?),
+                "path" => {
+                    let root = node.parent().is_some_and(|p| p.is_root());
+                    if !root {
+                        return Err(self.err(c, "<path> can only be a child of the root <scene>"));
+                    }
+                }
+                _ => out.push(Child {
+                    node: c,
+                    name: None,
+                }),
+            }
+        }
+        Ok(out)
+    }
+
+    /// Expands `<include filename="…" [name="…"]/>`: the included file's root element, or —
+    /// when that root is a `<scene>` — its children. The file is found in the including
+    /// file's directory first, then through the resolver (Mitsuba's order).
+    fn include(&mut self, node: Node<'a, 'i>) -> Result<Vec<Child<'a, 'i>>> {
+        self.check_attrs(node, &["filename", "name"])?;
+        let file = self.req_attr(node, "filename")?;
+        let here = self.file_of(node.document()).dir.clone();
+        let path = self.resolve_in(node, &file, &[here])?;
+        let canonical = path.canonicalize().unwrap_or_else(|_| path.clone());
+        if self.include_stack.contains(&canonical) {
+            let chain: Vec<String> = self
+                .include_stack
+                .iter()
+                .chain([&canonical])
+                .map(|p| p.display().to_string())
+                .collect();
+            return Err(self.err(node, format!("<include> cycle: {}", chain.join(" → "))));
+        }
+        if self.include_stack.len() >= MAX_INCLUDE_DEPTH {
+            return Err(self.err(
+                node,
+                format!("<include> nested deeper than {MAX_INCLUDE_DEPTH} files"),
+            ));
+        }
+        let label = path.display().to_string();
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| self.err(node, format!("reading included file {label}: {e}")))?;
+        let text: &'i str = self.texts.alloc(text);
+        let doc: &'a Document<'i> =
+            self.docs.alloc(Document::parse(text).map_err(|e| {
+                self.err(node, format!("included file {label}: malformed XML: {e}"))
+            })?);
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        self.files.push(SourceFile::new(doc, label, dir));
+        let root = doc.root_element();
+        self.check_version(root)?;
+        let name = self.attr(node, "name")?;
+        if root.tag_name().name() != "scene" {
+            return Ok(vec![Child { node: root, name }]);
+        }
+        // `<path>` in an included scene only serves that file's own includes (Mitsuba
+        // applies it to a resolver that is discarded after the include).
+        let saved_paths = self.search_paths.clone();
+        for p in Self::elements(root).filter(|c| c.tag_name().name() == "path") {
+            self.add_search_path(p)?;
+        }
+        self.include_stack.push(canonical);
+        let children = self.children(root);
+        self.include_stack.pop();
+        self.search_paths = saved_paths;
+        children
+    }
+
+    /// `<path value="DIR"/>`: DIR (relative to the file's directory, else through the
+    /// resolver) is searched first from now on.
+    fn add_search_path(&mut self, node: Node) -> Result<()> {
+        self.check_attrs(node, &["value"])?;
+        let value = self.req_attr(node, "value")?;
+        let p = Path::new(&value);
+        let dir = if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            let here = self.file_of(node.document()).dir.join(p);
+            if here.is_dir() {
+                here
+            } else {
+                self.search_paths
+                    .iter()
+                    .map(|d| d.join(p))
+                    .find(|d| d.is_dir())
+                    .unwrap_or(here)
+            }
+        };
+        if !dir.is_dir() {
+            return Err(self.err(
+                node,
+                format!("<path>: folder \"{}\" not found", dir.display()),
+            ));
+        }
+        self.search_paths.insert(0, dir);
+        Ok(())
     }
 
     // ---------------------------------------------------------------- scene
@@ -347,91 +645,46 @@ impl<'a, 'i> Ctx<'a, 'i> {
             return Err(self.err(root, "the root element must be <scene version=\"3.0.0\">"));
         }
         self.check_attrs(root, &["version"])?;
-        let version = root.attribute("version").ok_or_else(|| {
-            self.err(root, "missing attribute 'version' (e.g. version=\"3.0.0\")")
-        })?;
-        let major = version
-            .split('.')
-            .next()
-            .and_then(|m| m.trim().parse::<u32>().ok())
-            .ok_or_else(|| {
-                self.err(
-                    root,
-                    format!("version \"{version}\" is not a version number"),
-                )
-            })?;
-        if major < 2 {
-            return Err(self.err(
-                root,
-                format!("version {version}: only Mitsuba 2/3 scene syntax is supported"),
-            ));
-        }
-        // Defaults first (they may appear anywhere at top level), then overrides.
-        let mut declared = HashSet::new();
-        for c in Self::elements(root).filter(|c| c.tag_name().name() == "default") {
-            self.check_attrs(c, &["name", "value"])?;
-            let name = c
-                .attribute("name")
-                .ok_or_else(|| self.err(c, "missing attribute 'name'"))?;
-            let value = c
-                .attribute("value")
-                .ok_or_else(|| self.err(c, "missing attribute 'value'"))?;
-            declared.insert(name.to_string());
-            self.params.insert(name.to_string(), value.to_string());
-        }
+        self.check_version(root)?;
         for (k, v) in overrides {
-            if !declared.contains(k) && !text_mentions_param(self.doc.input_text(), k) {
-                let mut names: Vec<_> = declared.iter().map(String::as_str).collect();
-                names.sort_unstable();
-                bail!(
-                    "{}: -D {k}={v}: the scene has no parameter ${k} (declared: {})",
-                    self.file,
-                    if names.is_empty() {
-                        "none".to_string()
-                    } else {
-                        names.join(", ")
-                    }
-                );
-            }
-            self.params.insert(k.clone(), v.clone());
+            self.add_param(k, v, true);
         }
-        for c in Self::elements(root) {
-            let tag = c.tag_name().name();
-            match tag {
-                "default" => {}
-                "shape" | "bsdf" | "texture" | "emitter" | "sensor" | "integrator" => {
-                    let val = self.parse_object(c)?;
-                    self.add_top_level(c, val)?;
+        // `<path>` entries apply to every file name of the scene (Mitsuba resolves them when
+        // the plugins are built, after the whole file is parsed).
+        for c in Self::elements(root).filter(|c| c.tag_name().name() == "path") {
+            self.add_search_path(c)?;
+        }
+        let children = self.children(root)?;
+        for c in &children {
+            if OBJECT_TAGS.contains(&c.node.tag_name().name()) {
+                if let Some(id) = self.attr(c.node, "id")? {
+                    self.pending.entry(id).or_insert(c.node);
                 }
-                "float" | "integer" | "boolean" | "string" | "rgb" | "spectrum" | "point"
-                | "vector" => {
-                    // A named top-level value usable through <ref>.
-                    let (_, val) = self.parse_value(c)?;
-                    let id = self.req_attr(c, "id").map_err(|_| {
-                        self.err(c, "a top-level value needs an 'id' to be referenced")
-                    })?;
-                    self.register(c, id, Named::Value(val))?;
-                }
-                _ => return Err(self.unknown_element(c, "<scene>")),
             }
         }
+        for Child { node: c, .. } in children {
+            if self.built.contains(&node_key(c)) {
+                continue;
+            }
+            self.top_level(c)?;
+        }
+        self.check_overrides()?;
+        self.check_direct_strategies()?;
         let integrator = self.integrator.unwrap_or_default();
         let (camera, film, spp, seed, sampler, polarizer) = match self.sensor.clone() {
             Some(s) => (s.camera, s.film, s.spp, s.seed, s.sampler, s.polarizer),
-            None => {
-                // Mitsuba would use a default 45° camera at the origin; framing the scene is
-                // more useful and documented here.
-                let bounds = super::shapes_bounds(&self.shapes)
-                    .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-                (
-                    super::default_camera(bounds),
-                    FilmSettings::default(),
-                    4,
-                    0,
-                    SamplerKind::Independent,
-                    None,
-                )
-            }
+            None => (
+                mitsuba_default_camera(super::shapes_bounds(&self.shapes)),
+                FilmSettings {
+                    width: 768,
+                    height: 576,
+                    filter: ReconstructionFilter::Gaussian { stddev: 0.5 },
+                },
+                4,
+                0,
+                SamplerKind::Independent,
+                None,
+            ),
         };
         Ok(Scene {
             camera,
@@ -446,6 +699,149 @@ impl<'a, 'i> Ctx<'a, 'i> {
             polarizer,
             source: None,
         })
+    }
+
+    /// Checks `<scene version="X.Y.Z">`; files older than 2.0 get Mitsuba's upgrade
+    /// (camelCase parameter names to snake_case) when their objects are read.
+    fn check_version(&mut self, root: Node) -> Result<()> {
+        let version = root.attribute("version").ok_or_else(|| {
+            self.err(root, "missing attribute 'version' (e.g. version=\"3.0.0\")")
+        })?;
+        let major = version
+            .split('.')
+            .next()
+            .and_then(|m| m.trim().parse::<u32>().ok())
+            .ok_or_else(|| {
+                self.err(
+                    root,
+                    format!("version \"{version}\" is not a version number"),
+                )
+            })?;
+        let addr = root.document() as *const Document as usize;
+        if let Some(f) = self.files.iter_mut().find(|f| f.doc == addr) {
+            f.v1 = major < 2;
+        }
+        Ok(())
+    }
+
+    /// One child of the scene (after include expansion).
+    fn top_level(&mut self, c: Node<'a, 'i>) -> Result<()> {
+        match c.tag_name().name() {
+            "shape" | "bsdf" | "texture" | "emitter" | "sensor" | "integrator" | "medium"
+            | "phase" | "volume" | "film" | "sampler" | "rfilter" => {
+                let val = self.parse_object(c)?;
+                self.add_top_level(c, val)?;
+            }
+            "float" | "integer" | "boolean" | "string" | "rgb" | "spectrum" | "point"
+            | "vector"
+                if c.attribute("id").is_none()
+                    && c.attribute("name")
+                        .is_some_and(|n| SCENE_ACCEL_PROPS.contains(&n)) =>
+            {
+                // Options of Mitsuba's ray-tracing back end: no effect on the image.
+                self.parse_value(c)?;
+            }
+            "float" | "integer" | "boolean" | "string" | "rgb" | "spectrum" | "point"
+            | "vector" => {
+                // A named top-level value usable through <ref>.
+                let (_, val) = self.parse_value(c)?;
+                let id = self
+                    .req_attr(c, "id")
+                    .map_err(|_| self.err(c, "a top-level value needs an 'id' to be referenced"))?;
+                self.register(c, id, Named::Value(val))?;
+            }
+            "alias" => {
+                self.check_attrs(c, &["id", "as"])?;
+                let id = self.req_attr(c, "id")?;
+                let alias = self.req_attr(c, "as")?;
+                let named = self.lookup(c, &id)?;
+                self.register(c, alias, named)?;
+            }
+            _ => return Err(self.unknown_element(c, "<scene>")),
+        }
+        Ok(())
+    }
+
+    /// The object or value registered under `id`; a top-level object declared later in the
+    /// file is built now (forward reference).
+    fn lookup(&mut self, node: Node, id: &str) -> Result<Named> {
+        if let Some(n) = self.ids.get(id) {
+            return Ok(n.clone());
+        }
+        if let Some(target) = self.pending.remove(id) {
+            self.built.insert(node_key(target));
+            self.top_level(target)?;
+            if let Some(n) = self.ids.get(id) {
+                return Ok(n.clone());
+            }
+        }
+        Err(self.err(
+            node,
+            format!("reference to unknown id \"{id}\" (or a circular reference)"),
+        ))
+    }
+
+    /// A `direct` integrator without one of its strategies misses light the path tracer
+    /// finds (see [`direct_integrator`](Self::direct_integrator)): refused when that light
+    /// exists in this scene.
+    fn check_direct_strategies(&self) -> Result<()> {
+        let Some((node, emitter_sampling, bsdf_sampling)) = self.direct_strategies else {
+            return Ok(());
+        };
+        if !emitter_sampling
+            && self
+                .emitters
+                .iter()
+                .any(|e| matches!(e, EmitterDesc::Point { .. }))
+        {
+            return Err(self.err(
+                node,
+                "direct with emitter_samples = 0 in a scene with point lights is not supported (Mitsuba never reaches them; thinfilm's path tracer would)",
+            ));
+        }
+        if !bsdf_sampling
+            && self
+                .shapes
+                .iter()
+                .any(|s| has_delta_lobe(&self.bsdfs[s.bsdf]))
+        {
+            return Err(self.err(
+                node,
+                "direct with bsdf_samples = 0 in a scene with smooth (delta) BSDFs is not supported (Mitsuba shows them black; thinfilm's path tracer would not)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Every `-D name=value` must name a parameter the scene declares or uses (Mitsuba
+    /// rejects unused parameters).
+    fn check_overrides(&self) -> Result<()> {
+        if let Some(p) = self
+            .params
+            .iter()
+            .find(|p| p.cli && !p.declared && !p.used.get())
+        {
+            let mut names: Vec<&str> = self
+                .params
+                .iter()
+                .filter(|p| p.declared)
+                .map(|p| p.name.as_str())
+                .collect();
+            names.sort_unstable();
+            bail!(
+                "{}: -D {}={}: the scene has no parameter ${} (declared: {})",
+                self.files[0].label,
+                p.name,
+                p.value,
+                p.name,
+                if names.is_empty() {
+                    "none".to_string()
+                } else {
+                    names.join(", ")
+                }
+            );
+        }
+        Ok(())
     }
 
     fn unknown_element(&self, node: Node, parent: &str) -> anyhow::Error {
@@ -486,10 +882,54 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     self.register(node, id, Named::Emitter)?;
                 }
             }
-            Val::Emitter(Emitter::Area(_)) => {
-                return Err(self.err(node, "an area emitter must be nested inside a <shape>"))
+            // Objects a shape or sensor takes by <ref>: Mitsuba keeps them by id; one that
+            // is never referenced does nothing (an area emitter lights only a shape).
+            v @ (Val::Emitter(Emitter::Area(_))
+            | Val::Film(_)
+            | Val::Sampler(..)
+            | Val::Rfilter(_)) => match id {
+                Some(id) => self.register(node, id, Named::Value(v))?,
+                None => eprintln!(
+                    "note: {}: a top-level {} without an id is not used by anything",
+                    self.loc(node),
+                    v.kind()
+                ),
+            },
+            Val::Shapes(Shapes::Group(shapes)) => {
+                let id = id.ok_or_else(|| {
+                    self.err(node, "a shapegroup needs an 'id' (instances refer to it)")
+                })?;
+                self.register(node, id, Named::ShapeGroup(Arc::new(shapes)))?;
             }
-            _ => {}
+            Val::Shapes(Shapes::Plain(shapes)) => {
+                self.shapes.extend(shapes);
+                if let Some(id) = id {
+                    self.register(node, id, Named::Shape)?;
+                }
+            }
+            Val::Sensor(s) => {
+                if self.sensor.is_some() {
+                    // mi.render(scene) renders the first sensor unless told otherwise.
+                    eprintln!(
+                        "note: {}: the scene has several sensors; rendering the first (as Mitsuba's render does by default)",
+                        self.loc(node)
+                    );
+                } else {
+                    self.sensor = Some(*s);
+                }
+            }
+            Val::Integrator(s) => {
+                if self.integrator.is_some() {
+                    return Err(self.err(node, "only one <integrator> is supported"));
+                }
+                self.integrator = Some(s);
+            }
+            other => {
+                return Err(self.err(
+                    node,
+                    format!("a {} cannot be a child of <scene>", other.kind()),
+                ))
+            }
         }
         Ok(())
     }
@@ -499,7 +939,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
     /// Parses a value element (`float`, `rgb`, `transform`, …) into (name, value).
     fn parse_value(&mut self, node: Node<'a, 'i>) -> Result<(String, Val)> {
         let tag = node.tag_name().name();
-        let name = node.attribute("name").unwrap_or("").to_string();
+        let name = self.attr(node, "name")?.unwrap_or_default();
         let bad = |ctx: &Self, what: &str, v: &str| ctx.err(node, format!("'{v}' is not {what}"));
         let val = match tag {
             "float" => {
@@ -721,7 +1161,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
             .attr(node, "type")?
             .ok_or_else(|| self.err(node, "missing attribute 'type'"))?;
         let mut list = Vec::new();
-        for c in Self::elements(node) {
+        for Child {
+            node: c,
+            name: include_name,
+        } in self.children(node)?
+        {
             let ctag = c.tag_name().name();
             let (name, val) = match ctag {
                 "float" | "integer" | "boolean" | "string" | "rgb" | "spectrum" | "point"
@@ -735,14 +1179,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 "ref" => {
                     self.check_attrs(c, &["id", "name"])?;
                     let id = self.req_attr(c, "id")?;
-                    let named =
-                        self.ids.get(&id).cloned().ok_or_else(|| {
-                            self.err(c, format!("reference to unknown id \"{id}\""))
-                        })?;
-                    let val = match named {
+                    let val = match self.lookup(c, &id)? {
                         Named::Bsdf(i) => Val::BsdfRef(i),
                         Named::Texture(t) => Val::Texture(t),
                         Named::Value(v) => v,
+                        Named::ShapeGroup(g) => Val::ShapeGroup(g),
                         Named::Shape | Named::Emitter => {
                             return Err(self.err(c, format!("\"{id}\" cannot be referenced here")))
                         }
@@ -753,20 +1194,32 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     (name, val)
                 }
                 t if OBJECT_TAGS.contains(&t) => {
-                    let val = self.parse_object(c)?;
-                    let name = self.attr(c, "name")?.unwrap_or_else(|| format!("<{t}>"));
+                    let mut val = self.parse_object(c)?;
+                    let name = match include_name {
+                        Some(n) => n,
+                        None => self.attr(c, "name")?.unwrap_or_else(|| format!("<{t}>")),
+                    };
                     if let Some(id) = self.attr(c, "id")? {
-                        let named = match &val {
-                            Val::Texture(t) => Some(Named::Texture(t.clone())),
-                            _ => None,
-                        };
-                        if let Some(n) = named {
-                            self.register(c, id, n)?;
+                        // A nested object with an id can be referenced from anywhere after it.
+                        match &val {
+                            Val::Texture(t) => self.register(c, id, Named::Texture(t.clone()))?,
+                            Val::Bsdf(b) => {
+                                self.bsdfs.push(b.clone());
+                                let i = self.bsdfs.len() - 1;
+                                self.register(c, id, Named::Bsdf(i))?;
+                                val = Val::BsdfRef(i);
+                            }
+                            _ => {}
                         }
                     }
                     (name, val)
                 }
                 _ => return Err(self.unknown_element(c, &Self::describe(node))),
+            };
+            let name = if self.file_of(c.document()).v1 {
+                upgrade_v1_name(&plugin, &name)
+            } else {
+                name
             };
             // Unnamed nested objects ("<bsdf>") are checked by the plugin that takes them.
             if !name.starts_with('<') && list.iter().any(|p: &Prop| p.name == name) {
@@ -785,38 +1238,23 @@ impl<'a, 'i> Ctx<'a, 'i> {
     fn parse_object(&mut self, node: Node<'a, 'i>) -> Result<Val> {
         let tag = node.tag_name().name();
         self.check_attrs(node, &["type", "id", "name"])?;
+        if matches!(tag, "medium" | "phase" | "volume") {
+            let plugin = self.attr(node, "type")?.unwrap_or_default();
+            return Err(self.err(
+                node,
+                format!(
+                    "unsupported {tag} plugin \"{plugin}\": participating media are not supported"
+                ),
+            ));
+        }
         let mut p = self.collect_props(node)?;
         let val = match tag {
             "bsdf" => Val::Bsdf(self.build_bsdf(&mut p)?),
             "texture" => Val::Texture(self.build_texture(&mut p)?),
             "emitter" => Val::Emitter(self.build_emitter(&mut p)?),
-            "shape" => {
-                let shape = self.build_shape(&mut p)?;
-                p.finish(self)?;
-                self.shapes.push(shape);
-                if let Some(id) = self.attr(node, "id")? {
-                    self.register(node, id, Named::Shape)?;
-                }
-                return Ok(Val::Bool(true));
-            }
-            "sensor" => {
-                let s = self.build_sensor(&mut p)?;
-                p.finish(self)?;
-                if self.sensor.is_some() {
-                    return Err(self.err(node, "only one <sensor> is supported"));
-                }
-                self.sensor = Some(s);
-                return Ok(Val::Bool(true));
-            }
-            "integrator" => {
-                let s = self.build_integrator(&mut p)?;
-                p.finish(self)?;
-                if self.integrator.is_some() {
-                    return Err(self.err(node, "only one <integrator> is supported"));
-                }
-                self.integrator = Some(s);
-                return Ok(Val::Bool(true));
-            }
+            "shape" => Val::Shapes(self.build_shapes(&mut p)?),
+            "sensor" => Val::Sensor(Box::new(self.build_sensor(&mut p)?)),
+            "integrator" => Val::Integrator(self.build_integrator(&mut p)?),
             "film" => Val::Film(self.build_film(&mut p)?),
             "sampler" => {
                 let (n, s, k) = self.build_sampler(&mut p)?;
@@ -872,11 +1310,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let material = p.string(self, "material")?;
                 let eta = p.take("eta");
                 let k = p.take("k");
-                p.accept(
-                    &["specular_reflectance"],
-                    self,
-                    |v| matches!(v, Val::Float(x) if *x == 1.0),
-                )?;
+                p.accept(&["specular_reflectance"], self, is_unit)?;
                 let ior = match (material, eta, k) {
                     (Some(_), Some(e), _) | (Some(_), None, Some(e)) => {
                         return Err(
@@ -932,6 +1366,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 };
                 let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
                 let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
+                p.accept(
+                    &["specular_reflectance", "specular_transmittance"],
+                    self,
+                    is_unit,
+                )?;
                 BsdfDesc::Dielectric {
                     int_ior,
                     ext_ior,
@@ -948,6 +1387,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 } else {
                     0.0
                 };
+                p.accept(&["specular_reflectance"], self, is_unit)?;
                 BsdfDesc::Plastic {
                     diffuse_reflectance: p.texture(self, "diffuse_reflectance", 0.5)?,
                     int_ior: p.ior_number(self, "int_ior", 1.49)? as f32,
@@ -1354,7 +1794,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     })?;
                 }
                 tex.to_uv = p.uv_transform(self)?;
+                // Storage precision and lookup acceleration: the same texel values.
                 p.accept(&["format"], self, |v| matches!(v, Val::Str(_)))?;
+                p.accept(&["accel"], self, |v| matches!(v, Val::Bool(_)))?;
                 Ok(TextureDesc::Bitmap(Arc::new(tex)))
             }
             "checkerboard" => {
@@ -1372,24 +1814,45 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     fn build_emitter(&mut self, p: &mut Props<'a, 'i>) -> Result<Emitter> {
+        // Only changes how often the emitter is sampled, not the image.
+        p.accept(&["sampling_weight"], self, |v| {
+            matches!(v, Val::Float(_) | Val::Int(_))
+        })?;
         Ok(match p.plugin.as_str() {
-            "area" => Emitter::Area(p.spectrum(self, "radiance", 1.0)?),
+            "area" => Emitter::Area(p.emission(self, "radiance")?),
             "constant" => Emitter::Other(EmitterDesc::Constant {
-                radiance: p.spectrum(self, "radiance", 1.0)?,
+                radiance: p.emission(self, "radiance")?,
             }),
             "point" => {
-                let to_world = p.transform(self, "to_world")?;
-                let position = match p.take("position") {
-                    Some(Prop {
-                        val: Val::Point(v) | Val::Vector(v),
-                        ..
-                    }) => v,
-                    Some(q) => return Err(self.err(q.node, "position must be a <point>")),
-                    None => to_world.transform_point3(Vec3::ZERO),
+                let to_world = p.take("to_world");
+                let position = match (p.take("position"), to_world) {
+                    (Some(_), Some(t)) => {
+                        return Err(self.err(
+                            t.node,
+                            "give either 'position' or 'to_world' for a point light, not both",
+                        ))
+                    }
+                    (
+                        Some(Prop {
+                            val: Val::Point(v) | Val::Vector(v),
+                            ..
+                        }),
+                        None,
+                    ) => v,
+                    (Some(q), None) => return Err(self.err(q.node, "position must be a <point>")),
+                    (
+                        None,
+                        Some(Prop {
+                            val: Val::Transform(m),
+                            ..
+                        }),
+                    ) => m.transform_point3(Vec3::ZERO),
+                    (None, Some(q)) => return Err(Props::type_err(self, &q, "a <transform>")),
+                    (None, None) => Vec3::ZERO,
                 };
                 EmitterDesc::Point {
                     position,
-                    intensity: p.spectrum(self, "intensity", 1.0)?,
+                    intensity: p.emission(self, "intensity")?,
                 }
                 .into()
             }
@@ -1416,6 +1879,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 }
                 let scale = p.float(self, "scale", 1.0)? as f32;
                 let to_world = p.transform(self, "to_world")?;
+                // Changes the sampling density only (Karlík et al. 2019), not the image.
+                p.accept(&["mis_compensation"], self, |v| matches!(v, Val::Bool(_)))?;
                 EmitterDesc::Envmap {
                     image: Arc::new(image),
                     scale,
@@ -1428,9 +1893,91 @@ impl<'a, 'i> Ctx<'a, 'i> {
         })
     }
 
+    /// A `<shape>`: one shape, a `shapegroup`'s shapes, or an `instance` of a group, which
+    /// is flattened into world-space copies of the group's shapes (meshes are duplicated per
+    /// instance; the total is capped by [`MAX_INSTANCED_TRIANGLES`]).
+    fn build_shapes(&mut self, p: &mut Props<'a, 'i>) -> Result<Shapes> {
+        match p.plugin.as_str() {
+            "shapegroup" => {
+                let mut group = Vec::new();
+                for q in std::mem::take(&mut p.list) {
+                    match q.val {
+                        Val::Shapes(Shapes::Plain(s)) => group.extend(s),
+                        Val::Shapes(Shapes::Group(_)) => {
+                            return Err(self.err(q.node, "a shapegroup cannot contain a shapegroup"))
+                        }
+                        _ => p.list.push(q),
+                    }
+                }
+                if let Some(s) = group.iter().find(|s| s.emission.is_some()) {
+                    return Err(self.err(
+                        p.node,
+                        format!(
+                            "shapegroup: shape {} is an area emitter (Mitsuba does not instance emitters)",
+                            s.name.as_deref().unwrap_or("(unnamed)")
+                        ),
+                    ));
+                }
+                Ok(Shapes::Group(group))
+            }
+            "instance" => {
+                let to_world = p.transform(self, "to_world")?;
+                let mut group = None;
+                for q in std::mem::take(&mut p.list) {
+                    match q.val {
+                        Val::ShapeGroup(g) if group.is_none() => group = Some(g),
+                        Val::ShapeGroup(_) => {
+                            return Err(self.err(q.node, "an instance takes a single shapegroup"))
+                        }
+                        _ => p.list.push(q),
+                    }
+                }
+                let group = group.ok_or_else(|| {
+                    self.err(
+                        p.node,
+                        "an instance needs a <ref id=\"…\"/> to a shapegroup",
+                    )
+                })?;
+                self.instanced_triangles += group
+                    .iter()
+                    .map(|s| match &s.geometry {
+                        Geometry::Mesh(m) => m.indices.len(),
+                        Geometry::Sphere { .. } => 0,
+                    })
+                    .sum::<usize>();
+                if self.instanced_triangles > MAX_INSTANCED_TRIANGLES {
+                    return Err(self.err(
+                        p.node,
+                        format!(
+                            "instances add more than {MAX_INSTANCED_TRIANGLES} triangles (each instance is stored as a copy)"
+                        ),
+                    ));
+                }
+                let name = self.attr(p.node, "id")?;
+                group
+                    .iter()
+                    .map(|s| {
+                        let mut s =
+                            transformed_shape(s, &to_world).map_err(|e| self.err(p.node, e))?;
+                        if name.is_some() {
+                            s.name.clone_from(&name);
+                        }
+                        Ok(s)
+                    })
+                    .collect::<Result<_>>()
+                    .map(Shapes::Plain)
+            }
+            _ => Ok(Shapes::Plain(vec![self.build_shape(p)?])),
+        }
+    }
+
     fn build_shape(&mut self, p: &mut Props<'a, 'i>) -> Result<Shape> {
         let to_world = p.transform(self, "to_world")?;
         let flip_normals = p.bool(self, "flip_normals", false)?;
+        // Differentiable-rendering weight: no effect on images.
+        p.accept(&["silhouette_sampling_weight"], self, |v| {
+            matches!(v, Val::Float(_))
+        })?;
         let mut bsdf = None;
         let mut emission = None;
         let mut rest = Vec::new();
@@ -1444,90 +1991,34 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 Val::Emitter(_) => {
                     return Err(self.err(q.node, "a shape takes one emitter, of type \"area\""))
                 }
+                Val::Sensor(_) => {
+                    return Err(self.err(q.node, "sensors attached to shapes are not supported"))
+                }
                 _ => rest.push(q),
             }
         }
         p.list = rest;
         let geometry = match p.plugin.as_str() {
-            "sphere" => {
-                let center = match p.take("center") {
-                    Some(Prop {
-                        val: Val::Point(v) | Val::Vector(v),
-                        ..
-                    }) => v,
-                    Some(q) => return Err(self.err(q.node, "center must be a <point>")),
-                    None => Vec3::ZERO,
-                };
-                let radius = p.float(self, "radius", 1.0)? as f32;
-                // Mitsuba: to_world · translate(center) · scale(radius).
-                let m = to_world
-                    * Mat4::from_translation(center)
-                    * Mat4::from_scale(Vec3::splat(radius));
-                let c = m.transform_point3(Vec3::ZERO);
-                let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| m.transform_vector3(a));
-                let r = axes[0].length();
-                let similar = axes
-                    .iter()
-                    .all(|a| (a.length() - r).abs() <= 1e-4 * r.max(1e-12))
-                    && axes[0].dot(axes[1]).abs() <= 1e-4 * r * r
-                    && axes[1].dot(axes[2]).abs() <= 1e-4 * r * r
-                    && axes[0].dot(axes[2]).abs() <= 1e-4 * r * r;
-                if !similar {
-                    return Err(self.err(p.node, "sphere to_world must be a similarity (uniform scale, rotation, translation)"));
-                }
-                if !(r > 0.0 && r.is_finite()) {
-                    return Err(self.err(p.node, "sphere radius must be > 0"));
-                }
-                Geometry::Sphere {
-                    center: c,
-                    radius: r,
-                    flip_normals,
-                }
-            }
-            "obj" | "ply" | "rectangle" | "cube" | "disk" => {
-                let mut mesh = match p.plugin.as_str() {
-                    "obj" | "ply" => {
-                        let file = p
-                            .string(self, "filename")?
-                            .ok_or_else(|| self.err(p.node, "missing parameter 'filename'"))?;
-                        let path = self.resolve_path(p.node, &file)?;
-                        let m = if p.plugin == "obj" {
-                            let flip_tex = p.bool(self, "flip_tex_coords", true)?;
-                            let mut m = super::meshio::load_obj(&path);
-                            if !flip_tex {
-                                if let Ok(m) = &mut m {
-                                    for uv in &mut m.uvs {
-                                        uv.y = 1.0 - uv.y;
-                                    }
-                                }
-                            }
-                            m
-                        } else {
-                            super::meshio::load_ply(&path)
-                        };
-                        m.map_err(|e| self.err(p.node, format!("{e:#}")))?
-                    }
-                    "rectangle" => shapes::rectangle(),
-                    "cube" => shapes::cube(),
-                    _ => shapes::disk(8, 128),
-                };
-                let face_normals = p.bool(self, "face_normals", false)?;
-                if face_normals {
-                    mesh.normals.clear();
-                } else {
-                    mesh.ensure_normals();
-                }
-                mesh.transform(&to_world);
-                if flip_normals {
-                    mesh.flip();
-                }
-                mesh.validate(&self.loc(p.node))?;
-                Geometry::Mesh(mesh)
+            "sphere" => self.sphere(p, &to_world, flip_normals)?,
+            "obj" | "ply" | "serialized" | "rectangle" | "cube" | "disk" | "cylinder" => {
+                Geometry::Mesh(self.mesh(p, &to_world, flip_normals)?)
             }
             _ => {
-                return Err(
-                    self.unknown_plugin(p, &["obj", "ply", "sphere", "rectangle", "cube", "disk"])
-                )
+                return Err(self.unknown_plugin(
+                    p,
+                    &[
+                        "obj",
+                        "ply",
+                        "serialized",
+                        "sphere",
+                        "rectangle",
+                        "cube",
+                        "disk",
+                        "cylinder",
+                        "shapegroup",
+                        "instance",
+                    ],
+                ))
             }
         };
         let bsdf = match bsdf {
@@ -1558,18 +2049,139 @@ impl<'a, 'i> Ctx<'a, 'i> {
         })
     }
 
+    /// Mitsuba's analytic `sphere`: `to_world · translate(center) · scale(radius)`, which
+    /// must be a similarity.
+    fn sphere(
+        &mut self,
+        p: &mut Props<'a, 'i>,
+        to_world: &Mat4,
+        flip_normals: bool,
+    ) -> Result<Geometry> {
+        let center = match p.take("center") {
+            Some(Prop {
+                val: Val::Point(v) | Val::Vector(v),
+                ..
+            }) => v,
+            Some(q) => return Err(self.err(q.node, "center must be a <point>")),
+            None => Vec3::ZERO,
+        };
+        let radius = p.float(self, "radius", 1.0)? as f32;
+        let m = *to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
+        sphere_geometry(&m, flip_normals).map_err(|e| self.err(p.node, e))
+    }
+
+    /// A triangle-mesh shape in world space: a mesh file (`obj`, `ply`, `serialized`) or a
+    /// tessellated primitive (`rectangle`, `cube`, `disk`, `cylinder`).
+    fn mesh(
+        &mut self,
+        p: &mut Props<'a, 'i>,
+        to_world: &Mat4,
+        flip_normals: bool,
+    ) -> Result<TriangleMesh> {
+        let mut to_world = *to_world;
+        let mut file_face_normals = false;
+        let mut mesh = match p.plugin.as_str() {
+            "obj" | "ply" | "serialized" => {
+                let file = p
+                    .string(self, "filename")?
+                    .ok_or_else(|| self.err(p.node, "missing parameter 'filename'"))?;
+                let path = self.resolve_path(p.node, &file)?;
+                let loaded = match p.plugin.as_str() {
+                    // Mitsuba flips OBJ texture coordinates by default (v ↦ 1 − v), PLY not.
+                    "obj" => super::meshio::load_obj(&path).map(|m| (m, true)),
+                    "ply" => super::meshio::load_ply(&path).map(|m| (m, false)),
+                    _ => {
+                        let index = p.int(self, "shape_index", 0)?;
+                        let index = usize::try_from(index)
+                            .map_err(|_| self.err(p.node, "shape_index must be ≥ 0"))?;
+                        super::serialized::load(&path, index).map(|s| {
+                            file_face_normals = s.face_normals;
+                            (s.mesh, false)
+                        })
+                    }
+                };
+                let (mut m, flipped) = loaded.map_err(|e| self.err(p.node, format!("{e:#}")))?;
+                if p.plugin != "serialized" {
+                    let flip_tex = p.bool(self, "flip_tex_coords", p.plugin == "obj")?;
+                    if flip_tex != flipped {
+                        for uv in &mut m.uvs {
+                            uv.y = 1.0 - uv.y;
+                        }
+                    }
+                }
+                m
+            }
+            "rectangle" => shapes::rectangle(),
+            "cube" => shapes::cube(),
+            "disk" => shapes::disk(8, 128),
+            _ => {
+                // Mitsuba's analytic cylinder, tessellated finely (see shapes::cylinder).
+                let radius = p.float(self, "radius", 1.0)? as f32;
+                let p0 = self.point(p, "p0", Vec3::ZERO)?;
+                let p1 = self.point(p, "p1", Vec3::Z)?;
+                let length = (p1 - p0).length();
+                if !(radius > 0.0 && length > 0.0) {
+                    return Err(self.err(p.node, "cylinder needs radius > 0 and p0 ≠ p1"));
+                }
+                to_world = to_world
+                    * Mat4::from_translation(p0)
+                    * mitsuba_to_frame((p1 - p0) / length)
+                    * Mat4::from_scale(Vec3::new(radius, radius, length));
+                shapes::cylinder(shapes::CYLINDER_SEGMENTS)
+            }
+        };
+        let face_normals = match p.take("face_normals") {
+            Some(Prop {
+                val: Val::Bool(b), ..
+            }) => b,
+            Some(q) => return Err(Props::type_err(self, &q, "a <boolean>")),
+            None => file_face_normals,
+        };
+        if face_normals {
+            mesh.normals.clear();
+        } else {
+            mesh.ensure_normals();
+        }
+        mesh.transform(&to_world);
+        if flip_normals {
+            mesh.flip();
+        }
+        mesh.validate(&self.loc(p.node))?;
+        Ok(mesh)
+    }
+
+    fn point(&self, p: &mut Props<'a, 'i>, name: &str, default: Vec3) -> Result<Vec3> {
+        match p.take(name) {
+            None => Ok(default),
+            Some(Prop {
+                val: Val::Point(v) | Val::Vector(v),
+                ..
+            }) => Ok(v),
+            Some(q) => Err(Props::type_err(self, &q, "a <point>")),
+        }
+    }
+
     fn build_sensor(&mut self, p: &mut Props<'a, 'i>) -> Result<Sensor> {
         if p.plugin != "perspective" {
             return Err(self.unknown_plugin(p, &["perspective"]));
         }
-        // Mitsuba: `fov` (degrees, along `fov_axis`) or `focal_length` ("50mm" default, 35 mm
-        // film equivalent: fov_x = 2·atan(36 / (2f))) — checked against Mitsuba 3.9.1.
+        // Mitsuba's `parse_fov` (sensor.cpp): `fov` in degrees along `fov_axis`, or a
+        // `focal_length` ("50mm" by default) of a 36 × 24 mm film, whose field of view is
+        // measured along the film diagonal (2·atan(√(36² + 24²) / 2f)) whatever `fov_axis` says.
         let focal = p.string(self, "focal_length")?;
-        let fov = match (p.float_opt(self, "fov")?, focal) {
+        let fov_given = p.float_opt(self, "fov")?;
+        let fov_axis_str = p.string(self, "fov_axis")?.map(|a| a.to_ascii_lowercase());
+        let (fov, fov_axis_str) = match (fov_given, focal) {
             (Some(_), Some(_)) => {
                 return Err(self.err(p.node, "give either 'fov' or 'focal_length', not both"))
             }
-            (Some(f), None) => f as f32,
+            (Some(f), None) => (f as f32, fov_axis_str),
+            (None, _) if fov_axis_str.is_some() => {
+                return Err(self.err(
+                    p.node,
+                    "'fov_axis' applies to 'fov' only (a focal length is always measured along the film diagonal; Mitsuba rejects it too)",
+                ))
+            }
             (None, f) => {
                 let f = f.unwrap_or_else(|| "50mm".to_string());
                 let mm = f
@@ -1586,13 +2198,15 @@ impl<'a, 'i> Ctx<'a, 'i> {
                             format!("focal_length \"{f}\" is not a length like \"50mm\""),
                         )
                     })?;
-                (2.0 * (36.0 / (2.0 * mm)).atan()).to_degrees() as f32
+                let diagonal_mm = (36.0f64 * 36.0 + 24.0 * 24.0).sqrt();
+                let fov = (2.0 * (diagonal_mm / (2.0 * mm)).atan()).to_degrees() as f32;
+                (fov, Some("diagonal".to_string()))
             }
         };
         if !(fov > 0.0 && fov < 180.0) {
             return Err(self.err(p.node, format!("fov {fov}° must be in (0, 180)")));
         }
-        let fov_axis = match p.string(self, "fov_axis")?.as_deref() {
+        let fov_axis = match fov_axis_str.as_deref() {
             None | Some("x") => FovAxis::X,
             Some("y") => FovAxis::Y,
             Some("diagonal") => FovAxis::Diagonal,
@@ -1605,6 +2219,24 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 ))
             }
         };
+        // A pinhole has no focal plane (Mitsuba's perspective reads and ignores it); no motion
+        // blur without animated transforms, so the shutter interval changes nothing either.
+        p.accept(
+            &["focus_distance", "shutter_open", "shutter_close"],
+            self,
+            |v| matches!(v, Val::Float(_) | Val::Int(_)),
+        )?;
+        for axis in ["principal_point_offset_x", "principal_point_offset_y"] {
+            if p.float(self, axis, 0.0)? != 0.0 {
+                return Err(self.err(p.node, format!("a non-zero {axis} is not supported")));
+            }
+        }
+        if let Some(q) = p.take("srf") {
+            return Err(self.err(
+                q.node,
+                "a sensor spectral response ('srf') is not supported",
+            ));
+        }
         let near_clip = p.float(self, "near_clip", 0.01)? as f32;
         let far_clip = p.float(self, "far_clip", 10000.0)? as f32;
         if !(near_clip > 0.0 && far_clip > near_clip) {
@@ -1672,15 +2304,37 @@ impl<'a, 'i> Ctx<'a, 'i> {
         if !(1..=65536).contains(&width) || !(1..=65536).contains(&height) {
             return Err(self.err(p.node, format!("film size {width}×{height} out of range")));
         }
-        // Output-format options do not change pixel values.
+        // A crop window other than the whole film is not supported.
+        let crop = [
+            ("crop_offset_x", 0),
+            ("crop_offset_y", 0),
+            ("crop_width", width),
+            ("crop_height", height),
+        ];
+        for (name, full) in crop {
+            let v = p.int(self, name, full)?;
+            if v != full {
+                return Err(self.err(
+                    p.node,
+                    format!("crop windows are not supported ({name} = {v}; the whole {width}×{height} film is rendered only)"),
+                ));
+            }
+        }
+        // Output-format options do not change pixel values (thinfilm writes RGB EXRs).
         p.accept(
             &["pixel_format", "component_format", "file_format"],
             self,
             |v| matches!(v, Val::Str(_)),
         )?;
-        p.accept(&["banner", "sample_border", "compensate"], self, |v| {
+        p.accept(&["banner", "compensate"], self, |v| {
             matches!(v, Val::Bool(_))
         })?;
+        if p.bool(self, "sample_border", false)? {
+            eprintln!(
+                "note: {}: sample_border is ignored (only pixels at the image border would change)",
+                self.loc(p.node)
+            );
+        }
         let mut filter = ReconstructionFilter::Gaussian { stddev: 0.5 };
         if let Some(i) = p.list.iter().position(|q| matches!(q.val, Val::Rfilter(_))) {
             if let Val::Rfilter(f) = p.list.remove(i).val {
@@ -1734,7 +2388,16 @@ impl<'a, 'i> Ctx<'a, 'i> {
         if seed < 0 {
             return Err(self.err(p.node, "seed must be ≥ 0"));
         }
-        p.accept(&["jitter"], self, |v| matches!(v, Val::Bool(_)))?;
+        // Stratification options change the noise, not the expected image.
+        if matches!(
+            p.plugin.as_str(),
+            "stratified" | "multijitter" | "orthogonal"
+        ) {
+            p.accept(&["jitter"], self, |v| matches!(v, Val::Bool(_)))?;
+        }
+        if p.plugin == "orthogonal" {
+            p.accept(&["strength"], self, |v| matches!(v, Val::Int(_)))?;
+        }
         let kind = if p.plugin == "independent" {
             SamplerKind::Independent
         } else {
@@ -1744,20 +2407,253 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     fn build_integrator(&mut self, p: &mut Props<'a, 'i>) -> Result<IntegratorSettings> {
-        if p.plugin != "path" {
-            return Err(self.unknown_plugin(p, &["path"]));
+        // Mitsuba's generic integrator parameters that do not change the expected image.
+        p.accept(&["timeout"], self, |v| {
+            matches!(v, Val::Float(_) | Val::Int(_))
+        })?;
+        p.accept(&["block_size", "samples_per_pass"], self, |v| {
+            matches!(v, Val::Int(_))
+        })?;
+        let plugin = p.plugin.clone();
+        match plugin.as_str() {
+            "path" | "volpath" | "volpathmis" | "prb" | "prb_basic" => {
+                if plugin != "path" {
+                    // Participating media are refused where they are declared, so these
+                    // integrators meet surfaces only: their estimate is the path tracer's.
+                    eprintln!(
+                        "note: {}: integrator \"{plugin}\" is rendered by the path tracer (same expected image without participating media)",
+                        self.loc(p.node)
+                    );
+                }
+                let max_depth = p.int(self, "max_depth", -1)?;
+                let rr_depth = p.int(self, "rr_depth", 5)?;
+                if max_depth < -1 || rr_depth < 1 {
+                    return Err(self.err(p.node, "max_depth must be ≥ −1 and rr_depth ≥ 1"));
+                }
+                Ok(IntegratorSettings {
+                    max_depth: max_depth.min(i32::MAX as i64) as i32,
+                    rr_depth: rr_depth.min(i32::MAX as i64) as i32,
+                    hide_emitters: p.bool(self, "hide_emitters", false)?,
+                })
+            }
+            "direct" => self.direct_integrator(p),
+            "moment" | "aov" | "stokes" => self.wrapper_integrator(p),
+            _ => Err(self.unknown_plugin(
+                p,
+                &[
+                    "path",
+                    "direct",
+                    "volpath",
+                    "volpathmis",
+                    "prb",
+                    "prb_basic",
+                    "moment",
+                    "aov",
+                    "stokes",
+                ],
+            )),
         }
-        let max_depth = p.int(self, "max_depth", -1)?;
-        let rr_depth = p.int(self, "rr_depth", 5)?;
-        if max_depth < -1 || rr_depth < 1 {
-            return Err(self.err(p.node, "max_depth must be ≥ −1 and rr_depth ≥ 1"));
+    }
+
+    /// Mitsuba's `direct`: directly visible emitters plus one bounce of direct light, each
+    /// shading point combining `emitter_samples` light samples and `bsdf_samples` BSDF
+    /// samples by multiple importance sampling (power heuristic). Its expected image is the
+    /// path tracer's with `max_depth` 2 — both strategies estimate the same integral — except
+    /// that without emitter samples delta lights (point) are never reached, and without BSDF
+    /// samples delta BSDF lobes (smooth mirrors and glass) reflect nothing; those two
+    /// combinations are refused rather than rendered differently. (Checked against Mitsuba
+    /// 3.9 `direct.cpp`.)
+    fn direct_integrator(&mut self, p: &mut Props<'a, 'i>) -> Result<IntegratorSettings> {
+        let shading = p.int_opt(self, "shading_samples")?;
+        let emitter = p.int_opt(self, "emitter_samples")?;
+        let bsdf = p.int_opt(self, "bsdf_samples")?;
+        if shading.is_some() && (emitter.is_some() || bsdf.is_some()) {
+            return Err(self.err(
+                p.node,
+                "give either 'shading_samples' or 'emitter_samples'/'bsdf_samples', not both",
+            ));
         }
+        let shading = shading.unwrap_or(1);
+        let (emitter, bsdf) = (emitter.unwrap_or(shading), bsdf.unwrap_or(shading));
+        if emitter < 0 || bsdf < 0 || emitter + bsdf == 0 {
+            return Err(self.err(
+                p.node,
+                "need at least one BSDF or emitter sample (counts ≥ 0)",
+            ));
+        }
+        self.direct_strategies = Some((p.node, emitter > 0, bsdf > 0));
         Ok(IntegratorSettings {
-            max_depth: max_depth.min(i32::MAX as i64) as i32,
-            rr_depth: rr_depth.min(i32::MAX as i64) as i32,
+            max_depth: 2,
+            rr_depth: i32::MAX,
             hide_emitters: p.bool(self, "hide_emitters", false)?,
         })
     }
+
+    /// `moment`, `aov` and `stokes` wrap other integrators and add channels thinfilm does
+    /// not write (second moments, AOVs, Stokes components); the image itself is the first
+    /// nested integrator's, which is what is rendered.
+    fn wrapper_integrator(&mut self, p: &mut Props<'a, 'i>) -> Result<IntegratorSettings> {
+        let aovs = if p.plugin == "aov" {
+            p.string(self, "aovs")?
+        } else {
+            None
+        };
+        let mut inner = Vec::new();
+        for q in std::mem::take(&mut p.list) {
+            match q.val {
+                Val::Integrator(s) => inner.push((q.name, s)),
+                _ => p.list.push(q),
+            }
+        }
+        let Some((name, first)) = inner.first().cloned() else {
+            return Err(self.err(
+                p.node,
+                format!("a {} integrator needs a nested <integrator>", p.plugin),
+            ));
+        };
+        let ignored = match p.plugin.as_str() {
+            "moment" => "the second-moment channels".to_string(),
+            "aov" => format!("the AOV channels ({})", aovs.as_deref().unwrap_or("none")),
+            _ => "the Stokes channels S1–S3 (the image is the intensity S0)".to_string(),
+        };
+        let others = if inner.len() > 1 {
+            format!(" and {} further nested integrator(s)", inner.len() - 1)
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "note: {}: integrator \"{}\": rendering its first nested integrator ({}); ignoring {ignored}{others}",
+            self.loc(p.node),
+            p.plugin,
+            if name.starts_with('<') { "unnamed".to_string() } else { format!("\"{name}\"") }
+        );
+        Ok(first)
+    }
+}
+
+/// A specular reflectance/transmittance factor of 1 (Mitsuba's default), however written.
+fn is_unit(v: &Val) -> bool {
+    match v {
+        Val::Float(x) => *x == 1.0,
+        Val::Int(x) => *x == 1,
+        Val::Rgb(c) => c.iter().all(|&x| x == 1.0),
+        Val::Spectrum(SpectrumDesc::Constant(x)) => *x == 1.0,
+        _ => false,
+    }
+}
+
+/// True when the BSDF has a lobe only BSDF sampling can reach (a Dirac delta: smooth
+/// reflection or transmission).
+fn has_delta_lobe(b: &BsdfDesc) -> bool {
+    match b {
+        BsdfDesc::Diffuse { .. } => false,
+        BsdfDesc::Conductor {
+            alpha_u, alpha_v, ..
+        } => *alpha_u == 0.0 || *alpha_v == 0.0,
+        BsdfDesc::Dielectric { alpha, .. }
+        | BsdfDesc::Plastic { alpha, .. }
+        | BsdfDesc::ThinFilm { alpha, .. }
+        | BsdfDesc::ThinFilmStack { alpha, .. } => *alpha == 0.0,
+        BsdfDesc::TwoSided(inner) => has_delta_lobe(inner),
+        BsdfDesc::Polarizer { .. }
+        | BsdfDesc::CoatedDielectric { .. }
+        | BsdfDesc::Bubble { .. } => true,
+    }
+}
+
+/// The sensor Mitsuba 3 (up to 3.8; 3.9 refuses to render without one) creates for a scene
+/// without a sensor: a 45° (horizontal) perspective camera looking along +z at the centre of
+/// the shapes' bounding box from `distance = max extent / (2·tan 22.5°)` in front of its
+/// z = min face, near clip distance / 100, far clip 5·max extent + distance; at the origin
+/// looking along +z when the scene has no shapes.
+fn mitsuba_default_camera(bounds: Option<(Vec3, Vec3)>) -> Camera {
+    let (to_world, near_clip, far_clip) = match bounds {
+        Some((lo, hi)) if (hi - lo).max_element() > 0.0 => {
+            let (center, extents) = ((lo + hi) * 0.5, hi - lo);
+            let max_extent = extents.max_element();
+            let distance = max_extent / (2.0 * (22.5f32).to_radians().tan());
+            (
+                Mat4::from_translation(Vec3::new(center.x, center.y, lo.z - distance)),
+                distance / 100.0,
+                max_extent * 5.0 + distance,
+            )
+        }
+        _ => (Mat4::IDENTITY, 0.01, 10000.0),
+    };
+    Camera {
+        to_world,
+        fov_deg: 45.0,
+        fov_axis: FovAxis::X,
+        near_clip,
+        far_clip,
+    }
+}
+
+/// Cap on the triangles `instance`s add (each instance is a world-space copy).
+const MAX_INSTANCED_TRIANGLES: usize = 1 << 26;
+
+/// An analytic sphere from the matrix mapping the unit sphere to it (a similarity).
+fn sphere_geometry(m: &Mat4, flip_normals: bool) -> std::result::Result<Geometry, String> {
+    let c = m.transform_point3(Vec3::ZERO);
+    let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| m.transform_vector3(a));
+    let r = axes[0].length();
+    let similar = axes
+        .iter()
+        .all(|a| (a.length() - r).abs() <= 1e-4 * r.max(1e-12))
+        && axes[0].dot(axes[1]).abs() <= 1e-4 * r * r
+        && axes[1].dot(axes[2]).abs() <= 1e-4 * r * r
+        && axes[0].dot(axes[2]).abs() <= 1e-4 * r * r;
+    if !similar {
+        return Err(
+            "sphere to_world must be a similarity (uniform scale, rotation, translation)".into(),
+        );
+    }
+    if !(r > 0.0 && r.is_finite()) {
+        return Err("sphere radius must be > 0".into());
+    }
+    Ok(Geometry::Sphere {
+        center: c,
+        radius: r,
+        flip_normals,
+    })
+}
+
+/// A copy of `shape` moved by `m` (an `instance` of a shapegroup member).
+fn transformed_shape(shape: &Shape, m: &Mat4) -> std::result::Result<Shape, String> {
+    let geometry = match &shape.geometry {
+        Geometry::Mesh(mesh) => {
+            let mut mesh = mesh.clone();
+            mesh.transform(m);
+            Geometry::Mesh(mesh)
+        }
+        Geometry::Sphere {
+            center,
+            radius,
+            flip_normals,
+        } => {
+            let to_unit = Mat4::from_translation(*center) * Mat4::from_scale(Vec3::splat(*radius));
+            sphere_geometry(&(*m * to_unit), *flip_normals)
+                .map_err(|e| format!("instanced sphere: {e}"))?
+        }
+    };
+    Ok(Shape {
+        geometry,
+        ..shape.clone()
+    })
+}
+
+/// Mitsuba's `Transform4f::to_frame(Frame3f(n))`: a matrix whose columns are the frame's
+/// s, t, n (local z goes to n), with s, t from `coordinate_system(n)` (Duff et al. 2017,
+/// "Building an Orthonormal Basis, Revisited"). `cylinder` composes it exactly as Mitsuba
+/// does, so that the tessellated cylinder's seam (u = 0) lies where Mitsuba's is.
+fn mitsuba_to_frame(n: Vec3) -> Mat4 {
+    let sign = if n.z >= 0.0 { 1.0f32 } else { -1.0 };
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    // mulsign(x, z) = x·sign(z); mulsign_neg(x, z) = −x·sign(z).
+    let s = Vec3::new(n.x * n.x * a * sign + 1.0, b * sign, -n.x * sign);
+    let t = Vec3::new(b, n.y * n.y * a + sign, -n.y);
+    Mat4::from_cols(s.extend(0.0), t.extend(0.0), n.extend(0.0), glam::Vec4::W)
 }
 
 /// A real quantity that may depend on wavelength.
@@ -1921,16 +2817,31 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
     Ok(out)
 }
 
-/// True when `$name` occurs as a whole parameter reference somewhere in the text.
-fn text_mentions_param(text: &str, name: &str) -> bool {
-    let pat = format!("${name}");
-    text.match_indices(&pat).any(|(i, _)| {
-        let after = &text[i + pat.len()..];
-        !after
-            .chars()
-            .next()
-            .is_some_and(|c| c.is_ascii_alphanumeric() || c == '_')
-    })
+/// Mitsuba's upgrade of a parameter name from a scene older than version 2.0
+/// (`transform_upgrade`): camelCase becomes snake_case ("maxDepth" → "max_depth"), and a
+/// `diffuse` BSDF's `diffuseReflectance` becomes `reflectance`.
+fn upgrade_v1_name(plugin: &str, name: &str) -> String {
+    let chars: Vec<char> = name.chars().collect();
+    let mut out = String::with_capacity(name.len() + 4);
+    let mut i = 0;
+    while i < chars.len() {
+        let c = chars[i];
+        if i > 0 && chars[i - 1].is_ascii_lowercase() && c.is_ascii_uppercase() {
+            out.push('_');
+            out.push(c.to_ascii_lowercase());
+            while i + 1 < chars.len() && chars[i + 1].is_ascii_uppercase() {
+                i += 1;
+                out.push(chars[i].to_ascii_lowercase());
+            }
+        } else {
+            out.push(c);
+        }
+        i += 1;
+    }
+    if plugin == "diffuse" && out == "diffuse_reflectance" {
+        return "reflectance".to_string();
+    }
+    out
 }
 
 /// A thickness texture must be scalar: RGB images are reduced to their mean.
@@ -2040,7 +2951,13 @@ impl<'a, 'i> Props<'a, 'i> {
         for n in names {
             if let Some(q) = self.take(n) {
                 if !ok(&q.val) {
-                    return Err(ctx.err(q.node, format!("unsupported value for '{n}'")));
+                    return Err(ctx.err(
+                        q.node,
+                        format!(
+                            "unsupported value for '{n}' of {} plugin \"{}\"",
+                            self.tag, self.plugin
+                        ),
+                    ));
                 }
             }
         }
@@ -2074,10 +2991,14 @@ impl<'a, 'i> Props<'a, 'i> {
     }
 
     fn int(&mut self, ctx: &Ctx, name: &str, default: i64) -> Result<i64> {
+        Ok(self.int_opt(ctx, name)?.unwrap_or(default))
+    }
+
+    fn int_opt(&mut self, ctx: &Ctx, name: &str) -> Result<Option<i64>> {
         match self.take(name) {
-            None => Ok(default),
+            None => Ok(None),
             Some(q) => match q.val {
-                Val::Int(v) => Ok(v),
+                Val::Int(v) => Ok(Some(v)),
                 _ => Err(Self::type_err(ctx, &q, "an <integer>")),
             },
         }
@@ -2130,6 +3051,26 @@ impl<'a, 'i> Props<'a, 'i> {
                 Val::Float(v) => Ok(SpectrumDesc::Constant(v as f32)),
                 Val::Rgb(c) => Ok(SpectrumDesc::Rgb(c)),
                 Val::Spectrum(s) => Ok(s),
+                _ => Err(Self::type_err(ctx, &q, "a <float>, <rgb> or <spectrum>")),
+            },
+        }
+    }
+
+    /// An emitter's spectrum as Mitsuba's `get_emissive_texture` reads it in spectral
+    /// variants: a number `v` (or nothing: 1) is the D65 illuminant scaled by `v`, RGB is
+    /// upsampled as an illuminant (`srgb_d65`), a `<spectrum value="v">` is flat.
+    fn emission(&mut self, ctx: &Ctx, name: &str) -> Result<SpectrumDesc> {
+        match self.take(name) {
+            None => Ok(SpectrumDesc::D65 { scale: 1.0 }),
+            Some(q) => match q.val {
+                Val::Float(v) if v.is_finite() => Ok(SpectrumDesc::D65 { scale: v as f32 }),
+                Val::Int(v) => Ok(SpectrumDesc::D65 { scale: v as f32 }),
+                Val::Rgb(c) => Ok(SpectrumDesc::Rgb(c)),
+                Val::Spectrum(s) => Ok(s),
+                Val::Texture(_) => Err(ctx.err(
+                    q.node,
+                    format!("a textured '{name}' (spatially varying emission) is not supported"),
+                )),
                 _ => Err(Self::type_err(ctx, &q, "a <float>, <rgb> or <spectrum>")),
             },
         }

@@ -320,6 +320,7 @@ pub enum EmitterDesc {
 pub mod gltf_scene;
 pub mod meshio;
 pub mod mitsuba;
+pub mod serialized;
 pub mod shapes;
 pub mod sky;
 pub mod teapot;

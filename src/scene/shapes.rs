@@ -246,6 +246,35 @@ pub fn disk(rings: usize, segments: usize) -> TriangleMesh {
     m
 }
 
+/// Segments around a tessellated `cylinder`: the polygon's sides lie within
+/// 1 − cos(π/N) ≈ 1.9·10⁻⁵ radii of the analytic surface (and its area within 7·10⁻⁶).
+pub const CYLINDER_SEGMENTS: usize = 512;
+
+/// Mitsuba's `cylinder` in its local frame — the open tube of radius 1 around the z axis
+/// from z = 0 to 1 — as `segments` quads with the analytic normals (x, y, 0) and Mitsuba's
+/// uv = (φ / 2π, z), φ = atan2(y, x) ∈ [0, 2π). The seam vertices at φ = 0 and 2π are
+/// duplicated so that u runs to 1.
+pub fn cylinder(segments: usize) -> TriangleMesh {
+    let segments = segments.max(3);
+    let mut m = TriangleMesh::default();
+    for s in 0..=segments {
+        let u = s as f32 / segments as f32;
+        let (sin, cos) = (u * std::f32::consts::TAU).sin_cos();
+        for z in [0.0, 1.0] {
+            m.positions.push(Vec3::new(cos, sin, z));
+            m.normals.push(Vec3::new(cos, sin, 0.0));
+            m.uvs.push(Vec2::new(u, z));
+        }
+    }
+    for s in 0..segments as u32 {
+        let (a, d, b, c) = (2 * s, 2 * s + 1, 2 * s + 2, 2 * s + 3);
+        // Counter-clockwise seen from outside: the faces' normals point away from the axis.
+        m.indices.push([a, b, c]);
+        m.indices.push([a, c, d]);
+    }
+    m
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -306,5 +335,33 @@ mod tests {
         let mut nan = rectangle();
         nan.positions[0].x = f32::NAN;
         assert!(nan.validate("nan").is_err());
+    }
+
+    #[test]
+    fn cylinder_matches_mitsubas_parameterisation() {
+        let m = cylinder(CYLINDER_SEGMENTS);
+        m.validate("cylinder").unwrap();
+        // Lateral area 2π r h, face normals outward and equal to the vertex normals.
+        let expected = std::f32::consts::TAU;
+        assert!(
+            (area(&m) - expected).abs() < 1e-4 * expected,
+            "{}",
+            area(&m)
+        );
+        for t in &m.indices {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            let n = (b - a).cross(c - a).normalize();
+            let centre = (a + b + c) / 3.0;
+            assert!(n.dot(Vec3::new(centre.x, centre.y, 0.0)) > 0.999);
+        }
+        for (p, uv) in m.positions.iter().zip(&m.uvs) {
+            let phi = p.y.atan2(p.x).rem_euclid(std::f32::consts::TAU);
+            let u = phi / std::f32::consts::TAU;
+            assert!(
+                (uv.x - u).abs() < 1e-5 || (uv.x - 1.0).abs() < 1e-6,
+                "{uv} at {p}"
+            );
+            assert_eq!(uv.y, p.z);
+        }
     }
 }

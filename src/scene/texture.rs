@@ -7,7 +7,9 @@
 //!   Bilinear: p = uv·(W,H) − ½, interpolate texels ⌊p⌋ and ⌊p⌋+1 (each wrapped);
 //!   nearest: texel ⌊uv·(W,H)⌋ wrapped.
 //! - Wrap: `repeat` (modulo), `mirror` (period 2W, reflected), `clamp` (to the edge texel).
-//! - 8-bit PNGs are sRGB-decoded to linear unless `raw`; float images (EXR, HDR) are kept.
+//! - 8/16-bit images (PNG, JPEG, BMP, TGA, PPM/PGM) are sRGB-decoded to linear unless `raw`,
+//!   as Mitsuba's `Bitmap` readers mark them sRGB; float images (EXR, HDR) are kept. Alpha is
+//!   dropped; grey images become equal RGB (the same spectrum as Mitsuba's one channel).
 
 use super::{BitmapTexture, TextureFilter, WrapMode};
 use crate::image_io::{self, RgbImage};
@@ -206,14 +208,15 @@ impl BitmapTexture {
                     );
                 }
             }
-            "hdr" | "png" => {
+            e if e == "hdr" || INTEGER_FORMATS.contains(&e) => {
                 let img = load_rgb_image_raw(path, raw)?;
                 let data = img.pixels.iter().flatten().copied().collect();
                 BitmapTexture::new(img.width, img.height, 3, data)?
             }
             _ => bail!(
-                "{}: unsupported texture format '.{ext}' (use .exr, .hdr or .png)",
-                path.display()
+                "{}: unsupported texture format '.{ext}' ({})",
+                path.display(),
+                SUPPORTED
             ),
         };
         tex.path = Some(path.to_path_buf());
@@ -221,13 +224,18 @@ impl BitmapTexture {
     }
 }
 
+/// Integer-valued image formats, read through the `image` crate and sRGB-decoded unless raw.
+const INTEGER_FORMATS: &[&str] = &["png", "jpg", "jpeg", "bmp", "tga", "ppm", "pgm"];
+const SUPPORTED: &str = "use .exr, .hdr, .png, .jpg, .bmp, .tga or .ppm";
+
 fn extension(path: &Path) -> String {
     path.extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default()
 }
 
-/// Loads an RGB image as linear values: EXR (R,G,B or Y), Radiance HDR, PNG (sRGB-decoded).
+/// Loads an RGB image as linear values: EXR (R,G,B or Y), Radiance HDR, or an integer
+/// format (PNG, JPEG, BMP, TGA, PPM; sRGB-decoded).
 pub fn load_rgb_image(path: &Path) -> Result<RgbImage> {
     load_rgb_image_raw(path, false)
 }
@@ -259,9 +267,9 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
                 pixels,
             })
         }
-        "png" => {
+        e if INTEGER_FORMATS.contains(&e) => {
             let img = image::open(path)
-                .with_context(|| format!("reading PNG {}", path.display()))?
+                .with_context(|| format!("reading image {}", path.display()))?
                 .to_rgb16();
             let (w, h) = (img.width() as usize, img.height() as usize);
             let pixels = img
@@ -284,7 +292,7 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
             })
         }
         other => bail!(
-            "{}: unsupported image format '.{other}' (use .exr, .hdr or .png)",
+            "{}: unsupported image format '.{other}' ({SUPPORTED})",
             path.display()
         ),
     }
@@ -346,5 +354,9 @@ mod tests {
         assert!(BitmapTexture::new(2, 1, 1, vec![0.0]).is_err());
         assert!(BitmapTexture::load(Path::new("/nonexistent/x.png"), false).is_err());
         assert!(BitmapTexture::load(Path::new("x.jpg"), false).is_err());
+        assert!(BitmapTexture::load(Path::new("x.pfm"), false)
+            .unwrap_err()
+            .to_string()
+            .contains("unsupported"));
     }
 }

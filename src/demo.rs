@@ -340,7 +340,11 @@ fn write_index(cfg: &DemoConfig, s: &DemoSummary) -> Result<()> {
         html.push_str("</tr>\n");
     }
     html.push_str("</table>\n");
-    for f in s.figures.iter().chain(s.method_figures.iter().map(|(f, _)| f)) {
+    for f in s
+        .figures
+        .iter()
+        .chain(s.method_figures.iter().map(|(f, _)| f))
+    {
         let _ = writeln!(html, "<p><img src=\"{}\"></p>", relative(&cfg.out, f));
     }
     html.push_str("</body></html>\n");

@@ -17,9 +17,9 @@ use crate::image_io::{ExrFile, RgbImage};
 use crate::material::{
     FilmMaterial, FitFile, MapStats, PixelCounts, FIT_JSON, THICKNESS_CHANNEL, THICKNESS_EXR,
 };
-use crate::stats::Summary;
 use crate::render::passes::is_tree_node;
 use crate::render::provenance::{RenderInfo, FILTER_WEIGHT_CHANNEL};
+use crate::stats::Summary;
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
@@ -367,7 +367,9 @@ pub fn merge_fit_dirs(dirs: &[PathBuf], out: &Path) -> Result<MergedFit> {
         .channels
         .iter()
         .find(|(n, _)| n == THICKNESS_CHANNEL)
-        .with_context(|| format!("the bands' thickness maps have no channel '{THICKNESS_CHANNEL}'"))?;
+        .with_context(|| {
+            format!("the bands' thickness maps have no channel '{THICKNESS_CHANNEL}'")
+        })?;
     let first = &fits[0];
     let material = FilmMaterial {
         film_ior: first.film_index()?,
@@ -379,7 +381,11 @@ pub fn merge_fit_dirs(dirs: &[PathBuf], out: &Path) -> Result<MergedFit> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     material.write_files_with_provenance(
         out,
-        &format!("thinfilm estimate ({}), {} row bands merged", first.method, fits.len()),
+        &format!(
+            "thinfilm estimate ({}), {} row bands merged",
+            first.method,
+            fits.len()
+        ),
         &stitched.info.attributes(),
     )?;
     crate::estimate::report::write_colormap_png(
@@ -408,7 +414,13 @@ fn pooled_fit_file(fits: &[FitFile], thickness: &[f32], width: usize, height: us
             let v = value(f)?;
             acc += weight(f) * if squared { v * v } else { v };
         }
-        (total > 0.0).then(|| if squared { (acc / total).sqrt() } else { acc / total })
+        (total > 0.0).then(|| {
+            if squared {
+                (acc / total).sqrt()
+            } else {
+                acc / total
+            }
+        })
     };
     let mut fit = fits[0].clone();
     fit.width = width;

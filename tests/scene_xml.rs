@@ -523,7 +523,7 @@ fn bsdfs() {
                 substrate_ior,
                 alpha,
             } => {
-                // design.md defaults
+                // thinfilm's documented defaults
                 assert_eq!(
                     (film_ior, d, substrate_ior, alpha),
                     (Ior::real(1.37), 400.0, Ior::real(1.64), 0.0)

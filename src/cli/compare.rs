@@ -35,13 +35,13 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     let a = read_exr_rgb(&args.a).with_context(|| format!("reading {an}"))?;
     let b = read_exr_rgb(&args.b).with_context(|| format!("reading {bn}"))?;
     let (a, b, resized) = match_sizes(a, &an, b, &bn)?;
-    if let Some(note) = &resized {
-        report.log(format_args!("note: {note}"));
-    }
     // Bit-identical pixels (e.g. a merged render against the single run it reproduces).
     let identical = resized.is_none()
         && a.pixels.len() == b.pixels.len()
-        && a.pixels.iter().zip(&b.pixels).all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits));
+        && a.pixels
+            .iter()
+            .zip(&b.pixels)
+            .all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits));
     let (a, b) = if args.downsample != 1 {
         (
             downsample_box(&a, args.downsample)?,
@@ -64,6 +64,10 @@ pub fn run(args: Args, report: Output) -> Result<()> {
             "size:          {}×{} (downsample {})",
             m.width, m.height, args.downsample
         );
+        if let Some(note) = &resized {
+            // A result, not a log line: the numbers below are of the resized image.
+            println!("resized:       {note}");
+        }
         println!(
             "identical:     {}",
             if identical { "yes, bit for bit" } else { "no" }

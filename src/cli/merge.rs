@@ -159,7 +159,10 @@ pub fn run(args: Args, report: Output) -> Result<()> {
 
 fn merge_folders(args: &Args, report: Output) -> Result<()> {
     if args.pieces.contains(&args.output) {
-        bail!("the output folder {} is also an input", args.output.display());
+        bail!(
+            "the output folder {} is also an input",
+            args.output.display()
+        );
     }
     let m = merge_fit_dirs(&args.pieces, &args.output)?;
     report.text(format_args!(

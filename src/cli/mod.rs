@@ -79,7 +79,9 @@ pub(crate) fn parse_part(s: &str) -> Result<(usize, usize), String> {
     let k: usize = k.trim().parse().map_err(|_| format!("bad K in '{s}'"))?;
     let n: usize = n.trim().parse().map_err(|_| format!("bad N in '{s}'"))?;
     if k >= n {
-        return Err(format!("part '{s}': K must be < N (parts are counted from 0)"));
+        return Err(format!(
+            "part '{s}': K must be < N (parts are counted from 0)"
+        ));
     }
     Ok((k, n))
 }

@@ -1,5 +1,5 @@
 //! Film index (global) and per-pixel thickness from a multi-angle hyperspectral capture
-//! (seed §4, with the corrections of design.md §1).
+//! (seed §4, with the corrections for half orders and band quantisation).
 //!
 //! Three methods share one forward model ([`model::FilmModel`]):
 //! - [`Method::Paper`] — the seed as published: band-quantised peak wavelengths, eq. (12)

@@ -156,7 +156,9 @@ impl RowBand {
         match self {
             RowBand::Rows(a, b) => {
                 if a >= b || b > height {
-                    bail!("--rows {a}:{b} must satisfy START < END ≤ {height} (the capture's height)");
+                    bail!(
+                        "--rows {a}:{b} must satisfy START < END ≤ {height} (the capture's height)"
+                    );
                 }
                 Ok((a, b))
             }

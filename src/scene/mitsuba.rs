@@ -1,4 +1,4 @@
-//! Mitsuba 3 XML scene subset (see design.md §2 "Scenes" and issue 6).
+//! Mitsuba 3 XML scene subset (what is supported: scenes/README.md).
 //!
 //! Supported: `<scene version>`, `<default>` / `$param` substitution (with `-D` overrides),
 //! `id` / `<ref>`, transforms (`lookat`, `translate`, `rotate`, `scale`, `matrix`, composed in

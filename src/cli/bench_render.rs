@@ -218,19 +218,16 @@ fn series_from_table(path: &std::path::Path) -> Result<Vec<Series>> {
     Ok(series)
 }
 
+fn write_plot(series: &[Series], path: &std::path::Path) -> Result<()> {
+    let legend = ["ours", "Mitsuba 3"];
+    plot_error_vs_time(series, PLOT_TITLE, legend, "RMSE", path, PANEL_PX)?;
+    println!("plot: {}", path.display());
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
     if let Some(table) = &args.replot {
-        let series = series_from_table(table)?;
-        plot_error_vs_time(
-            &series,
-            PLOT_TITLE,
-            ["ours", "Mitsuba 3"],
-            "RMSE",
-            &args.plot,
-            PANEL_PX,
-        )?;
-        println!("plot: {}", args.plot.display());
-        return Ok(());
+        return write_plot(&series_from_table(table)?, &args.plot);
     }
     if args.effects.effects {
         let table = args.table.as_deref();
@@ -393,15 +390,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(p) = &args.table {
         thinfilm::image_io::write_atomically(p, |tmp| Ok(std::fs::write(tmp, &table)?))?;
     }
-    plot_error_vs_time(
-        &series,
-        PLOT_TITLE,
-        ["ours", "Mitsuba 3"],
-        "RMSE",
-        &args.plot,
-        PANEL_PX,
-    )?;
-    println!("plot: {}", args.plot.display());
+    write_plot(&series, &args.plot)?;
     let _ = std::fs::remove_dir_all(&tmp);
     Ok(())
 }

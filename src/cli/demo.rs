@@ -60,7 +60,7 @@ pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
     for f in summary
         .figures
         .iter()
-        .chain(summary.method_figures.iter().map(|(f, _)| f))
+        .chain(summary.method_figures.iter().map(|(_, f, _)| f))
     {
         println!("  {}", f.display());
     }

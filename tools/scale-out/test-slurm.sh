@@ -108,8 +108,9 @@ wait_for_queue() {
     squeue >&2
     return 1
 }
-identical() { # A B: bit-identical pixels?
-    "$thinfilm" compare "$1" "$2" --json | grep -q '"identical": true'
+identical() { # A B: bit-identical pixels? (grep reads all: with -q it could close the
+    # pipe before compare has written everything, and pipefail would fail on that)
+    "$thinfilm" compare "$1" "$2" --json | grep '"identical": true' > /dev/null
 }
 
 # --- 1. a render split by sample ranges -------------------------------------------------------

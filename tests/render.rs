@@ -52,6 +52,7 @@ fn sphere(bsdf: usize) -> Shape {
         geometry: Geometry::Sphere {
             center: Vec3::ZERO,
             radius: 1.0,
+            rotation: glam::Mat3::IDENTITY,
             flip_normals: false,
         },
         bsdf,
@@ -628,6 +629,7 @@ fn area_light_enclosure() {
         geometry: Geometry::Sphere {
             center: Vec3::ZERO,
             radius: 10.0,
+            rotation: glam::Mat3::IDENTITY,
             flip_normals: true,
         },
         bsdf: 1,

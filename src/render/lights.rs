@@ -1050,6 +1050,7 @@ impl LightSet {
                     center,
                     radius,
                     flip_normals,
+                    ..
                 } => AreaGeometry::Sphere {
                     center: *center,
                     radius: *radius,

@@ -1,25 +1,18 @@
-//! Mitsuba 3 XML scene subset (what is supported: scenes/README.md).
+//! Mitsuba 3 XML scenes: the parser, Mitsuba's scene-description mechanics and the plugins
+//! the renderer can draw as Mitsuba draws them. docs/mitsuba-support.md lists every
+//! supported plugin and parameter, Mitsuba's defaults where one is omitted, and each
+//! deviation.
 //!
-//! Supported: `<scene version>`, `<default>` / `$param` substitution (with `-D` overrides),
-//! `id` / `<ref>`, transforms (`lookat`, `translate`, `rotate`, `scale`, `matrix`, composed in
-//! document order: each new operation is applied after the previous ones, M ← op · M),
-//! `perspective` sensor (`fov`, `fov_axis`, `focal_length`, `near_clip`, `far_clip`, `to_world`)
-//! with `hdrfilm`
-//! (`width`, `height`, `rfilter` box/tent/gaussian; format options accepted and ignored since
-//! they do not change pixel values) and any sampler (`sample_count`, `seed`; `independent` → PCG, the stratified types → Owen-scrambled Sobol'), `path`
-//! integrator (`max_depth`, `rr_depth`, `hide_emitters`), shapes `obj`, `ply`, `sphere`,
-//! `rectangle`, `cube`, `disk` (`to_world`, `flip_normals`, `face_normals`), emitters
-//! `envmap`, `constant`, `area`, `point`, BSDFs `diffuse`, `conductor`, `roughconductor`,
-//! `dielectric`, `roughdielectric`, `plastic`, `roughplastic`, `twosided`, `thinfilm`,
-//! `polarizer` (constant `theta`), the sensor extension `<string name="polarizer"
-//! value="s|p|DEG"/>` (scenes/README.md),
-//! textures `bitmap`, `checkerboard`, values `float`, `integer`, `boolean`, `string`, `rgb`,
-//! `spectrum`, `point`, `vector`.
+//! Mechanics: `<scene version>`, `<include>`, `<path>`, `<default>` / `$param` (with `-D`
+//! overrides), `id` / `<ref>` / `<alias>`, transforms composed in document order (each new
+//! operation applied after the previous ones, M ← op · M), `shapegroup` / `instance`.
 //!
-//! Everything else — elements, attributes, parameters, plugin types — is an error naming the
-//! file, line:column, element and plugin, never silently ignored. The only tolerated
-//! deviation: rough BSDFs with Mitsuba's default `beckmann` distribution are rendered with
-//! GGX (the renderer's only microfacet model) and a warning is printed.
+//! Everything else — elements, attributes, parameters, plugin types, values a plugin would
+//! need a model the renderer lacks (Beckmann microfacets, anisotropic roughness, scaled
+//! specular lobes, RGB-valued indices) — is an error naming the file, line:column, element,
+//! plugin and parameter. No plugin is silently replaced by another; parameters that change
+//! nothing in the image (e.g. `focus_distance` on a pinhole camera) are accepted as Mitsuba
+//! accepts them, and wrapper integrators say on stderr what they ignore.
 
 // `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -264,7 +257,7 @@ struct Ctx<'a, 'i> {
     instanced_triangles: usize,
     /// A `direct` integrator's strategies (emitter sampling, BSDF sampling), checked against
     /// the scene's lights and BSDFs once everything is loaded.
-    direct_strategies: Option<(Node<'a, 'i>, bool, bool)>,
+    direct_strategies: Option<(Node<'a, 'i>, u32, bool)>,
 }
 
 /// A node's identity across documents: (document address, node id).
@@ -666,6 +659,15 @@ impl<'a, 'i> Ctx<'a, 'i> {
             if self.built.contains(&node_key(c)) {
                 continue;
             }
+            if let Some(id) = self.attr(c, "id")? {
+                if self
+                    .pending
+                    .get(&id)
+                    .is_some_and(|n| node_key(*n) == node_key(c))
+                {
+                    self.pending.remove(&id);
+                }
+            }
             self.top_level(c)?;
         }
         self.check_overrides()?;
@@ -783,17 +785,30 @@ impl<'a, 'i> Ctx<'a, 'i> {
 
     /// A `direct` integrator without one of its strategies misses light the path tracer
     /// finds (see [`direct_integrator`](Self::direct_integrator)): refused when that light
-    /// exists in this scene.
-    fn check_direct_strategies(&self) -> Result<()> {
-        let Some((node, emitter_sampling, bsdf_sampling)) = self.direct_strategies else {
+    /// exists in this scene. With several emitter samples, Mitsuba 3.9 adds every sample of a
+    /// delta light (point) at full weight — its MIS weight for delta lights lacks the
+    /// 1/`emitter_samples` factor (`direct.cpp`) — so point lights come out
+    /// `emitter_samples` times brighter; thinfilm scales them to render what Mitsuba renders.
+    fn check_direct_strategies(&mut self) -> Result<()> {
+        let Some((node, emitter_samples, bsdf_sampling)) = self.direct_strategies else {
             return Ok(());
         };
-        if !emitter_sampling
-            && self
-                .emitters
-                .iter()
-                .any(|e| matches!(e, EmitterDesc::Point { .. }))
-        {
+        let has_point = self
+            .emitters
+            .iter()
+            .any(|e| matches!(e, EmitterDesc::Point { .. }));
+        if emitter_samples > 1 && has_point {
+            eprintln!(
+                "note: {}: direct with emitter_samples = {emitter_samples}: point lights are {emitter_samples}× as bright, as Mitsuba renders them (its delta-light weight omits 1/emitter_samples)",
+                self.loc(node)
+            );
+            for e in &mut self.emitters {
+                if let EmitterDesc::Point { intensity, .. } = e {
+                    *intensity = scaled_spectrum(intensity, emitter_samples as f32);
+                }
+            }
+        }
+        if emitter_samples == 0 && has_point {
             return Err(self.err(
                 node,
                 "direct with emitter_samples = 0 in a scene with point lights is not supported (Mitsuba never reaches them; thinfilm's path tracer would)",
@@ -1107,10 +1122,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     let angle = self.req_attr(c, "angle")?;
                     let angle = parse_f64(&angle)
                         .ok_or_else(|| self.err(c, format!("angle=\"{angle}\" is not a number")))?;
-                    let axis = axis
-                        .try_normalize()
-                        .ok_or_else(|| self.err(c, "rotation axis is zero"))?;
-                    Mat4::from_axis_angle(axis, (angle as f32).to_radians())
+                    if axis == Vec3::ZERO {
+                        return Err(self.err(c, "rotation axis is zero"));
+                    }
+                    mitsuba_rotation(axis, angle)
                 }
                 "matrix" => {
                     self.check_attrs(c, &["value"])?;
@@ -1237,7 +1252,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
 
     fn parse_object(&mut self, node: Node<'a, 'i>) -> Result<Val> {
         let tag = node.tag_name().name();
-        self.check_attrs(node, &["type", "id", "name"])?;
+        if node.parent().is_some_and(|p| p.is_root()) {
+            // The root element of an included file carries the scene version.
+            self.check_attrs(node, &["type", "id", "name", "version"])?;
+        } else {
+            self.check_attrs(node, &["type", "id", "name"])?;
+        }
         if matches!(tag, "medium" | "phase" | "volume") {
             let plugin = self.attr(node, "type")?.unwrap_or_default();
             return Err(self.err(
@@ -1310,7 +1330,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let material = p.string(self, "material")?;
                 let eta = p.take("eta");
                 let k = p.take("k");
-                p.accept(&["specular_reflectance"], self, is_unit)?;
+                p.unit_factors(&["specular_reflectance"], self)?;
                 let ior = match (material, eta, k) {
                     (Some(_), Some(e), _) | (Some(_), None, Some(e)) => {
                         return Err(
@@ -1322,11 +1342,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     (None, eta, k) => {
                         // Mitsuba's conductor defaults when eta/k are given: eta 0, k 1.
                         let n = match eta {
-                            Some(e) => self.spectral(&e, "eta")?,
+                            Some(e) => self.spectral(&e, &format!("'eta' of bsdf \"{plugin}\""))?,
                             None => Spectral::Const(0.0),
                         };
                         let kk = match k {
-                            Some(k) => self.spectral(&k, "k")?,
+                            Some(k) => self.spectral(&k, &format!("'k' of bsdf \"{plugin}\""))?,
                             None => Spectral::Const(1.0),
                         };
                         if !(n.min() >= 0.0 && kk.min() >= 0.0) {
@@ -1354,23 +1374,13 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     ));
                 }
                 let alpha = if plugin == "roughdielectric" {
-                    let (au, av) = self.microfacet(p)?;
-                    if au != av {
-                        return Err(
-                            self.err(p.node, "anisotropic roughdielectric is not supported")
-                        );
-                    }
-                    au
+                    self.microfacet(p)?.0
                 } else {
                     0.0
                 };
                 let int_ior = self.dielectric_ior(p, "int_ior", 1.5046)?;
                 let ext_ior = self.dielectric_ior(p, "ext_ior", 1.000277)?;
-                p.accept(
-                    &["specular_reflectance", "specular_transmittance"],
-                    self,
-                    is_unit,
-                )?;
+                p.unit_factors(&["specular_reflectance", "specular_transmittance"], self)?;
                 BsdfDesc::Dielectric {
                     int_ior,
                     ext_ior,
@@ -1379,15 +1389,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
             "plastic" | "roughplastic" => {
                 let alpha = if plugin == "roughplastic" {
-                    let (au, av) = self.microfacet(p)?;
-                    if au != av {
-                        return Err(self.err(p.node, "anisotropic roughplastic is not supported"));
-                    }
-                    au
+                    self.microfacet(p)?.0
                 } else {
                     0.0
                 };
-                p.accept(&["specular_reflectance"], self, is_unit)?;
+                p.unit_factors(&["specular_reflectance"], self)?;
                 BsdfDesc::Plastic {
                     diffuse_reflectance: p.texture(self, "diffuse_reflectance", 0.5)?,
                     int_ior: p.ior_number(self, "int_ior", 1.49)? as f32,
@@ -1668,17 +1674,28 @@ impl<'a, 'i> Ctx<'a, 'i> {
         }
     }
 
-    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`.
+    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`. Only GGX is
+    /// implemented: Beckmann — also Mitsuba's default when `distribution` is omitted — is
+    /// refused rather than rendered as GGX (the highlights differ in shape and tails).
     fn microfacet(&mut self, p: &mut Props<'a, 'i>) -> Result<(f32, f32)> {
         let dist = p.string(self, "distribution")?;
         match dist.as_deref() {
             Some("ggx") => {}
-            Some("beckmann") | None => eprintln!(
-                "warning: {}: {} \"{}\" uses Mitsuba's default Beckmann distribution; rendering with GGX (add <string name=\"distribution\" value=\"ggx\"/> to match exactly)",
-                self.loc(p.node),
-                p.tag,
-                p.plugin
-            ),
+            Some("beckmann") | None => {
+                return Err(self.err(
+                    p.node,
+                    format!(
+                        "{} \"{}\": the Beckmann microfacet distribution ({}) is not supported; only GGX is implemented — add <string name=\"distribution\" value=\"ggx\"/> to render it with GGX, knowing the highlight will differ from Mitsuba's",
+                        p.tag,
+                        p.plugin,
+                        if dist.is_some() {
+                            "'distribution' = \"beckmann\""
+                        } else {
+                            "Mitsuba's default when 'distribution' is omitted"
+                        }
+                    ),
+                ))
+            }
             Some(other) => {
                 return Err(self.err(p.node, format!("unknown distribution \"{other}\" (ggx, beckmann)")))
             }
@@ -1700,6 +1717,18 @@ impl<'a, 'i> Ctx<'a, 'i> {
         };
         if !(u >= 0.0 && v >= 0.0) {
             return Err(self.err(p.node, "roughness must be ≥ 0"));
+        }
+        if u != v {
+            // Mitsuba stretches α_u along its shading tangent s = dp/du made ⟂ n (the
+            // texture's u direction); the renderer's BSDF frame is built from the normal
+            // alone, so the highlight would be rotated: refused, not substituted.
+            return Err(self.err(
+                p.node,
+                format!(
+                    "{} \"{}\": anisotropic roughness (alpha_u = {u} ≠ alpha_v = {v}) is not supported (the renderer does not orient α_u along dp/du as Mitsuba does); give one 'alpha'",
+                    p.tag, p.plugin
+                ),
+            ));
         }
         Ok((u as f32, v as f32))
     }
@@ -1732,7 +1761,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             v => Err(self.err(
                 q.node,
                 format!(
-                    "{what} must be a number or a <spectrum> of λ:value pairs, not {} (RGB indices have no physical meaning)",
+                    "{what} must be a number or a <spectrum> of λ:value pairs, not {}: RGB-valued indices are not supported (Mitsuba upsamples them like colours; a measured index is a spectrum)",
                     v.kind()
                 ),
             )),
@@ -2057,14 +2086,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         to_world: &Mat4,
         flip_normals: bool,
     ) -> Result<Geometry> {
-        let center = match p.take("center") {
-            Some(Prop {
-                val: Val::Point(v) | Val::Vector(v),
-                ..
-            }) => v,
-            Some(q) => return Err(self.err(q.node, "center must be a <point>")),
-            None => Vec3::ZERO,
-        };
+        let center = self.point(p, "center", Vec3::ZERO)?;
         let radius = p.float(self, "radius", 1.0)? as f32;
         let m = *to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
         sphere_geometry(&m, flip_normals).map_err(|e| self.err(p.node, e))
@@ -2481,7 +2503,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 "need at least one BSDF or emitter sample (counts ≥ 0)",
             ));
         }
-        self.direct_strategies = Some((p.node, emitter > 0, bsdf > 0));
+        self.direct_strategies = Some((p.node, emitter.min(u32::MAX as i64) as u32, bsdf > 0));
         Ok(IntegratorSettings {
             max_depth: 2,
             rr_depth: i32::MAX,
@@ -2589,6 +2611,44 @@ fn mitsuba_default_camera(bounds: Option<(Vec3, Vec3)>) -> Camera {
     }
 }
 
+/// Mitsuba's `<rotate>` (drjit's `rotate`): Rodrigues' formula with the axis as given, *not*
+/// normalised — an axis of length ≠ 1 also scales and shears, exactly as in Mitsuba 3.9
+/// (`rotate x="0" y="1" z="1" angle="15"` gives a matrix with unit diagonal entries on y, z).
+fn mitsuba_rotation(axis: Vec3, angle_deg: f64) -> Mat4 {
+    let (s, c) = angle_deg.to_radians().sin_cos();
+    let a = axis.as_dvec3();
+    let k = 1.0 - c;
+    let m = glam::DMat3::from_cols(
+        glam::DVec3::new(
+            c + a.x * a.x * k,
+            a.x * a.y * k + a.z * s,
+            a.x * a.z * k - a.y * s,
+        ),
+        glam::DVec3::new(
+            a.x * a.y * k - a.z * s,
+            c + a.y * a.y * k,
+            a.y * a.z * k + a.x * s,
+        ),
+        glam::DVec3::new(
+            a.x * a.z * k + a.y * s,
+            a.y * a.z * k - a.x * s,
+            c + a.z * a.z * k,
+        ),
+    );
+    Mat4::from_mat3(m.as_mat3())
+}
+
+fn scaled_spectrum(s: &SpectrumDesc, k: f32) -> SpectrumDesc {
+    match s {
+        SpectrumDesc::Constant(v) => SpectrumDesc::Constant(v * k),
+        SpectrumDesc::Rgb(c) => SpectrumDesc::Rgb(c.map(|x| x * k)),
+        SpectrumDesc::Tabulated(t) => {
+            SpectrumDesc::Tabulated(t.iter().map(|&(l, v)| (l, v * k)).collect())
+        }
+        SpectrumDesc::D65 { scale } => SpectrumDesc::D65 { scale: scale * k },
+    }
+}
+
 /// Cap on the triangles `instance`s add (each instance is a world-space copy).
 const MAX_INSTANCED_TRIANGLES: usize = 1 << 26;
 
@@ -2614,6 +2674,7 @@ fn sphere_geometry(m: &Mat4, flip_normals: bool) -> std::result::Result<Geometry
     Ok(Geometry::Sphere {
         center: c,
         radius: r,
+        rotation: Mat3::from_cols(axes[0] / r, axes[1] / r, axes[2] / r),
         flip_normals,
     })
 }
@@ -2629,9 +2690,12 @@ fn transformed_shape(shape: &Shape, m: &Mat4) -> std::result::Result<Shape, Stri
         Geometry::Sphere {
             center,
             radius,
+            rotation,
             flip_normals,
         } => {
-            let to_unit = Mat4::from_translation(*center) * Mat4::from_scale(Vec3::splat(*radius));
+            let to_unit = Mat4::from_translation(*center)
+                * Mat4::from_mat3(*rotation)
+                * Mat4::from_scale(Vec3::splat(*radius));
             sphere_geometry(&(*m * to_unit), *flip_normals)
                 .map_err(|e| format!("instanced sphere: {e}"))?
         }
@@ -2948,13 +3012,35 @@ impl<'a, 'i> Props<'a, 'i> {
 
     /// Removes the named parameters if present, checking their type with `ok`.
     fn accept(&mut self, names: &[&str], ctx: &Ctx, ok: impl Fn(&Val) -> bool) -> Result<()> {
+        self.accept_or(names, ctx, ok, "")
+    }
+
+    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
+    /// default, 1, is supported — a scaled or textured lobe is refused, not dropped.
+    fn unit_factors(&mut self, names: &[&str], ctx: &Ctx) -> Result<()> {
+        self.accept_or(
+            names,
+            ctx,
+            is_unit,
+            ": only 1 (Mitsuba's default) is supported, not a scaled or textured lobe",
+        )
+    }
+
+    /// [`Self::accept`] with `why` appended to the error message.
+    fn accept_or(
+        &mut self,
+        names: &[&str],
+        ctx: &Ctx,
+        ok: impl Fn(&Val) -> bool,
+        why: &str,
+    ) -> Result<()> {
         for n in names {
             if let Some(q) = self.take(n) {
                 if !ok(&q.val) {
                     return Err(ctx.err(
                         q.node,
                         format!(
-                            "unsupported value for '{n}' of {} plugin \"{}\"",
+                            "unsupported value for '{n}' of {} plugin \"{}\"{why}",
                             self.tag, self.plugin
                         ),
                     ));

@@ -151,9 +151,13 @@ pub struct Shape {
 pub enum Geometry {
     Mesh(TriangleMesh),
     /// Analytic sphere (world space), normals pointing out (in if `flip_normals`).
+    /// `rotation` takes the sphere's local frame to world space (orthonormal; a reflection if
+    /// its `to_world` mirrors): Mitsuba measures a sphere's (u, v) in the local frame, so a
+    /// rotated sphere turns its textures with it.
     Sphere {
         center: Vec3,
         radius: f32,
+        rotation: Mat3,
         flip_normals: bool,
     },
 }

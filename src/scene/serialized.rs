@@ -310,6 +310,17 @@ mod tests {
     use flate2::Compression;
     use std::io::Write;
 
+    /// One mesh as stored: the uncompressed header, then `body` zlib-compressed.
+    fn compressed(version: u16, body: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        out.extend(MAGIC.to_le_bytes());
+        out.extend(version.to_le_bytes());
+        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
+        e.write_all(body).unwrap();
+        out.extend(e.finish().unwrap());
+        out
+    }
+
     /// A version-3/4 mesh stream: one triangle, with normals and uvs.
     fn legacy_mesh(version: u16, z_shift: f32, double: bool) -> Vec<u8> {
         let mut body = Vec::new();
@@ -343,13 +354,7 @@ mod tests {
         for i in [0u32, 1, 2] {
             body.extend(i.to_le_bytes());
         }
-        let mut out = Vec::new();
-        out.extend(MAGIC.to_le_bytes());
-        out.extend(version.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        out.extend(e.finish().unwrap());
-        out
+        compressed(version, &body)
     }
 
     /// Concatenated meshes plus the end-of-file offset table.
@@ -418,13 +423,7 @@ mod tests {
             body.extend(i.to_le_bytes());
         }
         body.extend(0u32.to_le_bytes()); // no attributes
-        let mut mesh = Vec::new();
-        mesh.extend(MAGIC.to_le_bytes());
-        mesh.extend(5u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        mesh.extend(e.finish().unwrap());
-        let s = parse(&file(5, &[mesh]), 0).unwrap();
+        let s = parse(&file(5, &[compressed(5, &body)]), 0).unwrap();
         assert!(s.face_normals);
         assert_eq!(s.mesh.indices, vec![[0, 2, 1]]);
         assert_eq!(s.mesh.positions[1], Vec3::new(2.0, 0.0, 1.0));
@@ -459,26 +458,16 @@ mod tests {
         for i in [0u32, 0, 5] {
             body.extend(i.to_le_bytes());
         }
-        let mut m = Vec::new();
-        m.extend(MAGIC.to_le_bytes());
-        m.extend(4u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        m.extend(e.finish().unwrap());
-        let e = parse(&file(4, &[m]), 0).unwrap_err().to_string();
+        let e = parse(&file(4, &[compressed(4, &body)]), 0)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("refers to vertex 5"), "{e}");
         // A huge vertex count fails cleanly.
         let mut body = Vec::new();
         body.extend(0x1000u32.to_le_bytes());
         body.extend(b"\0");
         body.extend(u64::MAX.to_le_bytes());
-        let mut m = Vec::new();
-        m.extend(MAGIC.to_le_bytes());
-        m.extend(4u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        m.extend(e.finish().unwrap());
-        assert!(parse(&file(4, &[m]), 0)
+        assert!(parse(&file(4, &[compressed(4, &body)]), 0)
             .unwrap_err()
             .to_string()
             .contains("exceeds the limit"));

@@ -380,7 +380,7 @@ fn effect_analysis_switches_interference() {
 
     let mut polarised = film_scene(4, 1);
     polarised.polarizer = Some(Polarizer::S);
-    // Polarised rendering (issue 9): the polariser switches the polarised integrator on.
+    // Polarised rendering: the polariser switches the polarised integrator on.
     let out = render(&polarised, &RenderOptions::default()).unwrap();
     assert!(out.effects.polarization);
     assert!(out

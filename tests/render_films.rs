@@ -1,4 +1,4 @@
-//! Free-standing films, multilayer stacks and dispersion end to end (issue 9): scene syntax,
+//! Free-standing films, multilayer stacks and dispersion end to end: scene syntax,
 //! effect analysis, the bubble white furnace, and the proof that secondary wavelengths are
 //! terminated only where a scene declares dispersion.
 

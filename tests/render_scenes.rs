@@ -47,7 +47,7 @@ fn all_scene_files_render_finite() {
             || name.contains("zns")
             || name.contains("thinfilm")
             || name.contains("thickness")
-            // issue 9: soap bubble, multilayer coatings, AR-coated lens.
+            // soap bubble, multilayer coatings, AR-coated lens.
             || ["bubble", "coatings", "lens"].iter().any(|k| name.contains(k));
         assert_eq!(
             out.effects.interference, film,

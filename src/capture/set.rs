@@ -1,4 +1,4 @@
-//! `capture.json` (format `thinfilm-capture/1`, design.md §2) and the simulator's ground
+//! `capture.json` (format `thinfilm-capture/1`) and the simulator's ground
 //! truth (`ground_truth/ground_truth.json` + `thickness.exr`).
 //!
 //! Reflectance per sample is the cube value, or with references

@@ -892,19 +892,11 @@ pub fn write_capture_set(cfg: &SimulateConfig, out: &Path) -> Result<SimulationS
     let sim = Simulator::new(cfg, &thickness)?;
     let nb = cfg.wavelengths_nm.len();
     let work = (cfg.angles_deg.len() * cfg.height) as u64;
-    let progress =
-        if cfg.progress && cfg.width * cfg.height * nb * cfg.angles_deg.len() > 20_000_000 {
-            let bar = indicatif::ProgressBar::new(work);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "simulate {bar:40} {pos}/{len} rows [{elapsed_precise} < {eta}]",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            bar
-        } else {
-            indicatif::ProgressBar::hidden()
-        };
+    let progress = crate::progress::bar(
+        cfg.progress,
+        work,
+        "simulate {bar:40} {pos}/{len} rows [{elapsed_precise}, {eta} left]",
+    );
     let fwhm = (cfg.fwhm_nm > 0.0).then(|| vec![cfg.fwhm_nm; nb]);
     let options = |w: usize, h: usize, what: &str| {
         let mut o = WriteOptions::new(w, h, nb);

@@ -39,7 +39,11 @@ pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
         summary.seconds,
         cfg.out.display()
     );
-    for f in &summary.figures {
+    for f in summary
+        .figures
+        .iter()
+        .chain(summary.method_figures.iter().map(|(_, f, _)| f))
+    {
         println!("  {}", f.display());
     }
     println!(

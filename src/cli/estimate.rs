@@ -8,6 +8,7 @@ use std::time::Instant;
 use thinfilm::capture::spectra::{load_spectra, SpectraSetup};
 use thinfilm::capture::{Polarization, Radiometry};
 use thinfilm::estimate::film::FilmModelKind;
+use thinfilm::estimate::tiles::RowBand;
 use thinfilm::estimate::{report as fit_report, Method, Options};
 use thinfilm::optics::Ior;
 
@@ -96,6 +97,10 @@ pub struct Args {
     /// `thinfilm merge` stitches the bands' thickness.exr.
     #[arg(long, value_parser = parse_rows, value_name = "START:END")]
     pub rows: Option<(usize, usize)>,
+    /// Fit band K of N equal row bands (K from 0; e.g. a job array's task index and count):
+    /// the same as --rows with that band's rows.
+    #[arg(long, value_parser = super::parse_part, value_name = "K/N", conflicts_with = "rows")]
+    pub part: Option<(usize, usize)>,
 }
 
 /// Most steps a `grid` search may take along the index and along the thickness.
@@ -165,7 +170,11 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         grid_pixel_stride: args.grid_pixel_stride,
         band_integration: !args.no_band_integration,
         progress: report.progress(),
-        rows: args.rows,
+        rows: match (args.rows, args.part) {
+            (Some((a, b)), _) => Some(RowBand::Rows(a, b)),
+            (None, Some((index, count))) => Some(RowBand::Part { index, count }),
+            (None, None) => None,
+        },
         ..Options::default()
     };
     let t = Instant::now();

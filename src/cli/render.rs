@@ -44,6 +44,11 @@ pub struct Args {
     /// the ranges are powers of two aligned like 0:16 16:32 32:64 64:128.
     #[arg(long, value_parser = parse_range)]
     pub sample_range: Option<(u32, u32)>,
+    /// Render part K of N equal sample ranges (K from 0; e.g. a job array's task index and
+    /// count): the same as the matching --sample-range. Exact merges need power-of-two spp
+    /// and N.
+    #[arg(long, value_parser = super::parse_part, value_name = "K/N", conflicts_with = "sample_range")]
+    pub part: Option<(usize, usize)>,
     /// Scene parameter `key=value` (Mitsuba `-D`), fills `$key` / `<default name="key">`.
     #[arg(short = 'D', value_parser = parse_define)]
     pub define: Vec<(String, String)>,
@@ -154,9 +159,10 @@ fn command_for(output: &Path, range: (u32, u32)) -> String {
             continue;
         }
         match a.as_str() {
-            "-o" | "--output" | "--sample-range" => skip = true,
+            "-o" | "--output" | "--sample-range" | "--part" => skip = true,
             _ if a.starts_with("--output=")
                 || a.starts_with("--sample-range=")
+                || a.starts_with("--part=")
                 || (a.starts_with("-o") && a.len() > 2 && !a.starts_with("--")) => {}
             _ => args.push(a),
         }
@@ -191,13 +197,21 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     }
     let scene = thinfilm::scene::load(&args.scene, &args.define)
         .with_context(|| format!("loading scene {}", args.scene.display()))?;
+    let sample_range = match args.part {
+        Some((k, n)) => Some(thinfilm::render::passes::part(
+            args.spp.unwrap_or(scene.spp),
+            u32::try_from(k).unwrap_or(u32::MAX),
+            u32::try_from(n).unwrap_or(u32::MAX),
+        )?),
+        None => args.sample_range,
+    };
     let options = RenderOptions {
         spp: args.spp,
         seed: args.seed,
         threads: args.threads,
         max_depth: args.max_depth,
         resolution: args.resolution,
-        sample_range: args.sample_range,
+        sample_range,
         sampler: args.sampler,
         fresnel_splits: args.fresnel_splits,
         progress: report.progress(),

@@ -167,9 +167,9 @@ pub struct Options {
     /// Pixels used for the joint refinement of `full`.
     pub joint_pixels: usize,
     pub progress: bool,
-    /// Fit only rows `[A, B)`: the index from their pixels (unless given), their thickness
+    /// Fit only a band of rows: the index from its pixels (unless given), its thickness
     /// exactly as in the whole fit ([`tiles`]). `None`: every row.
-    pub rows: Option<(usize, usize)>,
+    pub rows: Option<tiles::RowBand>,
 }
 
 impl Default for Options {
@@ -339,8 +339,8 @@ fn known_index(ior: &Ior, cx: &Context) -> Result<IndexEstimate> {
 /// Runs the chosen estimator.
 pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     check_set(set)?;
-    if let Some(rows) = opts.rows {
-        tiles::check_rows(rows, set.height)?;
+    if let Some(band) = opts.rows {
+        band.resolve(set.height)?;
     }
     if opts.film_ior.is_none() {
         let mut distinct: Vec<f64> = set.angles.iter().map(|a| a.incident_deg).collect();
@@ -396,7 +396,10 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     // A band of rows (`--rows`): every stage ran on the whole capture (the global stages
     // on pixel samples of it), so the band's thickness is exactly the same rows of the
     // whole fit; keep those rows.
-    let rows = opts.rows.unwrap_or((0, set.height));
+    let rows = match opts.rows {
+        Some(band) => band.resolve(set.height)?,
+        None => (0, set.height),
+    };
     let kept = rows.0 * set.width..rows.1 * set.width;
     let mut sigma = checked.sigma;
     crop(&mut map.d, &kept);

@@ -2,7 +2,7 @@
 //! difference is a whole — or, when n2 > n3, half — number of wavelengths).
 //!
 //! Two flavours: the seed's band-quantised maximum (the peak wavelength is a band centre,
-//! which limits Sample 3 — design.md §1), and sub-band localisation by a least-squares
+//! which limits Sample 3), and sub-band localisation by a least-squares
 //! parabola through the samples around each maximum.
 
 /// One detected maximum.

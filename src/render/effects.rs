@@ -1,4 +1,4 @@
-//! Effect analysis (design.md §4, "simulate only the effects a scene calls for"): before
+//! Effect analysis (simulate only the effects a scene calls for): before
 //! rendering, the scene's materials are inspected and only the machinery they need is switched
 //! on. Each decision records why, for the render log.
 //!

@@ -2,7 +2,7 @@
 //!
 //! Each sample's spectrum becomes CIE XYZ through [`SampledSpectrum::to_xyz`] (mean over the
 //! four wavelengths of cmf·L/pdf, Mitsuba/pbrt-v4) and then linear sRGB (Rec.709, D65, no
-//! adaptation, no clamping; conventions.md "Film").
+//! adaptation, no clamping; as Mitsuba 3's `hdrfilm`).
 //!
 //! Box filter (every sample stays in its pixel): a pixel's samples are summed in a fixed
 //! binary tree over their *global* sample indices ([`tree_sum`]). A render of samples

@@ -1,8 +1,8 @@
-//! Polarised `path` integrator (issue 9 part 1): the same unidirectional hero-wavelength path
+//! Polarised `path` integrator: the same unidirectional hero-wavelength path
 //! tracer as [`super::integrator`] (same sampling decisions, MIS, Russian roulette and random
 //! stream layout), but light carries Stokes vectors and BSDFs act as Mueller matrices, with
 //! Mitsuba 3's conventions ([`super::polarization`]). Used only when the scene asks for a
-//! polariser (effect analysis, design.md §4); other scenes never reach this file.
+//! polariser (effect analysis, `effects.rs`); other scenes never reach this file.
 //!
 //! **Adjoint (covector) transport.** The sensor records S0 only, and emitters are
 //! unpolarised, so the measured value of a path with Mueller matrices M₁ … M_k (camera side

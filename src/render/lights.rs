@@ -342,7 +342,7 @@ impl EnvMap {
         })
     }
 
-    /// Texture coordinates of a world direction (conventions.md).
+    /// Texture coordinates of a world direction (Mitsuba 3's lat-long convention).
     #[inline]
     fn uv_of(&self, dir: Vec3) -> Vec2 {
         let d = (self.to_local * dir).normalize();

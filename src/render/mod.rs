@@ -1,4 +1,4 @@
-//! The hero-wavelength spectral path tracer (design.md §4).
+//! The hero-wavelength spectral path tracer.
 //!
 //! One file per concept, after pbrt-v4's decomposition:
 //! [`accel`] (obvhs CWBVH + spheres), [`camera`] (Mitsuba `perspective`), [`sampler`]

@@ -1,4 +1,4 @@
-//! Stokes vectors and Mueller matrices for polarised rendering (issue 9, part 1).
+//! Stokes vectors and Mueller matrices for polarised rendering.
 //!
 //! Conventions are Mitsuba 3's (`mitsuba/render/mueller.h`, `fresnel.h`), so that a scene
 //! renders the same here and in Mitsuba's `*_polarized` variants:

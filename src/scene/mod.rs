@@ -2,7 +2,7 @@
 //! Loaders (Mitsuba XML subset, glTF, OBJ, PLY) produce a [`Scene`]; the renderer consumes it.
 //!
 //! CONTRACT between the scene loaders and the renderer. Geometry is in world space.
-//! Conventions are Mitsuba 3's (see shared/docs/conventions.md): the camera looks along +Z of
+//! Conventions are Mitsuba 3's: the camera looks along +Z of
 //! its `to_world` frame with +Y up; environment maps use Mitsuba's lat-long mapping.
 
 use crate::image_io::RgbImage;
@@ -251,7 +251,7 @@ pub enum BsdfDesc {
         nonlinear: bool,
     },
     TwoSided(Box<BsdfDesc>),
-    /// Opaque thin film on a substrate (design.md): Airy Fresnel term, optional GGX roughness.
+    /// Opaque thin film on a substrate: Airy Fresnel term, optional GGX roughness.
     ThinFilm {
         film_ior: Ior,
         thickness_nm: TextureDesc,

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes an estimator-style material (tests/references/material/material.xml + thickness.exr):
 a `<bsdf type="thinfilm">` whose thickness is a bitmap texture in nanometres, in the format
-`thinfilm estimate` writes (design.md, "material.xml"). The map is a smooth 64×64 field,
+`thinfilm estimate` writes (material.xml). The map is a smooth 64×64 field,
 250–650 nm, so the reference render shows bands of interference colour.
 
 Rerun (from the repository root): python3 tools/mitsuba/make_material.py

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Mitsuba 3 polarised reference renders for thinfilm (issue 9, part 1).
+"""Mitsuba 3 polarised reference renders for thinfilm.
 
 Renders the polariser scenes `scenes/polarizer_*.xml` with Mitsuba's polarised spectral
 variant (llvm_ad_spectral_polarized, else scalar_spectral_polarized) — the same XML thinfilm

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Mitsuba 3 reference renders for thinfilm (issue 7).
+"""Mitsuba 3 reference renders for thinfilm.
 
 Renders every scene file in `scenes/` (and the estimator-style material scene under
 `tests/references/material/`) with Mitsuba 3 and the Python `thinfilm` BSDF plugin

@@ -1,4 +1,4 @@
-//! Opaque thin film on a substrate (design.md "The thin-film BSDF"): the Fresnel term is the
+//! Opaque thin film on a substrate: the Fresnel term is the
 //! Airy single-film reflectance R(λ, θ) of [`crate::optics::ThinFilm`] (seed eq. 4), averaged
 //! over s and p. Smooth: a mirror lobe weighted by R. Rough (α > 0): a GGX microfacet lobe with
 //! the Airy term evaluated at the microfacet angle (the "rough thin film" of Belcour & Barla

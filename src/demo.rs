@@ -7,7 +7,6 @@ use crate::estimate::{report, Method, Options};
 use crate::figure::{self, RenderSettings, SampleRow};
 use crate::material::FilmMaterial;
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -55,6 +54,11 @@ pub struct PaperRow {
 }
 
 /// (preset, label, true n, true d, the paper's row).
+/// Samples that get the figure of the published method's fit against ours: sample 3, where
+/// the published method fails (half-order maxima). On samples 1 and 2 both fits render alike,
+/// and three more renders each would slow the demo for no new picture.
+pub const METHODS_FIGURE_SAMPLES: [&str; 1] = ["sample3"];
+
 pub const SAMPLES: [(&str, &str, f64, f64, PaperRow); 3] = [
     (
         "sample1",
@@ -113,6 +117,10 @@ pub struct MethodResult {
 pub struct DemoSummary {
     pub samples: Vec<(String, f64, f64, PaperRow, Vec<MethodResult>)>,
     pub figures: Vec<PathBuf>,
+    /// For [`METHODS_FIGURE_SAMPLES`]: the sample's label, its figure of ground truth, the
+    /// published method's fit and ours as teapots with ΔE00 maps (`SAMPLE/methods.png`), and
+    /// the two fits' mean ΔE00.
+    pub method_figures: Vec<(String, PathBuf, Vec<f64>)>,
     pub samples_figure_delta_e00: Vec<f64>,
     pub seconds: f64,
     pub table_markdown: String,
@@ -185,21 +193,16 @@ pub fn table_markdown(samples: &[(String, f64, f64, PaperRow, Vec<MethodResult>)
 pub fn run(cfg: &DemoConfig) -> Result<DemoSummary> {
     let start = Instant::now();
     std::fs::create_dir_all(&cfg.out).with_context(|| format!("creating {}", cfg.out.display()))?;
-    // simulate + 2 fits per sample, one figure per sample, the Fig. 6 figure.
-    let steps = SAMPLES.len() as u64 * 4 + 1;
-    let bar = if cfg.progress {
-        ProgressBar::new(steps)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} (eta {eta})",
-        )
-        .expect("valid template"),
+    // simulate + 2 fits + a figure per sample, the methods figures, the Fig. 6 figure.
+    let steps = SAMPLES.len() as u64 * 4 + METHODS_FIGURE_SAMPLES.len() as u64 + 1;
+    let bar = crate::progress::bar(
+        cfg.progress,
+        steps,
+        "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg} ({eta} left)",
     );
     let mut samples = Vec::new();
     let mut figures = Vec::new();
+    let mut method_figures = Vec::new();
     let mut rows = Vec::new();
     for (preset, label, n_true, d_true, paper) in SAMPLES {
         let dir = cfg.out.join(preset);
@@ -232,10 +235,27 @@ pub fn run(cfg: &DemoConfig) -> Result<DemoSummary> {
         figures.push(png);
         bar.inc(1);
         let gt = capture::load_ground_truth(&gt_dir)?;
+        let truth = FilmMaterial::from_ground_truth(&gt);
+        let fitted = FilmMaterial::from_fit_dir(&full_dir)?;
+        if METHODS_FIGURE_SAMPLES.contains(&preset) {
+            bar.set_message(format!("rendering {label}: the paper's fit and ours"));
+            let methods_png = dir.join("methods.png");
+            let fits = [
+                (
+                    "published method".to_string(),
+                    FilmMaterial::from_fit_dir(&dir.join("fit_paper"))?,
+                ),
+                ("ours (full)".to_string(), fitted.clone()),
+            ];
+            let title = format!("{label}: the published method's fit and ours, rendered");
+            let des = figure::methods_figure(&title, &truth, &fits, &cfg.render, &methods_png)?;
+            method_figures.push((label.to_string(), methods_png, des));
+            bar.inc(1);
+        }
         rows.push(SampleRow {
             name: label.to_string(),
-            truth: FilmMaterial::from_ground_truth(&gt),
-            fitted: FilmMaterial::from_fit_dir(&full_dir)?,
+            truth,
+            fitted,
         });
         samples.push((label.to_string(), n_true, d_true, paper, results));
     }
@@ -248,6 +268,7 @@ pub fn run(cfg: &DemoConfig) -> Result<DemoSummary> {
     let summary = DemoSummary {
         samples,
         figures: std::iter::once(fig6).chain(figures).collect(),
+        method_figures,
         samples_figure_delta_e00: des,
         seconds: start.elapsed().as_secs_f64(),
         table_markdown: table,
@@ -291,6 +312,18 @@ fn write_index(cfg: &DemoConfig, s: &DemoSummary) -> Result<()> {
             relative(&cfg.out, f)
         );
     }
+    md.push_str("## The published method's fit against ours\n\n");
+    for (label, f, des) in &s.method_figures {
+        let caption = format!(
+            "{label}: ground truth, the published method's fit (mean ΔE00 {:.2}) and ours ({:.2})",
+            des[0], des[1]
+        );
+        let _ = writeln!(
+            md,
+            "### {caption}\n\n![{caption}]({})\n",
+            relative(&cfg.out, f)
+        );
+    }
     md.push_str("Each sample folder holds the capture set (`capture/`, ENVI cubes + `capture.json` + `ground_truth/`) \
                  and the fits (`fit_paper/`, `fit_full/`: `fit.json`, `thickness.exr`, `material.xml`, `material.gltf`).\n");
     crate::image_io::write_atomically(&cfg.out.join("README.md"), |p| {
@@ -315,7 +348,11 @@ fn write_index(cfg: &DemoConfig, s: &DemoSummary) -> Result<()> {
         html.push_str("</tr>\n");
     }
     html.push_str("</table>\n");
-    for f in &s.figures {
+    for f in s
+        .figures
+        .iter()
+        .chain(s.method_figures.iter().map(|(_, f, _)| f))
+    {
         let _ = writeln!(html, "<p><img src=\"{}\"></p>", relative(&cfg.out, f));
     }
     html.push_str("</body></html>\n");

@@ -453,6 +453,77 @@ fn upscale_small(c: Canvas, factor: usize) -> Canvas {
     }
 }
 
+/// A file-name part from a label: lower-case letters and digits, runs of anything else as
+/// one `_` ("Sample 1 (MgF2 400 nm)" → "sample_1_mgf2_400_nm").
+pub fn slug(label: &str) -> String {
+    let mut s = String::with_capacity(label.len());
+    for c in label.chars() {
+        if c.is_ascii_alphanumeric() {
+            s.push(c.to_ascii_lowercase());
+        } else if !s.ends_with('_') {
+            s.push('_');
+        }
+    }
+    s.trim_matches('_').to_string()
+}
+
+/// Ground truth beside fits of the same capture by several methods, as teapots, with each
+/// fit's ΔE00 map against the ground truth under it — all maps on one colour scale, so they
+/// compare at a glance. Returns each fit's mean ΔE00.
+pub fn methods_figure(
+    title: &str,
+    truth: &FilmMaterial,
+    fits: &[(String, FilmMaterial)],
+    settings: &RenderSettings,
+    out_png: &Path,
+) -> Result<Vec<f64>> {
+    let base = base_scene(None, settings)?;
+    let gt_img = render_with_material(&base, truth, settings)?;
+    let mut images = Vec::new();
+    let mut maps = Vec::new();
+    let mut means = Vec::new();
+    let mut p95 = 1.0f64;
+    for (_, m) in fits {
+        let img = render_with_material(&base, m, settings)?;
+        let metrics = compare_images(&img, &gt_img)?;
+        maps.push(delta_e00_map(&img, &gt_img)?);
+        means.push(metrics.delta_e00_mean);
+        p95 = p95.max(metrics.delta_e00_p95);
+        images.push(img);
+    }
+    let vmax = nice_ceiling(p95);
+    let (w, h) = (gt_img.width, gt_img.height);
+    // One column per material: its teapot, and under a fit its ΔE00 map.
+    let one = |p: Panel| compose_panels(&[p], None, FONT_PX);
+    let mut columns = vec![one(panel(
+        &gt_img,
+        format!("ground truth: {}", truth.label()),
+        vec![],
+    ))];
+    for (((label, m), img), (de, mean)) in fits.iter().zip(&images).zip(maps.iter().zip(&means)) {
+        let map = Panel {
+            image: heatmap(de, w, h, vmax, Colormap::Viridis)?,
+            title: format!("ΔE00 against the truth: mean {mean:.2}"),
+            caption: vec![],
+        };
+        columns.push(stack_rows(&[
+            one(panel(img, format!("{label}: {}", m.label()), vec![])),
+            one(map),
+        ]));
+    }
+    let bar = colour_bar(h, vmax, Colormap::Viridis, "ΔE00", FONT_PX * 0.85);
+    // Beside the maps: the bottom of the bar at the bottom of the columns.
+    let tallest = columns.iter().map(|c| c.height).max().unwrap_or(0);
+    let mut bar_column = Canvas::new(bar.width, tallest.max(bar.height), [255, 255, 255]);
+    bar_column.blit(&bar, 0, tallest.saturating_sub(bar.height));
+    columns.push(bar_column);
+    let body = place_side_by_side(&columns, 16);
+    let mut header = Canvas::new(body.width, (FONT_PX * 2.0) as usize, [255, 255, 255]);
+    header.draw_text(title, 8.0, FONT_PX * 0.4, FONT_PX * 1.15, [0, 0, 0]);
+    stack_rows(&[header, body]).save_png(out_png)?;
+    Ok(means)
+}
+
 /// One row of the seed's Fig. 6: a sample's name, its true and fitted materials.
 #[derive(Debug, Clone)]
 pub struct SampleRow {
@@ -482,7 +553,7 @@ pub fn samples_figure(
             format!("fitted, {}", row.fitted.label()),
         )?;
         let stem = out_png.with_extension("");
-        let slug = row.name.to_ascii_lowercase().replace(' ', "_");
+        let slug = slug(&row.name);
         image_io::write_exr_rgb(
             Path::new(&format!("{}_{slug}_ground_truth.exr", stem.display())),
             &gt_img,

@@ -27,22 +27,70 @@ impl RgbImage {
     }
 }
 
+/// Marks temporaries: `.NAME.partial-PID` files and `.thinfilm-staging.partial-PID` folders.
+const PARTIAL: &str = ".partial-";
+
 fn temp_path(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.partial-{}", std::process::id()))
+    path.with_file_name(format!(".{name}{PARTIAL}{}", std::process::id()))
 }
 
-/// Runs `write` against a temporary path, then renames it onto `path`.
+/// True unless `pid` is known to have exited (only Linux's /proc can tell; elsewhere every
+/// temporary is assumed to belong to a live process and is left alone).
+fn process_alive(pid: u32) -> bool {
+    !Path::new("/proc/self").exists() || Path::new(&format!("/proc/{pid}")).exists()
+}
+
+/// Removes the temporaries a killed run left in `dir` (a temporary of a running process,
+/// this one included, stays).
+fn remove_stale_temporaries(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let pid = name
+            .strip_prefix('.')
+            .and_then(|n| n.rsplit_once(PARTIAL))
+            .and_then(|(_, pid)| pid.parse::<u32>().ok());
+        let Some(pid) = pid else { continue };
+        if pid == std::process::id() || process_alive(pid) {
+            continue;
+        }
+        let path = entry.path();
+        let _ = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+    }
+}
+
+/// Flushes a written file to the storage device, so that a rename never publishes a file
+/// whose data a crash of the machine could still lose.
+fn sync_file(path: &Path) -> Result<()> {
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(path)
+        .and_then(|f| f.sync_all())
+        .with_context(|| format!("flushing {}", path.display()))
+}
+
+/// Runs `write` against a temporary path beside `path`, flushes it, then renames it onto
+/// `path`: readers (and a run that is killed or fails) see either the previous file or the
+/// complete new one, never a partial one. Temporaries left by killed runs are removed.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+    if let Some(dir) = dir {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating directory {}", dir.display()))?;
     }
+    remove_stale_temporaries(dir.unwrap_or(Path::new(".")));
     let tmp = temp_path(path);
-    let result = write(&tmp).and_then(|()| {
+    let result = write(&tmp).and_then(|()| sync_file(&tmp)).and_then(|()| {
         std::fs::rename(&tmp, path)
             .with_context(|| format!("moving output into place at {}", path.display()))
     });
@@ -50,6 +98,42 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
         let _ = std::fs::remove_file(&tmp);
     }
     result.with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes a set of files into `dir` as one step: `write` creates them in a fresh staging
+/// folder inside `dir`, and only when all succeeded is each renamed over its namesake in
+/// `dir` (JSON files last: they name the others). Other files in `dir` are left alone; on an
+/// error, or if the process is killed before the renames, `dir` keeps its previous files.
+pub fn write_files_atomically(dir: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("creating output folder {}", dir.display()))?;
+    remove_stale_temporaries(dir);
+    let stage = dir.join(format!(".thinfilm-staging{PARTIAL}{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&stage);
+    std::fs::create_dir(&stage)
+        .with_context(|| format!("creating staging folder {}", stage.display()))?;
+    let result = write(&stage).and_then(|()| {
+        let mut names: Vec<std::ffi::OsString> = std::fs::read_dir(&stage)
+            .with_context(|| format!("listing {}", stage.display()))?
+            .flatten()
+            .filter(|e| e.path().is_file())
+            .map(|e| e.file_name())
+            .collect();
+        names.sort_by_key(|n| {
+            (
+                Path::new(n).extension().is_some_and(|e| e == "json"),
+                n.clone(),
+            )
+        });
+        for n in names {
+            std::fs::rename(stage.join(&n), dir.join(&n)).with_context(|| {
+                format!("moving output into place at {}", dir.join(&n).display())
+            })?;
+        }
+        Ok(())
+    });
+    let _ = std::fs::remove_dir_all(&stage);
+    result
 }
 
 /// Writes float32 channels named `R`, `G`, `B` (ZIP compressed).
@@ -125,6 +209,67 @@ pub fn write_exr_channels_with_attributes(
 /// A named channel plane: `(name, row-major samples)`.
 pub type NamedPlane = (String, Vec<f32>);
 
+/// Decoded EXR bytes can exceed the file by the compression ratio; deflate (ZIP, PXR24)
+/// reaches at most 1032:1, run-length 64:1, PIZ and DWA stay well below 2048:1. A header
+/// declaring more than this many decoded bytes per file byte is corrupt.
+const MAX_EXR_EXPANSION: u64 = 2048;
+
+/// Checks an EXR header's declared pixels against the file size and the memory budget
+/// before the decoder allocates them (a flipped byte in a header can declare gigapixels), and
+/// returns the bytes reading the file takes.
+pub fn exr_memory(path: &Path) -> Result<u64> {
+    crate::limits::contain_panics(path, || exr_memory_checked(path))
+}
+
+fn exr_memory_checked(path: &Path) -> Result<u64> {
+    if !path.is_file() {
+        bail!("EXR file {} does not exist", path.display());
+    }
+    let file_bytes = std::fs::metadata(path)
+        .with_context(|| format!("reading EXR {}", path.display()))?
+        .len();
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| anyhow::anyhow!("{}: not a readable EXR header: {e}", path.display()))?;
+    let mut total = 0u64;
+    for (i, h) in meta.headers.iter().enumerate() {
+        let (w, ht) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+        let sample_bytes: u64 = h
+            .channels
+            .list
+            .iter()
+            .map(|c| c.sample_type.bytes_per_sample() as u64)
+            .sum();
+        let raw = crate::limits::size_product(
+            format!("{} layer {i}", path.display()),
+            &[
+                ("width", w),
+                ("height", ht),
+                ("bytes per pixel", sample_bytes),
+            ],
+        )?;
+        let ratio = if h.compression == exr::compression::Compression::Uncompressed {
+            1
+        } else {
+            MAX_EXR_EXPANSION
+        };
+        if raw > file_bytes.saturating_mul(ratio) {
+            bail!(
+                "{}: the header declares {w}×{ht} pixels ({raw} bytes of samples) but the file has {file_bytes} bytes: corrupt or truncated",
+                path.display()
+            );
+        }
+        // Decoded samples, their f32 copies and an RGB image made from them.
+        let channels = h.channels.list.len() as u64;
+        let bytes = raw.saturating_add((w * ht).saturating_mul(4 * channels + 12));
+        crate::limits::check_alloc(
+            format!("{}: {w}×{ht} pixels × {channels} channels", path.display()),
+            bytes,
+        )?;
+        total = total.saturating_add(bytes);
+    }
+    Ok(total)
+}
+
 /// Reads every channel of the first layer as f32 planes: `(width, height, [(name, plane)])`.
 pub fn read_exr_channels(path: &Path) -> Result<(usize, usize, Vec<NamedPlane>)> {
     let e = read_exr(path)?;
@@ -153,6 +298,11 @@ impl ExrFile {
 
 /// Reads the first layer of an EXR with its text attributes.
 pub fn read_exr(path: &Path) -> Result<ExrFile> {
+    crate::limits::contain_panics(path, || read_exr_checked(path))
+}
+
+fn read_exr_checked(path: &Path) -> Result<ExrFile> {
+    exr_memory_checked(path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -164,12 +314,22 @@ pub fn read_exr(path: &Path) -> Result<ExrFile> {
         .with_context(|| format!("reading EXR {}", path.display()))?;
     let layer = image.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());
-    let channels = layer
+    let channels: Vec<NamedPlane> = layer
         .channel_data
         .list
         .iter()
         .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
         .collect();
+    if let Some((name, plane)) = channels.iter().find(|(_, p)| p.len() != w * h) {
+        bail!(
+            "{}: channel '{name}' has {} samples for {w}×{h} pixels (subsampled channels are not supported)",
+            path.display(),
+            plane.len()
+        );
+    }
+    if channels.is_empty() {
+        bail!("{}: the image has no channels", path.display());
+    }
     let attributes = image
         .attributes
         .other
@@ -206,6 +366,29 @@ pub fn read_exr_channel(path: &Path, name: &str) -> Result<(usize, usize, Vec<f3
     Ok((w, h, plane))
 }
 
+/// Reads a one-quantity image: the first of the channels `names` present, or the only
+/// channel of a single-channel file.
+pub fn read_exr_scalar(path: &Path, names: &[&str]) -> Result<(usize, usize, Vec<f32>)> {
+    let (w, h, channels) = read_exr_channels(path)?;
+    let listed: Vec<String> = channels.iter().map(|(n, _)| n.clone()).collect();
+    let single = channels.len() == 1;
+    let plane = channels
+        .into_iter()
+        .enumerate()
+        .filter(|(_, (n, _))| single || names.contains(&n.as_str()))
+        .min_by_key(|(_, (n, _))| names.iter().position(|m| m == n).unwrap_or(usize::MAX))
+        .map(|(_, (_, p))| p)
+        .with_context(|| {
+            format!(
+                "{}: no channel named {} (channels: {})",
+                path.display(),
+                names.join(" or "),
+                listed.join(", ")
+            )
+        })?;
+    Ok((w, h, plane))
+}
+
 /// Reads an RGB EXR (channels R, G, B; a single Y channel is read as grey).
 pub fn read_exr_rgb(path: &Path) -> Result<RgbImage> {
     let (w, h, channels) = read_exr_channels(path)?;
@@ -221,6 +404,56 @@ pub fn read_exr_rgb(path: &Path) -> Result<RgbImage> {
         height: h,
         pixels,
     })
+}
+
+/// Decodes an image file (PNG, Radiance HDR, JPEG …) after checking the size its header
+/// declares against the memory budget; `bytes_per_pixel` is what the caller keeps per pixel
+/// after converting the result.
+pub fn read_image(path: &Path, bytes_per_pixel: u64) -> Result<image::DynamicImage> {
+    let open = || {
+        image::ImageReader::open(path)
+            .and_then(|r| r.with_guessed_format())
+            .with_context(|| format!("reading image {}", path.display()))
+    };
+    crate::limits::contain_panics(path, || {
+        decode_checked(open, &path.display().to_string(), bytes_per_pixel)
+    })
+}
+
+/// [`read_image`] for an image held in memory (e.g. inside a glTF buffer); `what` names it.
+pub fn decode_image_bytes(
+    bytes: &[u8],
+    what: &str,
+    bytes_per_pixel: u64,
+) -> Result<image::DynamicImage> {
+    let open = || {
+        image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .with_context(|| format!("reading image {what}"))
+    };
+    decode_checked(open, what, bytes_per_pixel)
+}
+
+fn decode_checked<R: std::io::BufRead + std::io::Seek>(
+    open: impl Fn() -> Result<image::ImageReader<R>>,
+    what: &str,
+    bytes_per_pixel: u64,
+) -> Result<image::DynamicImage> {
+    let (w, h) = open()?
+        .into_dimensions()
+        .with_context(|| format!("{what}: not a readable image"))?;
+    let pixels = w as u64 * h as u64;
+    crate::limits::check_alloc(
+        format!("{what}: {w}×{h} pixels"),
+        pixels.saturating_mul(bytes_per_pixel.max(16)),
+    )?;
+    let mut reader = open()?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(crate::limits::memory_limit());
+    reader.limits(limits);
+    reader
+        .decode()
+        .with_context(|| format!("{what}: cannot decode the image"))
 }
 
 /// Writes 8-bit RGB PNG from already-encoded bytes (`width * height * 3`).

@@ -12,6 +12,7 @@
 //! - [`render`]: the hero-wavelength spectral path tracer;
 //! - [`compare`]: image metrics, side-by-side figures, plots;
 //! - [`image_io`]: EXR and PNG reading/writing shared by the stages;
+//! - [`limits`]: the memory budget, numeric domains and panic containment every loader uses;
 //! - [`stats`]: summary statistics shared by the stages (one percentile definition).
 
 pub mod capture;
@@ -20,6 +21,7 @@ pub mod demo;
 pub mod estimate;
 pub mod figure;
 pub mod image_io;
+pub mod limits;
 pub mod material;
 pub mod merge;
 pub mod optics;

@@ -1,6 +1,6 @@
 //! Putting split work back together: renders of disjoint sample ranges into the render of
-//! their union ([`merge_renders`]), and thickness tiles fitted row band by row band into the
-//! whole map ([`stitch_tiles`]). Pieces are recognised and checked by the provenance in their
+//! their union ([`merge_renders`]), thickness maps fitted row band by row band into the
+//! whole map ([`stitch_tiles`]), and the bands' fit folders into one ([`merge_fit_dirs`]). Pieces are recognised and checked by the provenance in their
 //! EXR headers ([`crate::render::provenance`], [`crate::estimate::tiles`]).
 //!
 //! Renders merge exactly: a box-filtered render of `n` samples is the sum of its samples in a
@@ -14,8 +14,12 @@
 
 use crate::estimate::tiles::TileInfo;
 use crate::image_io::{ExrFile, RgbImage};
+use crate::material::{
+    FilmMaterial, FitFile, MapStats, PixelCounts, FIT_JSON, THICKNESS_CHANNEL, THICKNESS_EXR,
+};
 use crate::render::passes::is_tree_node;
 use crate::render::provenance::{RenderInfo, FILTER_WEIGHT_CHANNEL};
+use crate::stats::Summary;
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
@@ -332,4 +336,122 @@ pub fn stitch_tiles(mut tiles: Vec<TilePiece>) -> Result<Stitched> {
         channels,
         info,
     })
+}
+
+/// What [`merge_fit_dirs`] wrote.
+#[derive(Debug, Clone)]
+pub struct MergedFit {
+    pub fit: FitFile,
+    pub bands: usize,
+}
+
+/// Stitches the output folders of `thinfilm estimate --rows` (or `--part`) runs of one fit
+/// into a complete fit folder `out`: `thickness.exr` (stitched, with its provenance),
+/// `thickness.png`, `material.xml`, `material.gltf` and a `fit.json` whose numbers cover the
+/// whole map — thickness statistics recomputed from it, pixel and sample counts and stage
+/// times summed, residual RMSE and ΔE pooled over the bands by their fitted pixels. The
+/// bands' `residual.png` maps are not stitched.
+pub fn merge_fit_dirs(dirs: &[PathBuf], out: &Path) -> Result<MergedFit> {
+    let mut tiles = Vec::with_capacity(dirs.len());
+    let mut fits = Vec::with_capacity(dirs.len());
+    for dir in dirs {
+        let fit = FitFile::read(&dir.join(FIT_JSON))?;
+        let path = dir.join(THICKNESS_EXR);
+        let exr = crate::image_io::read_exr(&path)?;
+        let info = TileInfo::from_attributes(&exr.attributes, &path.display().to_string())?;
+        tiles.push(TilePiece { path, info, exr });
+        fits.push(fit);
+    }
+    let stitched = stitch_tiles(tiles)?;
+    let (_, thickness) = stitched
+        .channels
+        .iter()
+        .find(|(n, _)| n == THICKNESS_CHANNEL)
+        .with_context(|| {
+            format!("the bands' thickness maps have no channel '{THICKNESS_CHANNEL}'")
+        })?;
+    let first = &fits[0];
+    let material = FilmMaterial {
+        film_ior: first.film_index()?,
+        substrate_ior: first.substrate.clone(),
+        width: stitched.width,
+        height: stitched.height,
+        thickness_nm: thickness.clone(),
+    };
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    material.write_files_with_provenance(
+        out,
+        &format!(
+            "thinfilm estimate ({}), {} row bands merged",
+            first.method,
+            fits.len()
+        ),
+        &stitched.info.attributes(),
+    )?;
+    crate::estimate::report::write_colormap_png(
+        &out.join("thickness.png"),
+        thickness,
+        stitched.width,
+        stitched.height,
+        "thickness (nm)",
+    )?;
+    let fit = pooled_fit_file(&fits, thickness, stitched.width, stitched.height);
+    fit.write(&out.join(FIT_JSON))?;
+    Ok(MergedFit {
+        fit,
+        bands: fits.len(),
+    })
+}
+
+/// One `fit.json` for bands of one fit (see [`merge_fit_dirs`]).
+fn pooled_fit_file(fits: &[FitFile], thickness: &[f32], width: usize, height: usize) -> FitFile {
+    let weight = |f: &FitFile| f.pixels.valid as f64;
+    let total: f64 = fits.iter().map(weight).sum();
+    // Mean of a per-band value weighted by fitted pixels; RMSEs are pooled as mean squares.
+    let pool = |value: fn(&FitFile) -> Option<f64>, squared: bool| -> Option<f64> {
+        let mut acc = 0.0;
+        for f in fits {
+            let v = value(f)?;
+            acc += weight(f) * if squared { v * v } else { v };
+        }
+        (total > 0.0).then(|| {
+            if squared {
+                (acc / total).sqrt()
+            } else {
+                acc / total
+            }
+        })
+    };
+    let mut fit = fits[0].clone();
+    fit.width = width;
+    fit.height = height;
+    fit.rows = None;
+    fit.thickness_nm = MapStats::from(Summary::of_finite(thickness));
+    fit.thickness_nm_reason = fit
+        .thickness_nm
+        .mean
+        .is_none()
+        .then(|| "no pixel was fitted".into());
+    fit.pixels = PixelCounts {
+        valid: fits.iter().map(|f| f.pixels.valid).sum(),
+        invalid: fits.iter().map(|f| f.pixels.invalid).sum(),
+        unfitted: fits.iter().map(|f| f.pixels.unfitted).sum(),
+    };
+    for f in &fits[1..] {
+        fit.invalid_samples.add(&f.invalid_samples);
+        for (stage, s) in &f.seconds {
+            let e = fit.seconds.entry(stage.clone()).or_insert(Some(0.0));
+            *e = e.zip(*s).map(|(a, b)| a + b);
+        }
+        for w in &f.warnings {
+            if !fit.warnings.contains(w) {
+                fit.warnings.push(w.clone());
+            }
+        }
+    }
+    fit.residual_rmse = pool(|f| f.residual_rmse, true);
+    fit.delta_e_ab_d65_mean = pool(|f| f.delta_e_ab_d65_mean, false);
+    fit.ground_truth = None;
+    fit.film_ior_note = format!("{} ({} row bands merged)", fit.film_ior_note, fits.len());
+    fit
 }

@@ -70,6 +70,34 @@ fn demo_fits_meet_the_acceptance_bounds_and_writes_every_output() {
             f.display()
         );
     }
+    // The methods figures: on sample 3 (ZnS on PET, reflectance maxima at half orders) the
+    // published method's fit renders visibly wrong, ours does not.
+    assert_eq!(summary.method_figures.len(), 1);
+    let (label, png, sample3) = &summary.method_figures[0];
+    assert!(label.starts_with("Sample 3"), "{label}");
+    assert!(png.is_file(), "{} not written", png.display());
+    assert!(
+        sample3[0] > 1.0 && sample3[1] < 0.5 * sample3[0],
+        "sample 3: mean ΔE00 published {:.3}, ours {:.3}",
+        sample3[0],
+        sample3[1]
+    );
+    // Output names a shell takes without quoting.
+    let mut stack = vec![dir.path().to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let name = p.file_name().unwrap().to_string_lossy().to_string();
+            assert!(
+                !name.contains([' ', '(', ')']),
+                "output name needs quoting: {}",
+                p.display()
+            );
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
     assert!(dir.path().join("index.html").is_file() && dir.path().join("README.md").is_file());
     let md = std::fs::read_to_string(dir.path().join("README.md")).unwrap();
     assert!(md.contains("paper (published)") && md.contains("ours: full"));

@@ -115,7 +115,7 @@ fn known_index_works_with_one_angle_and_unknown_index_is_a_clear_error() {
     let fit = estimate(
         &set,
         &Options {
-            film_ior: Some(1.37),
+            film_ior: Some(Ior::real(1.37)),
             ..Options::default()
         },
     )
@@ -125,7 +125,7 @@ fn known_index_works_with_one_angle_and_unknown_index_is_a_clear_error() {
     let bad = estimate(
         &set,
         &Options {
-            film_ior: Some(0.3),
+            film_ior: Some(Ior::real(0.3)),
             ..Options::default()
         },
     );

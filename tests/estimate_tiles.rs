@@ -97,6 +97,29 @@ fn stitched_row_bands_equal_the_whole_fit() {
         read_exr(&whole.join("thickness.exr")).unwrap().attributes
     );
 
+    // The bands' folders merge into a whole fit folder that reads like the single fit's.
+    let bands: Vec<String> = (0..bands.len())
+        .map(|i| tmp.path().join(format!("band{i}")).display().to_string())
+        .collect();
+    let merged = tmp.path().join("merged");
+    let mut args = vec!["merge", "-o", merged.to_str().unwrap()];
+    args.extend(bands.iter().map(String::as_str));
+    ok(thinfilm(&args));
+    assert_eq!(thickness_bits(&merged.join("thickness.exr")), want);
+    let read = |d: &Path| thinfilm::material::FitFile::read(&d.join("fit.json")).unwrap();
+    let (m, w) = (read(&merged), read(&whole));
+    assert_eq!((m.width, m.height, m.rows), (w.width, w.height, None));
+    assert_eq!(m.pixels, w.pixels);
+    assert_eq!(m.thickness_nm, w.thickness_nm);
+    assert_eq!(m.film_ior, w.film_ior);
+    let rel = |a: Option<f64>, b: Option<f64>| (a.unwrap() - b.unwrap()).abs() / b.unwrap();
+    assert!(rel(m.residual_rmse, w.residual_rmse) < 0.02, "{m:?}");
+    let material = thinfilm::material::FilmMaterial::from_fit_dir(&merged).unwrap();
+    assert_eq!((material.width, material.height), (60, 44));
+    for f in ["material.xml", "material.gltf", "thickness.png"] {
+        assert!(merged.join(f).is_file(), "{f}");
+    }
+
     // A band fitted with another index does not belong to this fit.
     let other = tmp.path().join("other");
     estimate(&cap, &other, &["--film-ior", "1.38", "--rows", "23:24"]);

@@ -166,6 +166,7 @@ fn room(extra: Vec<Shape>) -> Scene {
             geometry: Geometry::Sphere {
                 center: Vec3::new(1.0, 0.0, 5.0),
                 radius: 0.7,
+                rotation: glam::Mat3::IDENTITY,
                 flip_normals: false,
             },
             bsdf: 0,

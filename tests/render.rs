@@ -56,6 +56,7 @@ fn sphere(bsdf: usize) -> Shape {
         geometry: Geometry::Sphere {
             center: Vec3::ZERO,
             radius: 1.0,
+            rotation: glam::Mat3::IDENTITY,
             flip_normals: false,
         },
         bsdf,
@@ -612,6 +613,7 @@ fn area_light_enclosure() {
         geometry: Geometry::Sphere {
             center: Vec3::ZERO,
             radius: 10.0,
+            rotation: glam::Mat3::IDENTITY,
             flip_normals: true,
         },
         bsdf: 1,

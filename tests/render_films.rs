@@ -270,7 +270,7 @@ fn scene_syntax_for_films_stacks_and_dispersion() {
         ),
         (
             r#"<bsdf type="thinfilm_bubble"><float name="thickness" value="-1"/></bsdf>"#,
-            "≥ 0",
+            "'thickness' = -1 is outside [0, 20000]",
         ),
         (
             r#"<bsdf type="thinfilm_bubble"><string name="ext_ior" value="water"/></bsdf>"#,

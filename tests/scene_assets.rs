@@ -169,7 +169,10 @@ fn every_scene_loads() {
         );
         n += 1;
     }
-    assert!(n >= 7, "expected the 7 teapot and plane scenes, found {n}");
+    assert!(
+        n >= 7,
+        "expected at least the 7 teapot/plane scenes, found {n}"
+    );
 }
 
 #[test]

@@ -206,6 +206,27 @@ impl EnviHeader {
     pub fn data_bytes(&self) -> usize {
         self.len() * self.data_type.size()
     }
+
+    /// Bytes of the f32 decoding plus a validity flag per pixel (what a reader allocates).
+    pub fn decoded_bytes(&self) -> u64 {
+        self.len() as u64 * 4 + (self.samples * self.lines) as u64
+    }
+
+    /// Refuses to decode this cube when, on top of `already` bytes decoded before it, it
+    /// exceeds the memory budget (a sparse file can declare terabytes and pass the size
+    /// check against the binary).
+    pub fn check_decode_budget(&self, already: u64) -> Result<()> {
+        crate::limits::check_alloc(
+            format!(
+                "{}: decoding {}×{}×{} samples",
+                self.path.display(),
+                self.samples,
+                self.lines,
+                self.bands
+            ),
+            already.saturating_add(self.decoded_bytes()),
+        )
+    }
 }
 
 /// Splits header text into `key → raw value` (braces kept off), with line numbers for errors.
@@ -276,8 +297,7 @@ fn parse_list(value: &str) -> Vec<&str> {
 
 /// Reads and validates an ENVI header.
 pub fn read_header(path: &Path) -> Result<EnviHeader> {
-    let bytes =
-        std::fs::read(path).with_context(|| format!("reading ENVI header {}", path.display()))?;
+    let bytes = crate::limits::read_file(path, "ENVI header", 16)?;
     let text = String::from_utf8_lossy(&bytes);
     parse_header(&text, path)
 }
@@ -304,13 +324,16 @@ pub fn parse_header(text: &str, path: &Path) -> Result<EnviHeader> {
     }
     let header_offset = int_field("header offset", false)?.unwrap_or(0);
     let code = int_field("data type", true)?.unwrap_or(0);
-    let data_type = DataType::from_code(code as u32).with_context(|| {
-        format!(
+    let data_type = u32::try_from(code)
+        .ok()
+        .and_then(DataType::from_code)
+        .with_context(|| {
+            format!(
             "{p}:{}: field 'data type' = {code} is not supported (supported: 1 uint8, 2 int16, \
              3 int32, 4 float32, 5 float64, 12 uint16, 13 uint32, 14 int64, 15 uint64)",
             get("data type").map(|g| g.1).unwrap_or(0)
         )
-    })?;
+        })?;
     let interleave = match get("interleave") {
         Some((v, line)) => v
             .parse::<Interleave>()
@@ -330,6 +353,22 @@ pub fn parse_header(text: &str, path: &Path) -> Result<EnviHeader> {
         None if data_type.size() == 1 => false,
         None => bail!("{p}: header has no 'byte order' field (0 little-endian, 1 big-endian)"),
     };
+    // Sizes from the file: checked, so a header cannot wrap the size check to zero.
+    let data_bytes = crate::limits::size_product(
+        &p,
+        &[
+            ("samples", samples as u64),
+            ("lines", lines as u64),
+            ("bands", bands as u64),
+            ("bytes per sample", data_type.size() as u64),
+        ],
+    )?;
+    if data_bytes
+        .checked_add(header_offset as u64)
+        .is_none_or(|end| usize::try_from(end).is_err())
+    {
+        bail!("{p}: field 'header offset' = {header_offset} plus {data_bytes} bytes of data overflows");
+    }
     let float_list = |key: &str| -> Result<Option<(Vec<f64>, usize)>> {
         let Some((v, line)) = get(key) else {
             return Ok(None);
@@ -376,11 +415,12 @@ pub fn parse_header(text: &str, path: &Path) -> Result<EnviHeader> {
     let wavelengths_nm =
         wavelengths.map(|(w, _)| w.into_iter().map(|x| x * scale).collect::<Vec<_>>());
     if let Some(w) = &wavelengths_nm {
-        if let Some(bad) = w.iter().find(|&&x| x <= 0.0) {
-            bail!("{p}: field 'wavelength' has a non-positive value {bad}");
-        }
+        check_wavelengths(w, &p)?;
     }
     let fwhm_nm = fwhm.map(|(w, _)| w.into_iter().map(|x| x * scale).collect::<Vec<_>>());
+    if let (Some(f), Some(w)) = (&fwhm_nm, &wavelengths_nm) {
+        check_fwhm(f, w, &p)?;
+    }
     let ignore_value = match get("data ignore value") {
         None => None,
         Some((v, line)) => Some(v.trim().parse::<f64>().map_err(|_| {
@@ -402,6 +442,48 @@ pub fn parse_header(text: &str, path: &Path) -> Result<EnviHeader> {
         fields: raw.into_iter().map(|(k, (v, _))| (k, v)).collect(),
     })
 }
+
+/// Band centres (nm) must lie in [`MIN_WAVELENGTH_NM`, `MAX_WAVELENGTH_NM`] and increase
+/// strictly: a repeated or unsorted band is a broken header, not a spectrum.
+fn check_wavelengths(w: &[f64], p: &impl fmt::Display) -> Result<()> {
+    for (i, &x) in w.iter().enumerate() {
+        if !(MIN_WAVELENGTH_NM..=MAX_WAVELENGTH_NM).contains(&x) {
+            bail!(
+                "{p}: field 'wavelength' item {} = {x} nm is outside [{MIN_WAVELENGTH_NM}, {MAX_WAVELENGTH_NM}] nm (check 'wavelength units')",
+                i + 1
+            );
+        }
+        if i > 0 && x <= w[i - 1] {
+            bail!(
+                "{p}: field 'wavelength' must increase strictly, but item {} = {x} nm follows {} nm",
+                i + 1,
+                w[i - 1]
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Band widths must be ≥ 0 and narrow enough that the Gaussian response (±4σ) stays at
+/// positive wavelengths.
+fn check_fwhm(f: &[f64], w: &[f64], p: &impl fmt::Display) -> Result<()> {
+    for (i, (&fw, &c)) in f.iter().zip(w).enumerate() {
+        // 4σ = 4 · FWHM / 2.3548 < λ.
+        if !(fw >= 0.0 && 4.0 * fw / 2.354_820_045 < c) {
+            bail!(
+                "{p}: field 'fwhm' item {} = {fw} nm must be ≥ 0 and below {:.1} nm for the band at {c} nm",
+                i + 1,
+                c * 2.354_820_045 / 4.0
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Shortest band centre accepted, nm (the far ultraviolet).
+pub const MIN_WAVELENGTH_NM: f64 = 100.0;
+/// Longest band centre accepted, nm (the thermal infrared).
+pub const MAX_WAVELENGTH_NM: f64 = 30_000.0;
 
 /// Without a unit, values below 100 can only be micrometres for optical bands
 /// (0.4–2.5 µm); anything else is taken as nanometres.
@@ -501,10 +583,13 @@ pub fn open(path: &Path) -> Result<EnviFile> {
             needed
         );
     }
+    // Decoding allocates f32 per sample: refuse before mapping what cannot be decoded.
+    header.check_decode_budget(0)?;
     // SAFETY: the mapping is read-only and lives as long as `EnviFile`. If another process
     // truncates the file while we read it, the OS may signal; that is the usual contract
-    // of read-only memory maps and cheaper than reading gigabytes into a buffer.
-    let map = unsafe { memmap2::Mmap::map(&file) }
+    // of read-only memory maps and cheaper than reading gigabytes into a buffer. Only the
+    // bytes the header describes are mapped (a file may carry trailing data).
+    let map = unsafe { memmap2::MmapOptions::new().len(needed as usize).map(&file) }
         .with_context(|| format!("memory-mapping {}", binary_path.display()))?;
     Ok(EnviFile {
         header,
@@ -711,6 +796,7 @@ pub struct Cube {
 /// Reads a whole cube as BIP f32.
 pub fn read_cube(path: &Path) -> Result<Cube> {
     let file = open(path)?;
+    file.header.check_decode_budget(0)?;
     let data = file.to_bip_f32();
     Ok(Cube {
         header: file.header,

@@ -14,6 +14,7 @@ pub mod envi;
 mod rng;
 mod set;
 pub mod simulate;
+pub mod spectra;
 
 pub use set::{ior_from_json, ior_to_json, CaptureFile, CAPTURE_FORMAT, GROUND_TRUTH_FORMAT};
 
@@ -56,16 +57,91 @@ impl Polarization {
 /// `reflectance[(y * width + x) * bands + b]`. Invalid samples are NaN.
 #[derive(Debug, Clone)]
 pub struct AngleCapture {
+    /// Nominal incident angle (the angle of the whole cube when there is no map).
     pub incident_deg: f64,
+    /// Per-pixel incident angle in degrees (row-major; NaN = unknown), when the capture
+    /// gives an angle map or the geometry.
+    pub incident_deg_map: Option<Vec<f32>>,
     pub reflectance: Vec<f32>,
     /// Per pixel: every band finite and usable.
     pub valid: Vec<bool>,
+}
+
+impl AngleCapture {
+    /// A cube of BIP reflectance with `bands` bands; a pixel is valid when all its bands
+    /// are finite.
+    pub fn from_bip(incident_deg: f64, reflectance: Vec<f32>, bands: usize) -> Self {
+        let valid = reflectance
+            .chunks(bands.max(1))
+            .map(|px| px.iter().all(|v| v.is_finite()))
+            .collect();
+        AngleCapture {
+            incident_deg,
+            incident_deg_map: None,
+            reflectance,
+            valid,
+        }
+    }
+
+    /// Copies the `out.len()` bands of pixel `p` into `out`; false (and `out` untouched)
+    /// when the pixel is not usable at this angle.
+    #[inline]
+    pub fn pixel(&self, p: usize, out: &mut [f32]) -> bool {
+        let nb = out.len();
+        if !self.valid.get(p).copied().unwrap_or(false) {
+            return false;
+        }
+        let src = &self.reflectance[p * nb..(p + 1) * nb];
+        if !src.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        out.copy_from_slice(src);
+        true
+    }
+
+    /// Incident angle of pixel `p`, degrees (the map's value when there is one).
+    #[inline]
+    pub fn incident_deg_at(&self, p: usize) -> f64 {
+        match &self.incident_deg_map {
+            Some(m) => m[p] as f64,
+            None => self.incident_deg,
+        }
+    }
+}
+
+/// What the capture's values are relative to.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Radiometry {
+    /// Values are proportional to reflectance with an unknown scale per pixel and angle
+    /// (a diffuse white reference does not calibrate a specular reflection; raw counts).
+    #[default]
+    Relative,
+    /// Values are calibrated reflectance: the fit may use their amplitude.
+    Absolute,
 }
 
 /// A loaded capture set: every angle shares wavelengths and size.
 #[derive(Debug, Clone)]
 pub struct CaptureSet {
     pub polarization: Polarization,
+    /// `"radiometry"` of capture.json (default relative).
+    pub radiometry: Radiometry,
+    /// `"film_model"` of capture.json: the film index model to fit, when given.
+    pub film_model: Option<crate::estimate::film::FilmModelKind>,
+    /// Names of the pixels when they are independent point spectra (one file, one
+    /// pixel): no spatial neighbourhood between them.
+    pub pixel_names: Option<Vec<String>>,
     pub ambient_ior: f64,
     pub substrate_ior: Ior,
     pub wavelengths_nm: Vec<f64>,
@@ -120,11 +196,11 @@ pub struct GroundTruth {
 /// Loads `dir/capture.json` and its cubes.
 /// `dir` may also be the path of the `capture.json` itself.
 pub fn load_capture_set(dir: &Path) -> anyhow::Result<CaptureSet> {
-    set::load_capture_set(dir)
+    crate::limits::contain_panics(dir, || set::load_capture_set(dir))
 }
 
 /// Loads `dir/ground_truth.json` + `dir/thickness.exr` (`dir` is the `ground_truth` folder
 /// or the capture folder that contains it).
 pub fn load_ground_truth(dir: &Path) -> anyhow::Result<GroundTruth> {
-    set::load_ground_truth(dir)
+    crate::limits::contain_panics(dir, || set::load_ground_truth(dir))
 }

@@ -31,6 +31,14 @@ pub struct CaptureFile {
     pub angles: Vec<AngleEntry>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub description: Option<String>,
+    /// `relative` (default: unknown scale per pixel and angle) or `absolute` (calibrated
+    /// reflectance).
+    #[serde(default)]
+    pub radiometry: super::Radiometry,
+    /// Film index model to fit: `constant`, `cauchy` or `cauchy3` (default: chosen by
+    /// the data).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub film_model: Option<crate::estimate::film::FilmModelKind>,
 }
 
 fn default_ambient() -> Value {
@@ -46,6 +54,10 @@ pub struct AngleEntry {
     pub white: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dark: Option<String>,
+    /// EXR of the per-pixel incidence in degrees (one channel, `Y` or `incident_deg`), for
+    /// cameras whose field of view spans several degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub incident_deg_map: Option<String>,
 }
 
 /// `{"ior": n, "k": k}` for a constant index, `{"material": name}` for a library material.
@@ -118,6 +130,30 @@ pub fn ior_from_json(v: &Value, what: &str) -> Result<Ior> {
         }
         _ => bail!("{what}: expected a number, a string or an object"),
     }
+}
+
+/// Largest `ambient_ior` accepted (dense immersion liquids reach ~1.8; 3 leaves room).
+const MAX_AMBIENT_IOR: f64 = 3.0;
+
+/// Most angles a capture set may list. Goniometric captures use tens; the fit's cost grows
+/// with the square of the count (angle pairs), so thousands would stall it.
+const MAX_ANGLES: usize = 64;
+
+/// Two captures at the same incident angle add no information about the index and make the
+/// angle pairs of the fit degenerate: refuse them, naming both entries.
+fn check_distinct_angles(angles: &[AngleEntry], json: &impl std::fmt::Display) -> Result<()> {
+    for (i, a) in angles.iter().enumerate() {
+        if let Some(k) = angles[..i]
+            .iter()
+            .position(|b| (a.incident_deg - b.incident_deg).abs() < 1e-9)
+        {
+            bail!(
+                "{json}: angles[{i}].incident_deg = {} repeats angles[{k}] (average repeated captures into one cube)",
+                a.incident_deg
+            );
+        }
+    }
+    Ok(())
 }
 
 fn resolve(dir: &Path, name: &str) -> PathBuf {
@@ -281,6 +317,43 @@ fn reflectance(
     (data, valid, counts)
 }
 
+/// A per-pixel incidence map named in capture.json: degrees, the cube's size, each value
+/// in [0, 90) or NaN (unknown: that pixel is not used at this angle).
+fn angle_map(
+    json: &Path,
+    dir: &Path,
+    field: &str,
+    name: &str,
+    size: (usize, usize),
+) -> Result<Vec<f32>> {
+    let path = resolve(dir, name);
+    let (w, h, map) = crate::image_io::read_exr_scalar(&path, &["incident_deg", "Y"])
+        .with_context(|| format!("{}: {field}", json.display()))?;
+    if (w, h) != size {
+        bail!(
+            "{}: {field}: {} is {w}×{h} but the cube is {}×{}",
+            json.display(),
+            path.display(),
+            size.0,
+            size.1
+        );
+    }
+    if let Some((i, v)) = map
+        .iter()
+        .enumerate()
+        .find(|(_, v)| v.is_finite() && !(0.0..90.0).contains(*v) || v.is_infinite())
+    {
+        bail!(
+            "{}: {field}: {} pixel ({}, {}) = {v}° is outside [0°, 90°)",
+            json.display(),
+            path.display(),
+            i % w,
+            i / w
+        );
+    }
+    Ok(map)
+}
+
 pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     let (dir, json) = if path.is_file() {
         (
@@ -290,8 +363,7 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     } else {
         (path.to_path_buf(), path.join("capture.json"))
     };
-    let text = std::fs::read_to_string(&json)
-        .with_context(|| format!("reading capture set {}", json.display()))?;
+    let text = crate::limits::read_text(&json, "capture set", 16)?;
     let j = json.display();
     let doc: Value = serde_json::from_str(&text).with_context(|| format!("{j}: not valid JSON"))?;
     // Checked by hand first so the message names the field and the allowed values.
@@ -305,7 +377,9 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         }
         None => bail!("{j}: missing field 'polarization' (s, p or unpolarized)"),
     }
-    let spec: CaptureFile = serde_json::from_value(doc)
+    drop(doc);
+    // Typed from the text (not the parsed value) so that errors carry a line and column.
+    let spec: CaptureFile = serde_json::from_str(&text)
         .with_context(|| format!("{j}: not a valid {CAPTURE_FORMAT} document"))?;
     if spec.format != CAPTURE_FORMAT {
         bail!(
@@ -319,11 +393,28 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         Ior::Constant(c) if c.im == 0.0 => c.re,
         other => bail!("{j}: ambient_ior must be a real number (light arrives through a lossless medium), got {other}"),
     };
+    // Air, water, immersion oils: a transparent medium light can arrive through.
+    crate::limits::check_range(
+        format!("{j}: ambient_ior"),
+        ambient_ior,
+        1.0,
+        MAX_AMBIENT_IOR,
+    )?;
     let substrate_ior =
         ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
+    crate::limits::check_index(format!("{j}: substrate"), &substrate_ior)?;
     if spec.angles.is_empty() {
         bail!("{j}: 'angles' is empty");
     }
+    if spec.angles.len() > MAX_ANGLES {
+        bail!(
+            "{j}: 'angles' lists {} captures; at most {MAX_ANGLES} are supported",
+            spec.angles.len()
+        );
+    }
+    check_distinct_angles(&spec.angles, &j)?;
+    // Decoded bytes of the angles loaded so far, against the memory budget.
+    let mut decoded = 0u64;
     // Only the first header is kept (its mapping is dropped as soon as it is decoded).
     let mut first: Option<envi::EnviHeader> = None;
     let mut angles = Vec::with_capacity(spec.angles.len());
@@ -338,6 +429,9 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         }
         let file = open_named(&json, &dir, &format!("{field}.cube"), &a.cube)?;
         let h = &file.header;
+        h.check_decode_budget(decoded)
+            .with_context(|| format!("{j}: {field}.cube"))?;
+        decoded += h.decoded_bytes();
         let Some(wl) = &h.wavelengths_nm else {
             bail!(
                 "{}: header has no 'wavelength' field (a capture needs band wavelengths)",
@@ -385,10 +479,31 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
             )?),
             (None, _) => None,
         };
-        let (data, valid, counts) = reflectance(&file, white.as_deref(), dark.as_deref());
+        let (data, mut valid, counts) = reflectance(&file, white.as_deref(), dark.as_deref());
         invalid.add(&counts);
+        let map = a
+            .incident_deg_map
+            .as_deref()
+            .map(|name| {
+                let size = (file.header.samples, file.header.lines);
+                angle_map(
+                    &json,
+                    &dir,
+                    &format!("{field}.incident_deg_map"),
+                    name,
+                    size,
+                )
+            })
+            .transpose()?;
+        if let Some(m) = &map {
+            // Pixels of unknown incidence are not used at this angle.
+            for (v, th) in valid.iter_mut().zip(m) {
+                *v &= th.is_finite();
+            }
+        }
         angles.push(AngleCapture {
             incident_deg: a.incident_deg,
+            incident_deg_map: map,
             reflectance: data,
             valid,
         });
@@ -396,10 +511,24 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
             first = Some(file.header);
         }
     }
-    let first = first.expect("angles is non-empty");
-    let h = first;
+    let Some(h) = first else {
+        bail!("{j}: 'angles' is empty");
+    };
+    let samples = (h.samples * h.lines * h.bands * angles.len()) as u64;
+    if invalid.total() >= samples {
+        bail!(
+            "{j}: no usable sample in any cube ({} NaN/inf, {} equal to the ignore value, {} saturated, {} with a bad white/dark reference)",
+            invalid.non_finite,
+            invalid.ignore_value,
+            invalid.saturated,
+            invalid.bad_reference
+        );
+    }
     Ok(CaptureSet {
         polarization: spec.polarization,
+        radiometry: spec.radiometry,
+        film_model: spec.film_model,
+        pixel_names: None,
         ambient_ior,
         substrate_ior,
         wavelengths_nm: h.wavelengths_nm.unwrap_or_default(),
@@ -437,8 +566,7 @@ pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
         dir.join("ground_truth")
     };
     let json = gt_dir.join("ground_truth.json");
-    let text = std::fs::read_to_string(&json)
-        .with_context(|| format!("reading ground truth {}", json.display()))?;
+    let text = crate::limits::read_text(&json, "ground truth", 16)?;
     let spec: GroundTruthFile = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a valid ground-truth document", json.display()))?;
     let j = json.display();
@@ -449,8 +577,10 @@ pub(super) fn load_ground_truth(dir: &Path) -> Result<GroundTruth> {
         );
     }
     let film_ior = ior_from_json(&spec.film, "film").with_context(|| format!("{j}"))?;
+    crate::limits::check_index(format!("{j}: film"), &film_ior)?;
     let substrate_ior =
         ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
+    crate::limits::check_index(format!("{j}: substrate"), &substrate_ior)?;
     let exr = resolve(&gt_dir, &spec.thickness_exr);
     let (w, h, thickness_nm) = crate::material::read_thickness_exr(&exr)?;
     if (w, h) != (spec.width, spec.height) {

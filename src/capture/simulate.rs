@@ -23,6 +23,20 @@
 //! reference cubes recorded the same way (so R = (raw − dark)/(white − dark) recovers
 //! the reflectance within shot noise). Randomness: an in-module SplitMix64 stream per
 //! (angle, row), so output is identical for any thread count.
+//!
+//! Realism ([`Realism`], all off by default — an ideal capture is written with
+//! `"radiometry": "absolute"`): what a real capture does to the calibrated reflectance R,
+//!
+//!   measured = e_a · v(x, y) · (1 + t_a x_λ) · R(θ_a(x)) + c_a  (+ noise),
+//!
+//! with e_a the exposure of angle a (uniform in 1 ± `exposure_variation`), v a radial
+//! vignetting falling to `vignetting_min` in the corners, t_a a lamp tilt across the band
+//! (x_λ ∈ [−1, 1], t_a uniform in ±`lamp_tilt`: the lamp drifted after the white
+//! reference), c_a stray light uniform in [0, `background`], and θ_a(x) the incidence
+//! varying by ±`fov_half_deg` across the image (a camera's field of view). A substrate
+//! index error writes `substrate_ior + substrate_error` into capture.json. Every drawn
+//! value is recorded in the ground truth. With any of the first four, capture.json says
+//! `"radiometry": "relative"`.
 
 use super::envi::{self, DataType, Interleave, WriteOptions};
 use super::rng::SplitMix64;
@@ -65,6 +79,8 @@ pub struct SimulateConfig {
     pub interleave: Interleave,
     /// The preset this configuration started from (recorded in the ground truth).
     pub preset: Option<String>,
+    /// Effects of a real capture (see the module doc).
+    pub realism: Realism,
     /// Show a progress bar (CLI only).
     pub progress: bool,
 }
@@ -91,7 +107,142 @@ impl Default for SimulateConfig {
             seed: 1,
             interleave: Interleave::Bsq,
             preset: None,
+            realism: Realism::default(),
             progress: false,
+        }
+    }
+}
+
+/// Effects of a real capture on the calibrated reflectance (module doc). `Default`: none.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Realism {
+    /// Exposure of each angle drawn in [1 − v, 1 + v].
+    pub exposure_variation: f64,
+    /// Vignetting gain in the image corners (1 = none); radial falloff 1 − (1 − v) r².
+    pub vignetting_min: f64,
+    /// Lamp tilt across the band per angle, drawn in [−v, v].
+    pub lamp_tilt: f64,
+    /// Additive stray light per angle drawn in [0, v], reflectance units.
+    pub background: f64,
+    /// Added to the substrate index written into capture.json (the truth is unchanged).
+    pub substrate_error: f64,
+    /// Incidence changes by ±this across the image width, degrees.
+    pub fov_half_deg: f64,
+    /// Write the per-pixel incidence as one EXR per angle and name it in capture.json.
+    pub write_angle_maps: bool,
+}
+
+impl Default for Realism {
+    fn default() -> Self {
+        Realism {
+            exposure_variation: 0.0,
+            vignetting_min: 1.0,
+            lamp_tilt: 0.0,
+            background: 0.0,
+            substrate_error: 0.0,
+            fov_half_deg: 0.0,
+            write_angle_maps: false,
+        }
+    }
+}
+
+impl Realism {
+    /// True when the values are no longer calibrated reflectance.
+    pub fn relative(&self) -> bool {
+        self.exposure_variation > 0.0
+            || self.vignetting_min < 1.0
+            || self.lamp_tilt > 0.0
+            || self.background > 0.0
+    }
+
+    fn validate(&self) -> Result<()> {
+        let ok = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
+        if !ok(self.exposure_variation, 0.0, 0.95) {
+            bail!(
+                "exposure variation must be in [0, 0.95], got {}",
+                self.exposure_variation
+            );
+        }
+        if !ok(self.vignetting_min, 0.01, 1.0) {
+            bail!(
+                "vignetting minimum must be in [0.01, 1], got {}",
+                self.vignetting_min
+            );
+        }
+        if !ok(self.lamp_tilt, 0.0, 0.9) {
+            bail!("lamp tilt must be in [0, 0.9], got {}", self.lamp_tilt);
+        }
+        if !ok(self.background, 0.0, 1.0) {
+            bail!("background must be in [0, 1], got {}", self.background);
+        }
+        if !self.substrate_error.is_finite() {
+            bail!("substrate error must be finite");
+        }
+        if !ok(self.fov_half_deg, 0.0, 30.0) {
+            bail!(
+                "field of view half-angle must be in [0°, 30°], got {}",
+                self.fov_half_deg
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The values drawn for one capture (recorded in the ground truth).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Effects {
+    pub exposure: Vec<f64>,
+    pub lamp_tilt: Vec<f64>,
+    pub background: Vec<f64>,
+}
+
+impl SimulateConfig {
+    /// Per-angle exposure, tilt and background, from the seed (all neutral without realism).
+    pub fn effects(&self) -> Effects {
+        let r = &self.realism;
+        let mut rng = SplitMix64::stream(self.seed, u64::MAX - 1, 0, 3);
+        let mut e = Effects {
+            exposure: Vec::new(),
+            lamp_tilt: Vec::new(),
+            background: Vec::new(),
+        };
+        for _ in &self.angles_deg {
+            e.exposure
+                .push(1.0 + r.exposure_variation * (2.0 * rng.uniform() - 1.0));
+            e.lamp_tilt.push(r.lamp_tilt * (2.0 * rng.uniform() - 1.0));
+            e.background.push(r.background * rng.uniform());
+        }
+        e
+    }
+
+    /// Vignetting gain of pixel (x, y): 1 − (1 − v) r², r = 1 in the corners.
+    pub fn vignetting(&self, x: usize, y: usize) -> f64 {
+        let v = self.realism.vignetting_min;
+        let u = 2.0 * (x as f64 + 0.5) / self.width as f64 - 1.0;
+        let w = 2.0 * (y as f64 + 0.5) / self.height as f64 - 1.0;
+        1.0 - (1.0 - v) * (u * u + w * w) / 2.0
+    }
+
+    /// Incidence of column x at angle index a, degrees.
+    pub fn incident_deg_at(&self, a: usize, x: usize) -> f64 {
+        let f = self.realism.fov_half_deg;
+        let u = 2.0 * (x as f64 + 0.5) / self.width as f64 - 1.0;
+        (self.angles_deg[a] + f * u).clamp(0.0, 89.9)
+    }
+
+    /// The substrate index capture.json states.
+    pub fn stated_substrate(&self) -> Ior {
+        let e = self.realism.substrate_error;
+        if e == 0.0 {
+            return self.substrate_ior.clone();
+        }
+        match &self.substrate_ior {
+            Ior::Constant(c) => Ior::Constant(crate::optics::Complex64::new(c.re + e, c.im)),
+            // A material with an error: the nearest constant (at 550 nm) plus the error.
+            Ior::Material(m) => {
+                let c = m.nk(550.0);
+                Ior::Constant(crate::optics::Complex64::new(c.re + e, c.im))
+            }
         }
     }
 }
@@ -116,12 +267,41 @@ impl SimulateConfig {
 
     /// Rejects configurations that would produce NaN or nonsense.
     pub fn validate(&self) -> Result<()> {
-        if !(self.thickness_nm.is_finite() && self.thickness_nm >= 0.0) {
+        use crate::limits::{check_alloc, check_range, size_product, MAX_THICKNESS_NM};
+        check_range("thickness (nm)", self.thickness_nm, 0.0, MAX_THICKNESS_NM)?;
+        check_range("ambient index", self.ambient_ior, 1.0, 3.0)?;
+        check_range("noise sigma", self.noise_sigma, 0.0, 10.0)?;
+        if let Some(i) =
+            (1..self.angles_deg.len()).find(|&i| self.angles_deg[..i].contains(&self.angles_deg[i]))
+        {
+            bail!("incident angle {}° is given twice", self.angles_deg[i]);
+        }
+        // Spectrometers have a few hundred bands; the simulation's cost grows with each.
+        if self.wavelengths_nm.len() > 2048 || self.angles_deg.len() > 64 {
             bail!(
-                "thickness must be finite and ≥ 0 nm, got {}",
-                self.thickness_nm
+                "{} wavelengths and {} angles: at most 2048 wavelengths and 64 angles",
+                self.wavelengths_nm.len(),
+                self.angles_deg.len()
             );
         }
+        // One angle's cube is in memory at a time (f32 plus its encoded copy ≤ 8 bytes).
+        let samples = size_product(
+            "image size",
+            &[
+                ("width", self.width as u64),
+                ("height", self.height as u64),
+                ("bands", self.wavelengths_nm.len() as u64),
+            ],
+        )?;
+        check_alloc(
+            format!(
+                "image size {}×{} with {} bands",
+                self.width,
+                self.height,
+                self.wavelengths_nm.len()
+            ),
+            samples.saturating_mul(12),
+        )?;
         if !(0.0..=1.0).contains(&self.thickness_variation) {
             bail!(
                 "thickness variation must be a fraction in [0, 1], got {}",
@@ -180,11 +360,16 @@ impl SimulateConfig {
                     self.white_counts
                 );
             }
-            if !(self.read_noise.is_finite() && self.read_noise >= 0.0) {
-                bail!("read noise must be finite and ≥ 0, got {}", self.read_noise);
+            if !(self.read_noise.is_finite() && (0.0..=65535.0).contains(&self.read_noise)) {
+                bail!(
+                    "read noise must be in [0, 65535] counts, got {}",
+                    self.read_noise
+                );
             }
         }
+        self.realism.validate()?;
         for (what, ior) in [("film", &self.film_ior), ("substrate", &self.substrate_ior)] {
+            crate::limits::check_index(format!("{what} index"), ior)?;
             let film = ThinFilm {
                 ambient_ior: self.ambient_ior,
                 film_ior: ior.at(self.wavelengths_nm[0]),
@@ -219,6 +404,15 @@ impl SimulateConfig {
             "height": self.height,
             "seed": self.seed,
             "interleave": self.interleave,
+            "realism": {
+                "exposure_variation": self.realism.exposure_variation,
+                "vignetting_min": self.realism.vignetting_min,
+                "lamp_tilt": self.realism.lamp_tilt,
+                "background": self.realism.background,
+                "substrate_error": self.realism.substrate_error,
+                "fov_half_deg": self.realism.fov_half_deg,
+                "write_angle_maps": self.realism.write_angle_maps,
+            },
         })
     }
 }
@@ -561,14 +755,16 @@ impl<'a> Simulator<'a> {
     }
 
     /// Noise-free band reflectance, BIP f64 → f32, for angle index `a`. `use_table`
-    /// `None` picks the cheaper method.
+    /// `None` picks the cheaper method (a field of view gives every column its own angle:
+    /// evaluated directly).
     pub fn clean_cube(&self, a: usize, use_table: Option<bool>) -> Vec<f32> {
         let cfg = self.cfg;
         let nb = cfg.wavelengths_nm.len();
         let cos_theta = cfg.angles_deg[a].to_radians().cos();
+        let fov = cfg.realism.fov_half_deg > 0.0;
         let step = self.table_step();
         let table_nodes = ((self.d_hi - self.d_lo) / step).ceil() + 4.0;
-        let use_table = use_table.unwrap_or(table_nodes < self.thickness.len() as f64);
+        let use_table = !fov && use_table.unwrap_or(table_nodes < self.thickness.len() as f64);
         let table = use_table
             .then(|| ThicknessTable::new(&self.model, cos_theta, self.d_lo, self.d_hi, step, nb));
         let mut out = vec![0f32; self.thickness.len() * nb];
@@ -580,6 +776,11 @@ impl<'a> Simulator<'a> {
                     let d = self.thickness[y * cfg.width + x] as f64;
                     match &table {
                         Some(t) => t.spectrum(d, &mut spec),
+                        None if fov => self.model.spectrum(
+                            d,
+                            cfg.incident_deg_at(a, x).to_radians().cos(),
+                            &mut spec,
+                        ),
                         None => self.model.spectrum(d, cos_theta, &mut spec),
                     }
                     for (o, s) in px.iter_mut().zip(&spec) {
@@ -590,7 +791,7 @@ impl<'a> Simulator<'a> {
         out
     }
 
-    /// The cube the camera records at angle index `a` (noise, raw counts).
+    /// The cube the camera records at angle index `a` (effects, noise, raw counts).
     pub fn angle(&self, a: usize, progress: &indicatif::ProgressBar) -> SimulatedAngle {
         let cfg = self.cfg;
         let nb = cfg.wavelengths_nm.len();
@@ -600,11 +801,23 @@ impl<'a> Simulator<'a> {
             .iter()
             .map(|&l| white_signal(cfg, l))
             .collect();
+        let fx = cfg.effects();
+        let (lo, hi) = (
+            cfg.wavelengths_nm[0],
+            cfg.wavelengths_nm[nb - 1].max(cfg.wavelengths_nm[0] + 1e-9),
+        );
+        // Spectral factor of angle a: exposure × lamp tilt.
+        let spectral: Vec<f64> = cfg
+            .wavelengths_nm
+            .iter()
+            .map(|&l| fx.exposure[a] * (1.0 + fx.lamp_tilt[a] * (2.0 * (l - lo) / (hi - lo) - 1.0)))
+            .collect();
         data.par_chunks_mut(cfg.width * nb)
             .enumerate()
             .for_each(|(y, row)| {
                 let mut rng = SplitMix64::stream(cfg.seed, a as u64, y as u64, 1);
-                for px in row.chunks_mut(nb) {
+                for (x, px) in row.chunks_mut(nb).enumerate() {
+                    let vig = cfg.vignetting(x, y);
                     for (b, v) in px.iter_mut().enumerate() {
                         // No draw at all for σ = 0: a noise-free float capture is the clean cube.
                         let noise = if cfg.noise_sigma > 0.0 {
@@ -612,7 +825,7 @@ impl<'a> Simulator<'a> {
                         } else {
                             0.0
                         };
-                        let r = *v as f64 + noise;
+                        let r = *v as f64 * vig * spectral[b] + fx.background[a] + noise;
                         *v = if cfg.raw_counts {
                             raw_count(&mut rng, r * signal[b], cfg) as f32
                         } else {
@@ -679,19 +892,11 @@ pub fn write_capture_set(cfg: &SimulateConfig, out: &Path) -> Result<SimulationS
     let sim = Simulator::new(cfg, &thickness)?;
     let nb = cfg.wavelengths_nm.len();
     let work = (cfg.angles_deg.len() * cfg.height) as u64;
-    let progress =
-        if cfg.progress && cfg.width * cfg.height * nb * cfg.angles_deg.len() > 20_000_000 {
-            let bar = indicatif::ProgressBar::new(work);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "simulate {bar:40} {pos}/{len} rows [{elapsed_precise} < {eta}]",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            bar
-        } else {
-            indicatif::ProgressBar::hidden()
-        };
+    let progress = crate::progress::bar(
+        cfg.progress,
+        work,
+        "simulate {bar:40} {pos}/{len} rows [{elapsed_precise}, {eta} left]",
+    );
     let fwhm = (cfg.fwhm_nm > 0.0).then(|| vec![cfg.fwhm_nm; nb]);
     let options = |w: usize, h: usize, what: &str| {
         let mut o = WriteOptions::new(w, h, nb);
@@ -730,7 +935,22 @@ pub fn write_capture_set(cfg: &SimulateConfig, out: &Path) -> Result<SimulationS
             cube,
             white: None,
             dark: None,
+            incident_deg_map: None,
         };
+        if cfg.realism.write_angle_maps {
+            let a = entries.len();
+            let map: Vec<f32> = (0..cfg.width * cfg.height)
+                .map(|p| cfg.incident_deg_at(a, p % cfg.width) as f32)
+                .collect();
+            let name = format!("angle{label}.exr");
+            crate::image_io::write_exr_channels(
+                &out.join(&name),
+                cfg.width,
+                cfg.height,
+                &[("incident_deg", &map)],
+            )?;
+            entry.incident_deg_map = Some(name);
+        }
         if let Some((rw, rh, white, dark)) = &angle.references {
             let (wn, dn) = (format!("white{label}.hdr"), format!("dark{label}.hdr"));
             envi::write_cube(&out.join(&wn), white, &options(*rw, *rh, "white reference"))?;
@@ -742,6 +962,7 @@ pub fn write_capture_set(cfg: &SimulateConfig, out: &Path) -> Result<SimulationS
     }
     progress.finish_and_clear();
 
+    let fx = cfg.effects();
     let gt_dir = out.join("ground_truth");
     let exr = gt_dir.join("thickness.exr");
     crate::image_io::write_exr_channels(
@@ -761,6 +982,14 @@ pub fn write_capture_set(cfg: &SimulateConfig, out: &Path) -> Result<SimulationS
         "thickness_exr": "thickness.exr",
         "thickness_nm": thickness_stats(&thickness),
         "options": cfg.to_json(),
+        "effects": {
+            "exposure": fx.exposure,
+            "lamp_tilt": fx.lamp_tilt,
+            "background": fx.background,
+            "vignetting_min": cfg.realism.vignetting_min,
+            "fov_half_deg": cfg.realism.fov_half_deg,
+            "substrate_in_capture": ior_to_json(&cfg.stated_substrate()),
+        },
     });
     let gt_json = gt_dir.join("ground_truth.json");
     write_json(&gt_json, &gt)?;
@@ -768,9 +997,15 @@ pub fn write_capture_set(cfg: &SimulateConfig, out: &Path) -> Result<SimulationS
         format: CAPTURE_FORMAT.into(),
         polarization: cfg.polarization,
         ambient_ior: Value::from(cfg.ambient_ior),
-        substrate: ior_to_json(&cfg.substrate_ior),
+        substrate: ior_to_json(&cfg.stated_substrate()),
         angles: entries,
         description: None,
+        radiometry: if cfg.realism.relative() {
+            super::Radiometry::Relative
+        } else {
+            super::Radiometry::Absolute
+        },
+        film_model: None,
     };
     let capture_json = out.join("capture.json");
     write_json(&capture_json, &serde_json::to_value(&capture)?)?;

@@ -39,6 +39,10 @@ pub struct Args {
     /// Also write the markdown table here.
     #[arg(long)]
     pub table: Option<PathBuf>,
+    /// Render nothing: redraw the plot from a table this command wrote before (`--table`),
+    /// e.g. `--replot tests/references/bench_render.md --plot docs/img/bench_render.png`.
+    #[arg(long, value_name = "TABLE.md")]
+    pub replot: Option<PathBuf>,
     /// Python interpreter for the Mitsuba side.
     #[arg(long, default_value = "python3")]
     pub python: String,
@@ -213,7 +217,71 @@ fn render_ours(
     Ok(ours)
 }
 
+/// Size of one scene's panel in the error-against-time plot.
+const PANEL_PX: (u32, u32) = (330, 250);
+const PLOT_TITLE: &str =
+    "RMSE against render time, per scene: ours and Mitsuba 3 (same spp, seed, sampler)";
+
+/// The (seconds, RMSE) curves of ours and Mitsuba per scene, from a table written by this
+/// command (columns: scene, spp, ours s, ours RMSE, ours ΔE00, Mitsuba s, Mitsuba RMSE, …).
+fn series_from_table(path: &std::path::Path) -> Result<Vec<Series>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut series: Vec<Series> = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(2) {
+        let cells: Vec<&str> = line
+            .trim()
+            .trim_matches('|')
+            .split('|')
+            .map(str::trim)
+            .collect();
+        if cells.len() < 7 {
+            bail!(
+                "{}:{}: expected the table of `bench render`",
+                path.display(),
+                i + 1
+            );
+        }
+        let num = |k: usize| -> Result<f64> {
+            cells[k].parse().with_context(|| {
+                format!(
+                    "{}:{}: column {} is '{}'",
+                    path.display(),
+                    i + 1,
+                    k + 1,
+                    cells[k]
+                )
+            })
+        };
+        let point = [(num(2)?, num(3)?), (num(5)?, num(6)?)];
+        for (secondary, p) in [false, true].into_iter().zip(point) {
+            match series
+                .iter_mut()
+                .find(|s| s.panel == cells[0] && s.secondary == secondary)
+            {
+                Some(s) => s.points.push(p),
+                None => series.push(Series {
+                    panel: cells[0].to_string(),
+                    secondary,
+                    points: vec![p],
+                }),
+            }
+        }
+    }
+    Ok(series)
+}
+
+fn write_plot(series: &[Series], path: &std::path::Path) -> Result<()> {
+    let legend = ["ours", "Mitsuba 3"];
+    plot_error_vs_time(series, PLOT_TITLE, legend, "RMSE", path, PANEL_PX)?;
+    println!("plot: {}", path.display());
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
+    if let Some(table) = &args.replot {
+        return write_plot(&series_from_table(table)?, &args.plot);
+    }
     if args.effects.effects {
         let table = args.table.as_deref();
         return args.effects.run(&args.root, args.seed, args.threads, table);
@@ -242,7 +310,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut summary = Vec::new();
     table.push_str("| scene | spp | ours s | ours RMSE | ours ΔE00 | Mitsuba s | Mitsuba RMSE | Mitsuba ΔE00 | our time ÷ Mitsuba's at equal error |\n");
     table.push_str("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
-    for (si, r) in refs.iter().enumerate() {
+    for r in &refs {
         let reference = read_exr_rgb(&r.exr)?;
         let scene = thinfilm::scene::load(&r.scene, &[])
             .with_context(|| format!("loading {}", r.scene.display()))?;
@@ -312,17 +380,15 @@ pub fn run(args: Args) -> Result<()> {
             ));
         }
         series.push(Series {
-            label: format!("{} (ours)", r.name),
-            points: ours.iter().map(|r| (r.seconds, r.rmse)).collect(),
-            colour_index: si,
+            panel: r.name.clone(),
             secondary: false,
+            points: ours.iter().map(|r| (r.seconds, r.rmse)).collect(),
         });
         if !theirs.is_empty() {
             series.push(Series {
-                label: format!("{} (Mitsuba)", r.name),
-                points: their_curve,
-                colour_index: si,
+                panel: r.name.clone(),
                 secondary: true,
+                points: their_curve,
             });
         }
     }
@@ -337,19 +403,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(p) = &args.table {
         thinfilm::image_io::write_atomically(p, |tmp| Ok(std::fs::write(tmp, &table)?))?;
     }
-    let ref_spp: std::collections::BTreeSet<u64> = refs.iter().map(|r| r.spp).collect();
-    let ref_spp: Vec<String> = ref_spp.iter().map(|s| s.to_string()).collect();
-    plot_error_vs_time(
-        &series,
-        &format!(
-            "RMSE against render time (vs Mitsuba 3 references, {} spp)",
-            ref_spp.join("/")
-        ),
-        "RMSE",
-        &args.plot,
-        (1000, 700),
-    )?;
-    println!("plot: {}", args.plot.display());
+    write_plot(&series, &args.plot)?;
     let _ = std::fs::remove_dir_all(&tmp);
     Ok(())
 }

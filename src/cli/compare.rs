@@ -20,13 +20,13 @@ pub struct Args {
     #[arg(long)]
     pub figure: Option<PathBuf>,
     /// Box-downsample both images by this integer factor first (averages out noise).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::args::count)]
     pub downsample: usize,
     /// Linear exposure for the figure's tone mapping.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1.0, value_parser = super::args::non_negative_f32)]
     pub exposure: f32,
     /// Colour-bar maximum of the ΔE00 heat map (default: a round number ≥ the 99th percentile).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub delta_e_max: Option<f64>,
 }
 
@@ -35,9 +35,13 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     let a = read_exr_rgb(&args.a).with_context(|| format!("reading {an}"))?;
     let b = read_exr_rgb(&args.b).with_context(|| format!("reading {bn}"))?;
     let (a, b, resized) = match_sizes(a, &an, b, &bn)?;
-    if let Some(note) = &resized {
-        report.log(format_args!("note: {note}"));
-    }
+    // Bit-identical pixels (e.g. a merged render against the single run it reproduces).
+    let identical = resized.is_none()
+        && a.pixels.len() == b.pixels.len()
+        && a.pixels
+            .iter()
+            .zip(&b.pixels)
+            .all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits));
     let (a, b) = if args.downsample != 1 {
         (
             downsample_box(&a, args.downsample)?,
@@ -49,7 +53,8 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     let m = compare_images(&a, &b).with_context(|| format!("comparing {an} with {bn}"))?;
     if report.json {
         let v = serde_json::json!({
-            "a": an, "b": bn, "resized": resized, "downsample": args.downsample, "metrics": m,
+            "a": an, "b": bn, "resized": resized, "identical": identical,
+            "downsample": args.downsample, "metrics": m,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
@@ -58,6 +63,14 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         println!(
             "size:          {}×{} (downsample {})",
             m.width, m.height, args.downsample
+        );
+        if let Some(note) = &resized {
+            // A result, not a log line: the numbers below are of the resized image.
+            println!("resized:       {note}");
+        }
+        println!(
+            "identical:     {}",
+            if identical { "yes, bit for bit" } else { "no" }
         );
         println!("RMSE:          {:.6}", m.rmse);
         println!("relMSE:        {:.6}", m.rel_mse);

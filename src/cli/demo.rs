@@ -9,7 +9,7 @@ pub struct Args {
     #[arg(long, default_value = "demo-out")]
     out: PathBuf,
     /// Simulated capture size, WxH pixels.
-    #[arg(long, default_value = "128x96", value_parser = parse_size)]
+    #[arg(long, default_value = "128x96", value_parser = super::args::size)]
     size: (usize, usize),
     /// Teapot render resolution (square), pixels.
     #[arg(long, default_value_t = 192)]
@@ -18,26 +18,8 @@ pub struct Args {
     #[arg(long, default_value_t = 32)]
     spp: u32,
     /// Additive reflectance noise σ of the simulated captures.
-    #[arg(long, default_value_t = 0.004)]
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.004, value_parser = super::args::non_negative)]
     noise: f64,
-}
-
-pub(crate) fn parse_size(s: &str) -> Result<(usize, usize), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("'{s}' is not WxH (e.g. 128x96)"))?;
-    let w: usize = w
-        .trim()
-        .parse()
-        .map_err(|_| format!("bad width in '{s}'"))?;
-    let h: usize = h
-        .trim()
-        .parse()
-        .map_err(|_| format!("bad height in '{s}'"))?;
-    if w == 0 || h == 0 {
-        return Err(format!("size '{s}' must be at least 1x1"));
-    }
-    Ok((w, h))
 }
 
 pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
@@ -57,7 +39,11 @@ pub fn run(args: Args, report: super::Output) -> anyhow::Result<()> {
         summary.seconds,
         cfg.out.display()
     );
-    for f in &summary.figures {
+    for f in summary
+        .figures
+        .iter()
+        .chain(summary.method_figures.iter().map(|(_, f, _)| f))
+    {
         println!("  {}", f.display());
     }
     println!(

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+mod args;
 mod bench;
 mod compare;
 mod demo;
@@ -69,6 +70,21 @@ impl Output {
         }
         Ok(())
     }
+}
+
+/// `K/N` (part K of N, counted from 0), for splitting work over a job array.
+pub(crate) fn parse_part(s: &str) -> Result<(usize, usize), String> {
+    let (k, n) = s
+        .split_once('/')
+        .ok_or_else(|| format!("'{s}' is not K/N (part K of N, from 0), e.g. 0/4"))?;
+    let k: usize = k.trim().parse().map_err(|_| format!("bad K in '{s}'"))?;
+    let n: usize = n.trim().parse().map_err(|_| format!("bad N in '{s}'"))?;
+    if k >= n {
+        return Err(format!(
+            "part '{s}': K must be < N (parts are counted from 0)"
+        ));
+    }
+    Ok((k, n))
 }
 
 /// Returned when Ctrl-C (or SIGTERM) stopped the work after saving what was done; the

@@ -19,8 +19,8 @@ pub struct Args {
     /// Output EXR (linear sRGB, Rec.709/D65). A tone-mapped PNG is written beside it.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Samples per pixel (overrides the scene's sampler `sample_count`).
-    #[arg(long)]
+    /// Samples per pixel, 1 to 1048576 (overrides the scene's sampler `sample_count`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1 << 20))]
     pub spp: Option<u32>,
     /// Sampler seed (overrides the scene's).
     #[arg(long)]
@@ -30,11 +30,11 @@ pub struct Args {
     /// `stratified`, `multijitter`, `orthogonal`): same expected image, less noise.
     #[arg(long)]
     pub sampler: Option<thinfilm::render::sampler::SamplerKind>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = super::args::threads)]
     pub threads: Option<usize>,
     /// Path vertices as in Mitsuba (1 = directly visible emitters only, −1 = unlimited).
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_max_depth)]
     pub max_depth: Option<i32>,
     /// Image size WxH (overrides the scene's film).
     #[arg(long, value_parser = parse_resolution)]
@@ -44,21 +44,26 @@ pub struct Args {
     /// the ranges are powers of two aligned like 0:16 16:32 32:64 64:128.
     #[arg(long, value_parser = parse_range)]
     pub sample_range: Option<(u32, u32)>,
+    /// Render part K of N equal sample ranges (K from 0; e.g. a job array's task index and
+    /// count): the same as the matching --sample-range. Exact merges need power-of-two spp
+    /// and N.
+    #[arg(long, value_parser = super::parse_part, value_name = "K/N", conflicts_with = "sample_range")]
+    pub part: Option<(usize, usize)>,
     /// Scene parameter `key=value` (Mitsuba `-D`), fills `$key` / `<default name="key">`.
     #[arg(short = 'D', value_parser = parse_define)]
     pub define: Vec<(String, String)>,
     /// Smooth glass and bubble interfaces at which a path follows both the reflection and
     /// the transmission (default 3; 0 = pick one lobe by Fresnel, as Mitsuba does). Same
     /// expected image; splitting costs rays and removes the noise of rarely chosen lobes.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=16))]
     pub fresnel_splits: Option<u32>,
     /// Trace with Stokes vectors and Mueller matrices even without a polariser in the scene
     /// (a check: the image must equal the unpolarised one within float rounding; refused if
     /// a material has no polarised form).
     #[arg(long)]
     pub force_polarization: bool,
-    /// Exposure multiplier for the PNG only.
-    #[arg(long, default_value_t = 1.0)]
+    /// Exposure multiplier for the PNG only (finite, ≥ 0).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 1.0, value_parser = super::args::non_negative_f32)]
     pub exposure: f32,
 }
 
@@ -74,10 +79,21 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
         .trim()
         .parse()
         .map_err(|_| format!("bad height in '{s}'"))?;
-    if w == 0 || h == 0 {
-        return Err(format!("resolution '{s}' must be at least 1x1"));
+    if w == 0 || h == 0 || w > 65536 || h > 65536 {
+        return Err(format!(
+            "resolution '{s}' must be between 1x1 and 65536x65536"
+        ));
     }
     Ok((w, h))
+}
+
+fn parse_max_depth(s: &str) -> Result<i32, String> {
+    match s.trim().parse::<i32>() {
+        Ok(d) if d == -1 || d >= 1 => Ok(d),
+        _ => Err(format!(
+            "'{s}' must be −1 (unlimited) or a whole number ≥ 1"
+        )),
+    }
 }
 
 fn parse_range(s: &str) -> Result<(u32, u32), String> {
@@ -148,9 +164,10 @@ fn command_for(output: &Path, range: (u32, u32)) -> String {
             continue;
         }
         match a.as_str() {
-            "-o" | "--output" | "--sample-range" => skip = true,
+            "-o" | "--output" | "--sample-range" | "--part" => skip = true,
             _ if a.starts_with("--output=")
                 || a.starts_with("--sample-range=")
+                || a.starts_with("--part=")
                 || (a.starts_with("-o") && a.len() > 2 && !a.starts_with("--")) => {}
             _ => args.push(a),
         }
@@ -185,13 +202,21 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     }
     let scene = thinfilm::scene::load(&args.scene, &args.define)
         .with_context(|| format!("loading scene {}", args.scene.display()))?;
+    let sample_range = match args.part {
+        Some((k, n)) => Some(thinfilm::render::passes::part(
+            args.spp.unwrap_or(scene.spp),
+            u32::try_from(k).unwrap_or(u32::MAX),
+            u32::try_from(n).unwrap_or(u32::MAX),
+        )?),
+        None => args.sample_range,
+    };
     let options = RenderOptions {
         spp: args.spp,
         seed: args.seed,
         threads: args.threads,
         max_depth: args.max_depth,
         resolution: args.resolution,
-        sample_range: args.sample_range,
+        sample_range,
         sampler: args.sampler,
         fresnel_splits: args.fresnel_splits,
         progress: report.progress(),

@@ -1,6 +1,7 @@
 //! `thinfilm simulate`: parse options into a [`SimulateConfig`] and write a capture set.
 //! All physics lives in `thinfilm::capture::simulate`.
 
+use anyhow::Context;
 use std::path::PathBuf;
 use thinfilm::capture::envi::Interleave;
 use thinfilm::capture::simulate::{
@@ -26,22 +27,22 @@ pub struct Options {
     #[arg(long, value_parser = ["sample1", "sample2", "sample3"])]
     pub preset: Option<String>,
     /// Film index: number, n+ki, or material name [default: 1.37].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::index)]
     pub film_ior: Option<Ior>,
     /// Mean film thickness, nm [default: 400].
-    #[arg(long, value_name = "NM")]
+    #[arg(long, allow_hyphen_values = true, value_name = "NM", value_parser = super::args::thickness_nm)]
     pub thickness: Option<f64>,
     /// Relative amplitude of the smooth thickness field, 0–1 [default: 0.05].
     #[arg(long, value_name = "FRACTION")]
     pub thickness_variation: Option<f64>,
     /// Substrate index: number, n+ki, or material name [default: 1.64 (PET)].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::index)]
     pub substrate_ior: Option<Ior>,
     /// Substrate extinction coefficient k (added to a numeric --substrate-ior).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub substrate_k: Option<f64>,
-    /// Ambient index [default: 1].
-    #[arg(long)]
+    /// Ambient index, in [1, 3] [default: 1].
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::ambient_index)]
     pub ambient_ior: Option<f64>,
     /// Incident angles in degrees, comma-separated [default: 10,20,30,40,50].
     #[arg(long)]
@@ -50,28 +51,28 @@ pub struct Options {
     #[arg(long)]
     pub wavelengths: Option<String>,
     /// Gaussian band FWHM in nm; 0 samples band centres [default: 4].
-    #[arg(long, value_name = "NM")]
+    #[arg(long, allow_hyphen_values = true, value_name = "NM", value_parser = super::args::non_negative)]
     pub fwhm: Option<f64>,
     /// Additive Gaussian noise, reflectance units [default: 0].
-    #[arg(long, value_name = "SIGMA")]
+    #[arg(long, allow_hyphen_values = true, value_name = "SIGMA", value_parser = super::args::non_negative)]
     pub noise: Option<f64>,
     /// Write uint16 raw counts with white and dark reference cubes (shot + read noise).
     #[arg(long)]
     pub raw_counts: bool,
     /// Raw mode: white signal at the spectrum's peak, counts [default: 40000].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub white_counts: Option<f64>,
     /// Raw mode: dark level, counts [default: 800].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub dark_counts: Option<f64>,
     /// Raw mode: read noise, counts [default: 3].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = super::args::non_negative)]
     pub read_noise: Option<f64>,
     /// s, p or unpolarized [default: s].
     #[arg(long)]
     pub polarization: Option<Polarization>,
     /// Image size WxH [default: 64x64].
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = super::args::size)]
     pub size: Option<(usize, usize)>,
     /// Random seed [default: 1].
     #[arg(long)]
@@ -79,20 +80,35 @@ pub struct Options {
     /// ENVI interleave of the written cubes: bsq, bil or bip [default: bsq].
     #[arg(long)]
     pub interleave: Option<Interleave>,
-}
-
-fn parse_size(s: &str) -> Result<(usize, usize), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("size '{s}' must be WxH, e.g. 256x256"))?;
-    let parse = |t: &str| {
-        t.trim()
-            .parse::<usize>()
-            .ok()
-            .filter(|&v| v > 0)
-            .ok_or_else(|| format!("size '{s}': '{t}' is not a positive integer"))
-    };
-    Ok((parse(w)?, parse(h)?))
+    /// Realism: exposure of each angle drawn in 1 ± V (0.4 = ±40 %) [default: 0].
+    #[arg(long, value_name = "V", help_heading = "Realistic capture effects")]
+    pub exposure_variation: Option<f64>,
+    /// Realism: vignetting gain in the image corners (radial falloff), 0.5 = half [default: 1].
+    #[arg(long, value_name = "GAIN", help_heading = "Realistic capture effects")]
+    pub vignetting: Option<f64>,
+    /// Realism: lamp drift since the white reference, a tilt across the band drawn in ±V
+    /// per angle (0.1 = ±10 % from blue to red end) [default: 0].
+    #[arg(long, value_name = "V", help_heading = "Realistic capture effects")]
+    pub lamp_tilt: Option<f64>,
+    /// Realism: stray light added per angle, drawn in [0, V] (reflectance units) [default: 0].
+    #[arg(long, value_name = "V", help_heading = "Realistic capture effects")]
+    pub background: Option<f64>,
+    /// Realism: error added to the substrate index written into capture.json (the
+    /// simulation uses the true one) [default: 0].
+    #[arg(
+        long,
+        value_name = "DN",
+        allow_hyphen_values = true,
+        help_heading = "Realistic capture effects"
+    )]
+    pub substrate_error: Option<f64>,
+    /// Realism: the incidence varies by ±DEG across the image width (camera field of view)
+    /// [default: 0].
+    #[arg(long, value_name = "DEG", help_heading = "Realistic capture effects")]
+    pub fov_deg: Option<f64>,
+    /// Write per-pixel incidence maps (angleNN.exr) and name them in capture.json.
+    #[arg(long, help_heading = "Realistic capture effects")]
+    pub angle_maps: bool,
 }
 
 /// Builds the configuration: preset (or defaults), then every explicit option.
@@ -114,9 +130,6 @@ pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> 
         cfg.substrate_ior = v.clone();
     }
     if let Some(k) = args.substrate_k {
-        if !(k.is_finite() && k >= 0.0) {
-            anyhow::bail!("--substrate-k must be finite and ≥ 0, got {k}");
-        }
         cfg.substrate_ior = match &cfg.substrate_ior {
             Ior::Constant(c) => Ior::Constant(Complex64::new(c.re, k)),
             Ior::Material(m) => anyhow::bail!(
@@ -129,10 +142,10 @@ pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> 
         cfg.ambient_ior = v;
     }
     if let Some(v) = &args.angles {
-        cfg.angles_deg = parse_angles(v)?;
+        cfg.angles_deg = parse_angles(v).context("--angles")?;
     }
     if let Some(v) = &args.wavelengths {
-        cfg.wavelengths_nm = parse_wavelengths(v)?;
+        cfg.wavelengths_nm = parse_wavelengths(v).context("--wavelengths")?;
     }
     if let Some(v) = args.fwhm {
         cfg.fwhm_nm = v;
@@ -163,8 +176,28 @@ pub fn config(args: &Options, progress: bool) -> anyhow::Result<SimulateConfig> 
     if let Some(v) = args.interleave {
         cfg.interleave = v;
     }
+    let r = &mut cfg.realism;
+    if let Some(v) = args.exposure_variation {
+        r.exposure_variation = v;
+    }
+    if let Some(v) = args.vignetting {
+        r.vignetting_min = v;
+    }
+    if let Some(v) = args.lamp_tilt {
+        r.lamp_tilt = v;
+    }
+    if let Some(v) = args.background {
+        r.background = v;
+    }
+    if let Some(v) = args.substrate_error {
+        r.substrate_error = v;
+    }
+    if let Some(v) = args.fov_deg {
+        r.fov_half_deg = v;
+    }
+    r.write_angle_maps |= args.angle_maps;
     cfg.progress = progress;
-    cfg.validate()?;
+    cfg.validate().context("simulate options")?;
     Ok(cfg)
 }
 

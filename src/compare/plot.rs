@@ -10,12 +10,11 @@ use std::path::Path;
 /// One convergence curve: (seconds, error) points in increasing time.
 #[derive(Debug, Clone)]
 pub struct Series {
-    pub label: String,
-    pub points: Vec<(f64, f64)>,
-    /// Index into the palette (curves of one scene share a colour).
-    pub colour_index: usize,
-    /// Draw as a dashed-look cross-marked curve (e.g. the other renderer).
+    /// The panel it is drawn in (e.g. the scene); panels appear in first-seen order.
+    pub panel: String,
+    /// Drawn as the other renderer: thin, cross-marked, second legend entry.
     pub secondary: bool,
+    pub points: Vec<(f64, f64)>,
 }
 
 fn register_font() {
@@ -68,32 +67,29 @@ fn short_number(v: f64) -> String {
     }
 }
 
-const PALETTE: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(23, 190, 207),
-];
+/// Colours of the primary and the secondary curves (ours, the other renderer).
+const COLOURS: [RGBColor; 2] = [RGBColor(31, 119, 180), RGBColor(255, 127, 14)];
 
-/// Draws all series on log–log axes (x: seconds, y: error) and writes a PNG.
+/// Error against time as small multiples: one log–log panel per `Series::panel`, all panels
+/// on the same axes (so scenes compare across panels too), primary and secondary curves in
+/// two fixed colours, and the legend in a strip above the panels where it covers no data.
+/// `legend` names the primary and the secondary curves. Writes a PNG `panel_px` per panel.
 pub fn plot_error_vs_time(
     series: &[Series],
     title: &str,
+    legend: [&str; 2],
     y_label: &str,
     path: &Path,
-    size: (u32, u32),
+    panel_px: (u32, u32),
 ) -> Result<()> {
     register_font();
-    let pts = series
+    let positive = |&(t, e): &(f64, f64)| t > 0.0 && e > 0.0 && t.is_finite() && e.is_finite();
+    let (mut t0, mut t1, mut e0, mut e1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(t, e) in series
         .iter()
         .flat_map(|s| s.points.iter())
-        .filter(|(t, e)| *t > 0.0 && *e > 0.0);
-    let (mut t0, mut t1, mut e0, mut e1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(t, e) in pts {
+        .filter(|p| positive(p))
+    {
         t0 = t0.min(t);
         t1 = t1.max(t);
         e0 = e0.min(e);
@@ -102,67 +98,91 @@ pub fn plot_error_vs_time(
     if t0 > t1 {
         bail!("nothing to plot: no positive (time, error) points");
     }
-    let (w, h) = size;
+    let mut panels: Vec<&str> = Vec::new();
+    for s in series {
+        if !panels.contains(&s.panel.as_str()) {
+            panels.push(&s.panel);
+        }
+    }
+    let cols = (panels.len() as f64).sqrt().ceil().max(1.0) as u32;
+    let rows = (panels.len() as u32).div_ceil(cols);
+    let header = 64u32;
+    let (w, h) = (cols * panel_px.0, header + rows * panel_px.1);
     let mut buf = vec![255u8; (w * h * 3) as usize];
+    let err = |e: &dyn std::fmt::Display| anyhow!("plot: {e}");
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(
-                (t0 / 1.5..t1 * 1.5).log_scale(),
-                (e0 / 1.5..e1 * 1.5).log_scale(),
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let (top, body) = root.split_vertically(header);
+        top.draw_text(
+            title,
+            &("sans-serif", 20).into_font().color(&BLACK),
+            (12, 8),
+        )
+        .map_err(|e| err(&e))?;
+        // The legend: a line and marker per renderer, in the header strip.
+        for (k, name) in legend.iter().enumerate() {
+            let x = 12 + k as i32 * 260;
+            let y = 46;
+            let c = COLOURS[k];
+            top.draw(&PathElement::new(
+                vec![(x, y), (x + 30, y)],
+                c.stroke_width(2),
+            ))
+            .map_err(|e| err(&e))?;
+            if k == 0 {
+                top.draw(&Circle::new((x + 15, y), 3, c.filled()))
+            } else {
+                top.draw(&Cross::new((x + 15, y), 4, c.stroke_width(1)))
+            }
+            .map_err(|e| err(&e))?;
+            top.draw_text(
+                name,
+                &("sans-serif", 15).into_font().color(&BLACK),
+                (x + 38, y - 8),
             )
-            .map_err(|e| anyhow!("plot: {e}"))?;
-        chart
-            .configure_mesh()
-            .x_desc("render time, s")
-            .y_desc(y_label)
-            .label_style(("sans-serif", 13))
-            .x_label_formatter(&|v| short_number(*v))
-            .y_label_formatter(&|v| short_number(*v))
-            .draw()
-            .map_err(|e| anyhow!("plot: {e}"))?;
-        for s in series {
-            let c = PALETTE[s.colour_index % PALETTE.len()];
-            let style = if s.secondary {
-                c.mix(0.6).stroke_width(1)
-            } else {
-                c.stroke_width(2)
-            };
-            let pts: Vec<(f64, f64)> = s
-                .points
-                .iter()
-                .copied()
-                .filter(|(t, e)| *t > 0.0 && *e > 0.0)
-                .collect();
-            let anno = chart
-                .draw_series(LineSeries::new(pts.clone(), style))
-                .map_err(|e| anyhow!("plot: {e}"))?;
-            anno.label(s.label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-            if s.secondary {
+            .map_err(|e| err(&e))?;
+        }
+        let areas = body.split_evenly((rows as usize, cols as usize));
+        for (name, area) in panels.iter().zip(&areas) {
+            let mut chart = ChartBuilder::on(area)
+                .caption(*name, ("sans-serif", 15))
+                .margin(6)
+                .x_label_area_size(32)
+                .y_label_area_size(52)
+                .build_cartesian_2d(
+                    (t0 / 1.3..t1 * 1.3).log_scale(),
+                    (e0 / 1.3..e1 * 1.3).log_scale(),
+                )
+                .map_err(|e| err(&e))?;
+            chart
+                .configure_mesh()
+                .x_desc("render time, s")
+                .y_desc(y_label)
+                .label_style(("sans-serif", 11))
+                .axis_desc_style(("sans-serif", 12))
+                .x_labels(5)
+                .y_labels(5)
+                .x_label_formatter(&|v| short_number(*v))
+                .y_label_formatter(&|v| short_number(*v))
+                .draw()
+                .map_err(|e| err(&e))?;
+            for s in series.iter().filter(|s| s.panel == *name) {
+                let c = COLOURS[s.secondary as usize];
+                let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(positive).collect();
+                let style = c.stroke_width(if s.secondary { 1 } else { 2 });
                 chart
-                    .draw_series(pts.iter().map(|&p| Cross::new(p, 4, c.stroke_width(1))))
-                    .map_err(|e| anyhow!("plot: {e}"))?;
-            } else {
-                chart
-                    .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))
-                    .map_err(|e| anyhow!("plot: {e}"))?;
+                    .draw_series(LineSeries::new(pts.clone(), style))
+                    .map_err(|e| err(&e))?;
+                if s.secondary {
+                    chart.draw_series(pts.iter().map(|&p| Cross::new(p, 4, c.stroke_width(1))))
+                } else {
+                    chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))
+                }
+                .map_err(|e| err(&e))?;
             }
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 12))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(|e| anyhow!("plot: {e}"))?;
-        root.present().map_err(|e| anyhow!("plot: {e}"))?;
+        root.present().map_err(|e| err(&e))?;
     }
     write_png_rgb8(path, w as usize, h as usize, buf)
 }
@@ -199,27 +219,29 @@ mod tests {
     }
 
     #[test]
-    fn plot_writes_a_png() {
+    fn plot_draws_one_panel_per_scene_on_shared_axes() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("p.png");
-        let s = vec![
-            Series {
-                label: "ours".into(),
-                points: vec![(0.1, 0.1), (0.4, 0.05)],
-                colour_index: 0,
-                secondary: false,
-            },
-            Series {
-                label: "mitsuba".into(),
-                points: vec![(0.2, 0.1), (0.8, 0.05)],
-                colour_index: 0,
-                secondary: true,
-            },
+        let curve = |panel: &str, secondary, scale: f64| Series {
+            panel: panel.into(),
+            secondary,
+            points: vec![(0.1 * scale, 0.1), (0.4 * scale, 0.05)],
+        };
+        let s = [
+            curve("a", false, 1.0),
+            curve("a", true, 2.0),
+            curve("b", false, 1.0),
+            curve("c", false, 1.0),
         ];
-        plot_error_vs_time(&s, "t", "RMSE", &path, (400, 300)).unwrap();
+        plot_error_vs_time(&s, "t", ["ours", "theirs"], "RMSE", &path, (200, 150)).unwrap();
         let img = image::open(&path).unwrap().to_rgb8();
-        assert_eq!(img.dimensions(), (400, 300));
-        assert!(img.pixels().any(|p| p.0 != [255, 255, 255]));
-        assert!(plot_error_vs_time(&[], "t", "RMSE", &path, (400, 300)).is_err());
+        // Three panels: 2 × 2 grid under the 64-px legend strip.
+        assert_eq!(img.dimensions(), (400, 64 + 300));
+        // Both curve colours are drawn, and the empty fourth cell stays white.
+        let has = |c: RGBColor| img.pixels().any(|p| p.0 == [c.0, c.1, c.2]);
+        assert!(has(COLOURS[0]) && has(COLOURS[1]));
+        let empty = (200..400).all(|x| (64 + 150..364).all(|y| img.get_pixel(x, y).0 == [255; 3]));
+        assert!(empty, "the fourth cell should be empty");
+        assert!(plot_error_vs_time(&[], "t", ["a", "b"], "RMSE", &path, (200, 150)).is_err());
     }
 }

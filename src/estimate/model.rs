@@ -11,8 +11,10 @@
 //! what makes a 1-megapixel fit take seconds). Complex r23 (metal substrates) is supported.
 //! Polarisation (s, p or the unpolarised mean) and the camera's Gaussian band response
 //! (3-point Gauss–Hermite quadrature when the FWHM is known) become several weighted terms
-//! per sample.
+//! per sample. A dispersive film (n(λ), [`FilmIndex`]) only changes the per-sample
+//! coefficients: each quadrature node uses the index at its own wavelength.
 
+use super::film::FilmIndex;
 use crate::capture::{CaptureSet, Polarization};
 use crate::optics::fresnel::{interface, n_cos_theta};
 use num_complex::Complex64;
@@ -20,6 +22,7 @@ use num_complex::Complex64;
 /// Per-sample coefficient tables for one film index (structure of arrays, f32 for speed).
 #[derive(Debug, Clone)]
 pub struct FilmModel {
+    /// Film index at 550 nm (fringe spacing estimates).
     pub film_ior: f64,
     /// Terms per sample (polarisations × quadrature nodes).
     pub terms: usize,
@@ -61,6 +64,28 @@ impl Geometry {
         }
     }
 
+    /// Angle-averaged 1 / √(n² − n1² sin²θ1): thickness d times n_eff is what a spectrum
+    /// measures (d · √(n² − kx²) sets the phase), so ∂d/∂n ≈ −d · n · this².
+    pub fn inverse_phase_index(&self, n: f64) -> f64 {
+        let k = self.incident_deg.len().max(1) as f64;
+        self.incident_deg
+            .iter()
+            .map(|a| {
+                let kx = self.ambient_ior * a.to_radians().sin();
+                1.0 / (n * n - kx * kx).max(1e-9).sqrt()
+            })
+            .sum::<f64>()
+            / k
+    }
+
+    /// True when the substrate absorbs anywhere in the band (metals): its reflection phase
+    /// is not 0 or π, so a substrate index error shifts fringes.
+    pub fn substrate_absorbs(&self) -> bool {
+        self.wavelengths_nm
+            .iter()
+            .any(|&l| self.substrate.at(l).im > 1e-6)
+    }
+
     /// Largest n1 sinθ1 over the angles: the film index must exceed it for Δ to be real.
     pub fn max_kx(&self) -> f64 {
         self.incident_deg
@@ -81,9 +106,19 @@ impl Geometry {
             .fold(f64::INFINITY, f64::min)
     }
 
-    /// Builds the tables for film index `n` (clamped to the propagating range).
+    pub fn lambda_max(&self) -> f64 {
+        self.wavelengths_nm.iter().copied().fold(0.0, f64::max)
+    }
+
+    /// Builds the tables for a constant film index `n` (clamped to the propagating range).
     pub fn model(&self, n: f64) -> FilmModel {
-        let n = n.max(self.min_film_ior());
+        self.model_of(&FilmIndex::constant(n), 0.0)
+    }
+
+    /// Builds the tables for `film` (n(λ) clamped to the propagating range at every
+    /// wavelength) with the substrate's real index shifted by `substrate_shift`.
+    pub fn model_of(&self, film: &FilmIndex, substrate_shift: f64) -> FilmModel {
+        let n_min = self.min_film_ior();
         // Gauss–Hermite nodes for a Gaussian band response, normalised weights.
         let nodes: &[(f64, f64)] = if self.band_integration {
             &[
@@ -104,7 +139,7 @@ impl Geometry {
         let angles = self.incident_deg.len();
         let len = angles * bands * terms;
         let mut m = FilmModel {
-            film_ior: n,
+            film_ior: film.n550(),
             terms,
             bands,
             angles,
@@ -118,11 +153,9 @@ impl Geometry {
             ci: Vec::with_capacity(len),
         };
         let n1 = Complex64::new(self.ambient_ior, 0.0);
-        let n2 = Complex64::new(n, 0.0);
         for &deg in &self.incident_deg {
             let (sin1, cos1) = deg.to_radians().sin_cos();
             let kx = self.ambient_ior * sin1;
-            let n2c = n_cos_theta(n2, kx);
             for (b, &lambda) in self.wavelengths_nm.iter().enumerate() {
                 let sigma = self
                     .fwhm_nm
@@ -131,7 +164,9 @@ impl Geometry {
                     .unwrap_or(0.0);
                 for &(x, wn) in nodes {
                     let lam = (lambda + std::f64::consts::SQRT_2 * sigma * x).max(1.0);
-                    let n3 = self.substrate.at(lam);
+                    let n2 = Complex64::new(film.at(lam).max(n_min), 0.0);
+                    let n2c = n_cos_theta(n2, kx);
+                    let n3 = self.substrate.at(lam) + substrate_shift;
                     let n3c = n_cos_theta(n3, kx);
                     let i12 = interface(n1, n2, Complex64::new(cos1, 0.0), n2c / n2);
                     let i23 = interface(n2, n3, n2c / n2, n3c / n3);
@@ -194,18 +229,6 @@ pub fn fast_sin_cos(x: f32) -> (f32, f32) {
     (s, c)
 }
 
-/// Result of one pass over a pixel's samples at thickness d.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct PassSums {
-    /// Σ (R − y)² over used samples.
-    pub sse: f64,
-    /// Σ (∂R/∂d)(R − y).
-    pub grad: f64,
-    /// Σ (∂R/∂d)².
-    pub hess: f64,
-    pub count: usize,
-}
-
 impl FilmModel {
     #[inline]
     fn range(&self, angle: usize) -> std::ops::Range<usize> {
@@ -241,15 +264,8 @@ impl FilmModel {
         }
     }
 
-    /// Band sums of the terms of bands `b0..b0 + nb_chunk` at one angle (multi-term path).
-    fn multi_term_pass(
-        &self,
-        angle: usize,
-        d: f32,
-        ya: &[f32],
-        sums: &mut (f32, f32, f32),
-        with_d: bool,
-    ) {
+    /// Σ (R − y)² over one angle's bands, the terms of each band summed (multi-term path).
+    fn multi_term_sse(&self, angle: usize, d: f32, ya: &[f32]) -> f32 {
         const CHUNK: usize = 96; // divisible by 1, 2, 3 and 6 terms
         let t = self.terms;
         let per = CHUNK / t;
@@ -257,59 +273,66 @@ impl FilmModel {
         let mut r = [0f32; CHUNK];
         let mut dr = [0f32; CHUNK];
         let mut b0 = 0;
+        let mut sse = 0f32;
         while b0 < self.bands {
             let nb = per.min(self.bands - b0);
             self.eval_terms(start + b0 * t, d, &mut r[..nb * t], &mut dr[..nb * t]);
             for i in 0..nb {
                 let rv: f32 = r[i * t..(i + 1) * t].iter().sum();
                 let e = rv - ya[b0 + i];
-                sums.0 += e * e;
-                if with_d {
-                    let dv: f32 = dr[i * t..(i + 1) * t].iter().sum();
-                    sums.1 += dv * e;
-                    sums.2 += dv * dv;
-                }
+                sse += e * e;
             }
             b0 += nb;
         }
+        sse
     }
 
     /// Model reflectance of every band at one angle for thickness `d` into `out`.
     pub fn spectrum(&self, angle: usize, d: f64, out: &mut [f32]) {
-        let d = d as f32;
-        let r = self.range(angle);
-        let t = self.terms;
-        for (b, o) in out.iter_mut().enumerate().take(self.bands) {
-            let mut acc = 0.0f32;
-            for j in r.start + b * t..r.start + (b + 1) * t {
-                let (s, c) = fast_sin_cos(self.k[j] * d);
-                let num = self.p[j] + 2.0 * (self.qr[j] * c - self.qi[j] * s);
-                let den = self.dd[j] + 2.0 * (self.cr[j] * c - self.ci[j] * s);
-                acc += self.w[j] * num / den;
-            }
-            *o = acc;
-        }
+        self.spectrum_terms(angle, d, out, None);
     }
 
     /// Model reflectance and its d-derivative at one angle (per band) into `r`, `dr`.
     pub fn spectrum_and_derivative(&self, angle: usize, d: f64, r: &mut [f32], dr: &mut [f32]) {
+        self.spectrum_terms(angle, d, r, Some(dr));
+    }
+
+    /// Band sums of the terms in chunks through the vectorised [`FilmModel::eval_terms`].
+    fn spectrum_terms(&self, angle: usize, d: f64, out: &mut [f32], mut dout: Option<&mut [f32]>) {
+        const CHUNK: usize = 96; // divisible by 1, 2, 3 and 6 terms
         let d = d as f32;
-        let range = self.range(angle);
         let t = self.terms;
-        for b in 0..self.bands {
-            let (mut acc, mut dacc) = (0.0f32, 0.0f32);
-            for j in range.start + b * t..range.start + (b + 1) * t {
-                let (s, c) = fast_sin_cos(self.k[j] * d);
-                let num = self.p[j] + 2.0 * (self.qr[j] * c - self.qi[j] * s);
-                let den = self.dd[j] + 2.0 * (self.cr[j] * c - self.ci[j] * s);
-                let dnum = -2.0 * self.k[j] * (self.qr[j] * s + self.qi[j] * c);
-                let dden = -2.0 * self.k[j] * (self.cr[j] * s + self.ci[j] * c);
-                let inv = 1.0 / den;
-                acc += self.w[j] * num * inv;
-                dacc += self.w[j] * (dnum * den - num * dden) * inv * inv;
+        let start = self.range(angle).start;
+        let (mut r, mut dr) = ([0f32; CHUNK], [0f32; CHUNK]);
+        let per = (CHUNK / t).max(1);
+        let mut b0 = 0;
+        while b0 < self.bands {
+            let nb = per.min(self.bands - b0);
+            let n = (nb * t).min(CHUNK);
+            if t * nb > CHUNK {
+                // More terms than a chunk holds (never for the models built here).
+                for b in b0..b0 + nb {
+                    let (mut acc, mut dacc) = (0f32, 0f32);
+                    for j in 0..t {
+                        self.eval_terms(start + b * t + j, d, &mut r[..1], &mut dr[..1]);
+                        acc += r[0];
+                        dacc += dr[0];
+                    }
+                    out[b] = acc;
+                    if let Some(o) = dout.as_deref_mut() {
+                        o[b] = dacc;
+                    }
+                }
+            } else {
+                self.eval_terms(start + b0 * t, d, &mut r[..n], &mut dr[..n]);
+                for i in 0..nb {
+                    out[b0 + i] = r[i * t..(i + 1) * t].iter().sum();
+                    if let Some(o) = dout.as_deref_mut() {
+                        o[b0 + i] = dr[i * t..(i + 1) * t].iter().sum();
+                    }
+                }
             }
-            r[b] = acc;
-            dr[b] = dacc;
+            b0 += nb;
         }
     }
 
@@ -362,9 +385,7 @@ impl FilmModel {
             return sse;
         }
         if step == 1 && t <= 6 && 96 % t == 0 {
-            let mut sums = (0.0f32, 0.0f32, 0.0f32);
-            self.multi_term_pass(angle, d, y, &mut sums, false);
-            return sums.0;
+            return self.multi_term_sse(angle, d, y);
         }
         let mut b = 0;
         while b < self.bands {
@@ -382,85 +403,13 @@ impl FilmModel {
         sse
     }
 
-    /// SSE, gradient and Gauss–Newton Hessian in d over the angles in `mask`.
-    /// `y` is the pixel's data laid out angle-major (`angles × bands`).
-    pub fn pass(&self, d: f64, y: &[f32], mask: &[bool]) -> PassSums {
-        let d32 = d as f32;
-        let t = self.terms;
-        let mut out = PassSums::default();
-        for a in 0..self.angles {
-            if !mask[a] {
-                continue;
-            }
-            let ya = &y[a * self.bands..(a + 1) * self.bands];
-            let start = self.range(a).start;
-            let (mut sse, mut g, mut h) = (0.0f32, 0.0f32, 0.0f32);
-            if t == 1 {
-                // Hot path: flat zipped loop over bands (vectorises).
-                let end = start + self.bands;
-                let it = ya
-                    .iter()
-                    .zip(&self.k[start..end])
-                    .zip(&self.w[start..end])
-                    .zip(&self.p[start..end])
-                    .zip(&self.qr[start..end])
-                    .zip(&self.qi[start..end])
-                    .zip(&self.dd[start..end])
-                    .zip(&self.cr[start..end])
-                    .zip(&self.ci[start..end]);
-                for ((((((((&yb, &k), &w), &p), &qr), &qi), &dd), &cr), &ci) in it {
-                    let (s, c) = fast_sin_cos(k * d32);
-                    let num = p + 2.0 * (qr * c - qi * s);
-                    let den = dd + 2.0 * (cr * c - ci * s);
-                    let dnum = -2.0 * k * (qr * s + qi * c);
-                    let dden = -2.0 * k * (cr * s + ci * c);
-                    let inv = 1.0 / den;
-                    let r = w * num * inv;
-                    let dr = w * (dnum * den - num * dden) * inv * inv;
-                    let e = r - yb;
-                    sse += e * e;
-                    g += dr * e;
-                    h += dr * dr;
-                }
-            } else if t <= 6 && 96 % t == 0 {
-                let mut sums = (0.0f32, 0.0f32, 0.0f32);
-                self.multi_term_pass(a, d32, ya, &mut sums, true);
-                sse = sums.0;
-                g = sums.1;
-                h = sums.2;
-            } else {
-                for (b, &yb) in ya.iter().enumerate() {
-                    let (mut acc, mut dacc) = (0.0f32, 0.0f32);
-                    for j in start + b * t..start + (b + 1) * t {
-                        let (s, c) = fast_sin_cos(self.k[j] * d32);
-                        let num = self.p[j] + 2.0 * (self.qr[j] * c - self.qi[j] * s);
-                        let den = self.dd[j] + 2.0 * (self.cr[j] * c - self.ci[j] * s);
-                        let dnum = -2.0 * self.k[j] * (self.qr[j] * s + self.qi[j] * c);
-                        let dden = -2.0 * self.k[j] * (self.cr[j] * s + self.ci[j] * c);
-                        let inv = 1.0 / den;
-                        acc += self.w[j] * num * inv;
-                        dacc += self.w[j] * (dnum * den - num * dden) * inv * inv;
-                    }
-                    let e = acc - yb;
-                    sse += e * e;
-                    g += dacc * e;
-                    h += dacc * dacc;
-                }
-            }
-            out.sse += sse as f64;
-            out.grad += g as f64;
-            out.hess += h as f64;
-            out.count += self.bands;
-        }
-        out
-    }
-
-    /// SSE over all masked angles (every `step`-th band).
-    pub fn sse(&self, d: f64, y: &[f32], mask: &[bool], step: usize) -> f64 {
+    /// SSE over all masked angles (every `step`-th band); angle a's data start at
+    /// `y[a * stride]`.
+    pub fn sse(&self, d: f64, y: &[f32], stride: usize, mask: &[bool], step: usize) -> f64 {
         let mut s = 0.0f64;
         for a in 0..self.angles {
             if mask[a] {
-                s += self.sse_angle(a, d, &y[a * self.bands..(a + 1) * self.bands], step) as f64;
+                s += self.sse_angle(a, d, &y[a * stride..a * stride + self.bands], step) as f64;
             }
         }
         s
@@ -469,10 +418,16 @@ impl FilmModel {
 
 /// Exact (f64, direct Airy) reflectance for the same geometry — used by tests and the
 /// simulator to check the fast tables.
-pub fn exact_reflectance(geom: &Geometry, n: f64, d: f64, angle: usize, lambda_nm: f64) -> f64 {
+pub fn exact_reflectance(
+    geom: &Geometry,
+    film: &FilmIndex,
+    d: f64,
+    angle: usize,
+    lambda_nm: f64,
+) -> f64 {
     let film = crate::optics::ThinFilm {
         ambient_ior: geom.ambient_ior,
-        film_ior: Complex64::new(n, 0.0),
+        film_ior: Complex64::new(film.at(lambda_nm), 0.0),
         thickness_nm: d,
         substrate_ior: geom.substrate.at(lambda_nm),
     };
@@ -528,7 +483,7 @@ mod tests {
                 for a in 0..4 {
                     m.spectrum(a, d, &mut out);
                     for (b, &lam) in g.wavelengths_nm.iter().enumerate() {
-                        let e = exact_reflectance(&g, n, d, a, lam);
+                        let e = exact_reflectance(&g, &FilmIndex::constant(n), d, a, lam);
                         assert!(
                             (out[b] as f64 - e).abs() < 2e-4,
                             "{pol:?} n={n} d={d} {lam}"
@@ -559,7 +514,7 @@ mod tests {
     }
 
     #[test]
-    fn pass_and_sse_agree_with_spectrum_for_multi_term_models() {
+    fn sse_agrees_with_spectrum_for_multi_term_models() {
         let mut g = geom(Polarization::Unpolarized, Ior::real(1.64));
         g.fwhm_nm = Some(vec![4.0; 81]);
         g.band_integration = true;
@@ -567,25 +522,15 @@ mod tests {
         assert_eq!(m.terms, 6);
         let y: Vec<f32> = (0..4 * 81).map(|i| 0.05 + 0.001 * (i % 7) as f32).collect();
         let mask = [true, false, true, true];
-        let (mut r, mut dr) = (vec![0f32; 81], vec![0f32; 81]);
-        let (mut sse, mut grad, mut hess) = (0.0f64, 0.0f64, 0.0f64);
+        let mut r = vec![0f32; 81];
+        let mut sse = 0.0f64;
         for a in [0, 2, 3] {
-            m.spectrum_and_derivative(a, 700.0, &mut r, &mut dr);
+            m.spectrum(a, 700.0, &mut r);
             for b in 0..81 {
                 let e = (r[b] - y[a * 81 + b]) as f64;
                 sse += e * e;
-                grad += dr[b] as f64 * e;
-                hess += (dr[b] as f64).powi(2);
             }
         }
-        let p = m.pass(700.0, &y, &mask);
-        assert!(
-            (p.sse - sse).abs() < 1e-5 * sse.max(1e-6),
-            "{} {sse}",
-            p.sse
-        );
-        assert!((p.grad - grad).abs() < 1e-3 * grad.abs().max(1e-6));
-        assert!((p.hess - hess).abs() < 1e-3 * hess);
-        assert!((m.sse(700.0, &y, &mask, 1) - sse).abs() < 1e-5 * sse.max(1e-6));
+        assert!((m.sse(700.0, &y, 81, &mask, 1) - sse).abs() < 1e-5 * sse.max(1e-6));
     }
 }

@@ -3,11 +3,14 @@
 //! `material.xml`, `material.gltf`). Also the seed's "BRDF error": mean ΔE*ab (D65) between
 //! measured and model spectra over every pixel and angle (seed eq. 15), and RMSE (eq. 16).
 
+use super::film::{FilmIndex, FilmModelKind};
 use super::model::Geometry;
 use super::Fit;
 use crate::capture::{CaptureSet, GroundTruth};
-use crate::material::{finite, FilmMaterial, FitFile, MapStats, PixelCounts, TruthComparison};
-use crate::optics::Ior;
+use crate::material::{
+    finite, FilmMaterial, FilmModelFit, FitFile, MapStats, NoiseFit, NuisanceFit, PixelCounts,
+    SubstrateFit, TruthComparison,
+};
 use crate::stats::{percentile, Summary};
 use anyhow::{Context, Result};
 use std::path::Path;
@@ -52,7 +55,7 @@ pub fn mean_delta_e(
     let fitted: Vec<usize> = (0..fit.thickness_nm.len())
         .filter(|&p| fit.thickness_nm[p].is_finite())
         .collect();
-    let pixels = super::spread(&fitted, max_pixels);
+    let pixels = super::data::spread(&fitted, max_pixels);
     let nb = set.bands();
     // Fit pixel p is capture pixel p + offset (a fit of rows A:B starts at row A).
     let offset = fit.rows.0 * set.width;
@@ -145,11 +148,46 @@ pub fn fit_json(
     seconds.insert("total".into(), finite(total));
     let sub = set.substrate_ior.at(550.0);
     let rmse = fit.rmse();
+    let film_model = match &fit.film {
+        FilmIndex::Known(_) => None,
+        f => {
+            let cauchy = f
+                .cauchy_coefficients()
+                .filter(|_| f.kind() != Some(FilmModelKind::Constant));
+            Some(FilmModelFit {
+                model: f.kind().map(|k| k.to_string()).unwrap_or_default(),
+                parameters_sigma: fit.film_param_sigma.iter().map(|v| finite(*v)).collect(),
+                cauchy_a: cauchy.and_then(|c| finite(c.0)),
+                cauchy_b_nm2: cauchy.and_then(|c| finite(c.1)),
+                cauchy_c_nm4: cauchy.and_then(|c| finite(c.2)),
+            })
+        }
+    };
     FitFile {
         format: crate::material::FIT_FORMAT.into(),
         method: fit.method.to_string(),
         film_ior: finite(fit.film_ior),
-        film_index: fit.film_ior.is_finite().then(|| Ior::real(fit.film_ior)),
+        film_index: fit.film_ior.is_finite().then(|| fit.film.to_ior()),
+        film_model,
+        substrate_fit: fit.substrate_sigma.map(|s| SubstrateFit {
+            shift: finite(fit.substrate_shift),
+            shift_sigma: finite(s),
+            substrate_ior: finite(sub.re + fit.substrate_shift),
+        }),
+        nuisance: Some(NuisanceFit {
+            model: fit.nuisance.spec.describe(),
+            multiplier: fit.nuisance.multiplier.clone(),
+            background: fit.nuisance.background.clone(),
+        }),
+        noise: Some(NoiseFit {
+            typical: finite(fit.noise),
+            source: fit.noise_source.clone(),
+        }),
+        chi2_per_dof: finite(fit.chi2_red),
+        model_selection: fit.selection.clone(),
+        thickness_sigma_nm: Some(MapStats::from(Summary::of_finite(&fit.thickness_sigma_nm))),
+        thickness_sigma_file: Some(THICKNESS_SIGMA_EXR.into()),
+        not_identifiable_pixels: fit.not_identifiable,
         film_ior_uncertainty: fit.film_ior_sigma.and_then(finite),
         film_ior_uncertainty_reason: fit.film_ior_sigma.is_none().then(|| {
             if fit.film_ior_note.starts_with("given") {
@@ -195,10 +233,16 @@ pub fn fit_json(
     }
 }
 
+/// Per-pixel 1σ of the thickness (nm), one channel `thickness_sigma`.
+pub const THICKNESS_SIGMA_EXR: &str = "thickness_sigma.exr";
+
+/// Point spectra: thickness and 1σ per spectrum (NaN: not fitted or not identifiable).
+pub const SPECTRA_CSV: &str = "thickness.csv";
+
 /// The fitted film as a material: the fitted index on the capture's substrate.
 pub fn fitted_material(set: &CaptureSet, fit: &Fit) -> FilmMaterial {
     FilmMaterial {
-        film_ior: Ior::real(fit.film_ior),
+        film_ior: fit.film.to_ior(),
         substrate_ior: set.substrate_ior.clone(),
         width: fit.width,
         height: fit.height,
@@ -332,10 +376,14 @@ pub fn write_colormap_png(
     crate::image_io::write_png_rgb8(path, iw, ih, buf)
 }
 
-/// Writes every output file of a fit into `out`.
+/// Writes every output file of a fit into `out`, as one step (see
+/// [`crate::image_io::write_files_atomically`]): other files in `out` are left alone, and a
+/// failed or killed run leaves the previous outputs.
 pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -> Result<()> {
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("creating output folder {}", out.display()))?;
+    crate::image_io::write_files_atomically(out, |stage| write_outputs_into(stage, set, fit, json))
+}
+
+fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -> Result<()> {
     let (w, h) = (fit.width, fit.height);
     write_colormap_png(
         &out.join("thickness.png"),
@@ -345,14 +393,14 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) ->
         "thickness (nm)",
     )
     .context("writing thickness.png")?;
-    let rmse: Vec<f32> = fit
-        .sse
+    let chi2_red: Vec<f32> = fit
+        .chi2
         .iter()
         .zip(&fit.samples)
         .zip(&fit.thickness_nm)
         .map(|((&s, &c), d)| {
             if d.is_finite() && c > 0 {
-                (s / c as f32).sqrt()
+                s / c as f32
             } else {
                 f32::NAN
             }
@@ -360,10 +408,10 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) ->
         .collect();
     write_colormap_png(
         &out.join("residual.png"),
-        &rmse,
+        &chi2_red,
         w,
         h,
-        "residual RMSE (reflectance)",
+        "residual χ²/sample (1 = noise level)",
     )
     .context("writing residual.png")?;
     fitted_material(set, fit).write_files_with_provenance(
@@ -371,6 +419,25 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) ->
         &format!("thinfilm estimate ({})", fit.method),
         &fit.provenance.attributes(),
     )?;
+    crate::image_io::write_exr_channels(
+        &out.join(THICKNESS_SIGMA_EXR),
+        w,
+        h,
+        &[("thickness_sigma", &fit.thickness_sigma_nm)],
+    )
+    .with_context(|| format!("writing {THICKNESS_SIGMA_EXR}"))?;
+    if let Some(names) = &set.pixel_names {
+        // Point spectra: one line per spectrum.
+        let mut csv = String::from("spectrum,thickness_nm,thickness_sigma_nm\n");
+        for (i, name) in names.iter().enumerate() {
+            let (d, s) = (fit.thickness_nm[i], fit.thickness_sigma_nm[i]);
+            csv += &format!("{name},{d},{s}\n");
+        }
+        crate::image_io::write_atomically(&out.join(SPECTRA_CSV), |p| {
+            Ok(std::fs::write(p, csv.as_bytes())?)
+        })
+        .with_context(|| format!("writing {SPECTRA_CSV}"))?;
+    }
     json.write(&out.join(crate::material::FIT_JSON))?;
     Ok(())
 }
@@ -417,11 +484,28 @@ pub fn fit_capture_dir(
     opts: &super::Options,
     ground_truth: Option<&Path>,
 ) -> Result<FitRun> {
+    fit_loaded(
+        || {
+            crate::capture::load_capture_set(capture_dir)
+                .with_context(|| format!("loading capture set {}", capture_dir.display()))
+        },
+        out,
+        opts,
+        ground_truth,
+    )
+}
+
+/// [`fit_capture_dir`] for a capture set from `load` (a folder, point spectra, …).
+pub fn fit_loaded(
+    load: impl FnOnce() -> Result<CaptureSet>,
+    out: &Path,
+    opts: &super::Options,
+    ground_truth: Option<&Path>,
+) -> Result<FitRun> {
     use super::{Stages, Stopwatch};
     let mut io = Stages::default();
     let t = Stopwatch::start();
-    let set = crate::capture::load_capture_set(capture_dir)
-        .with_context(|| format!("loading capture set {}", capture_dir.display()))?;
+    let set = load()?;
     t.stop("load", &mut io);
     let fit = super::estimate(&set, opts)?;
     let t = Stopwatch::start();

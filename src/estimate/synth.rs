@@ -141,15 +141,14 @@ pub fn capture(spec: &SynthSpec) -> (CaptureSet, Vec<f32>) {
                     refl.push(r as f32);
                 }
             }
-            AngleCapture {
-                incident_deg: deg,
-                reflectance: refl,
-                valid: vec![true; truth.len()],
-            }
+            AngleCapture::from_bip(deg, refl, nb)
         })
         .collect();
     let set = CaptureSet {
         polarization: spec.polarization,
+        radiometry: crate::capture::Radiometry::Absolute,
+        film_model: None,
+        pixel_names: None,
         ambient_ior: spec.ambient_ior,
         substrate_ior: spec.substrate_ior.clone(),
         wavelengths_nm: spec.wavelengths_nm.clone(),

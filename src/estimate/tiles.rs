@@ -80,6 +80,12 @@ impl TileInfo {
                 .with_context(|| format!("{what}: '{FILM_IOR}'"))?,
             version: get(VERSION)?.to_string(),
         };
+        crate::limits::check_range(
+            format!("{what}: '{FILM_IOR}'"),
+            info.film_ior,
+            f64::MIN_POSITIVE,
+            crate::limits::MAX_IOR,
+        )?;
         if info.rows.1 > info.image_height {
             bail!(
                 "{what}: rows {}:{} lie outside an image of {} rows",
@@ -101,6 +107,9 @@ pub fn fit_hash(set: &CaptureSet, film_ior: f64, options: &super::Options) -> u6
     let super::Options {
         method,
         film_ior: _, // the index used is hashed below
+        film_model,
+        fit_substrate,
+        radiometry,
         min_thickness_nm,
         max_thickness_nm,
         min_film_ior,
@@ -115,7 +124,7 @@ pub fn fit_hash(set: &CaptureSet, film_ior: f64, options: &super::Options) -> u6
     } = options;
     let _ = write!(
         h,
-        "{method}|{film_ior:?}|{min_thickness_nm:?}|{max_thickness_nm:?}|{min_film_ior:?}|\
+        "{method}|{film_ior:?}|{film_model:?}|{fit_substrate:?}|{radiometry:?}|{min_thickness_nm:?}|{max_thickness_nm:?}|{min_film_ior:?}|\
          {max_film_ior:?}|{grid_ior_step:?}|{grid_thickness_step_nm:?}|{grid_pixel_stride}|\
          {band_integration}|{joint_pixels}|{}x{}|{:?}|{:?}|{}|{}|{:?}|{}",
         set.width,
@@ -139,13 +148,39 @@ pub fn fit_hash(set: &CaptureSet, film_ior: f64, options: &super::Options) -> u6
     h.0
 }
 
-/// Checks `--rows A:B` against a capture of `height` rows.
-pub fn check_rows(rows: (usize, usize), height: usize) -> Result<()> {
-    let (a, b) = rows;
-    if a >= b || b > height {
-        bail!("--rows {a}:{b} must satisfy START < END ≤ {height} (the capture's height)");
+/// Which rows a fit covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RowBand {
+    /// Rows `[A, B)` (`--rows A:B`).
+    Rows(usize, usize),
+    /// Band `index` of `count` equal bands (`--part K/N`; band K is rows
+    /// `⌊K·H/N⌋ .. ⌊(K+1)·H/N⌋`), so a job array needs no arithmetic.
+    Part { index: usize, count: usize },
+}
+
+impl RowBand {
+    /// Rows `[A, B)` of a capture of `height` rows; an error naming the option when the band
+    /// is empty or outside the capture.
+    pub fn resolve(self, height: usize) -> Result<(usize, usize)> {
+        match self {
+            RowBand::Rows(a, b) => {
+                if a >= b || b > height {
+                    bail!(
+                        "--rows {a}:{b} must satisfy START < END ≤ {height} (the capture's height)"
+                    );
+                }
+                Ok((a, b))
+            }
+            RowBand::Part { index, count } => {
+                if index >= count || count > height {
+                    bail!(
+                        "--part {index}/{count} must satisfy K < N ≤ {height} (the capture's height)"
+                    );
+                }
+                Ok((index * height / count, (index + 1) * height / count))
+            }
+        }
     }
-    Ok(())
 }
 
 /// Rows a band's thickness stage computes: the band and its halo, inside the image.

@@ -41,6 +41,35 @@ pub struct FitFile {
         with = "optional_index"
     )]
     pub film_index: Option<Ior>,
+    /// The fitted index model (absent when the index was given): its kind, the 1σ of each
+    /// parameter (n(550 nm) first) and, for Cauchy models, A, B (nm²) and C (nm⁴).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub film_model: Option<FilmModelFit>,
+    /// Fitted substrate index (when the fit adjusted the capture's substrate).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub substrate_fit: Option<SubstrateFit>,
+    /// The nuisance model the data chose (scale, lamp shape, background) and its terms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nuisance: Option<NuisanceFit>,
+    /// Noise estimated from the data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<NoiseFit>,
+    /// Noise-weighted residual per degree of freedom (≈ 1 when the model explains the data).
+    #[serde(default)]
+    pub chi2_per_dof: Option<f64>,
+    /// Every model the selection tried, with its information criterion.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub model_selection: Vec<ModelSelectionStep>,
+    /// Statistics of the per-pixel thickness 1σ map (nm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thickness_sigma_nm: Option<MapStats>,
+    /// The per-pixel thickness 1σ map (EXR, one channel `thickness_sigma`, nm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub thickness_sigma_file: Option<String>,
+    /// Pixels whose thickness is not identifiable (less than one fringe in band with an
+    /// unknown scale): no thickness is reported there.
+    #[serde(default)]
+    pub not_identifiable_pixels: usize,
     /// 1σ uncertainty of `film_ior`.
     pub film_ior_uncertainty: Option<f64>,
     /// Why `film_ior_uncertainty` is null.
@@ -92,6 +121,64 @@ pub struct FitFile {
     /// Errors against a ground truth, when one was given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_truth: Option<TruthComparison>,
+}
+
+/// A fitted film index model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FilmModelFit {
+    /// `constant`, `cauchy` or `cauchy3`.
+    pub model: String,
+    /// 1σ of each fitted parameter: n(550 nm), then the dispersion terms.
+    pub parameters_sigma: Vec<Option<f64>>,
+    /// Cauchy n(λ) = A + B/λ² + C/λ⁴, λ in nm.
+    #[serde(default)]
+    pub cauchy_a: Option<f64>,
+    #[serde(default)]
+    pub cauchy_b_nm2: Option<f64>,
+    #[serde(default)]
+    pub cauchy_c_nm4: Option<f64>,
+}
+
+/// A fitted shift of the substrate's real index.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SubstrateFit {
+    pub shift: Option<f64>,
+    pub shift_sigma: Option<f64>,
+    /// Fitted substrate n at 550 nm.
+    pub substrate_ior: Option<f64>,
+}
+
+/// The nuisance terms of the forward model: a free gain per pixel and angle (not listed),
+/// a spectral multiplier per angle (Legendre coefficients beyond the constant) and an
+/// additive background per angle (Legendre coefficients, data units).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NuisanceFit {
+    pub model: String,
+    pub multiplier: Vec<Vec<f64>>,
+    pub background: Vec<Vec<f64>>,
+}
+
+/// The noise the fit weighted by.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NoiseFit {
+    /// Typical 1σ per sample (data units).
+    pub typical: Option<f64>,
+    /// How it was estimated.
+    pub source: String,
+}
+
+/// One model of the selection.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelSelectionStep {
+    pub model: String,
+    /// χ² (noise-weighted residual) on the pixels of the joint fit.
+    pub chi2: f64,
+    /// Global parameters of the model.
+    pub parameters: usize,
+    /// Information criterion (lower is better).
+    pub criterion: f64,
+    /// Kept (the selection moved to it).
+    pub chosen: bool,
 }
 
 /// Statistics of a map; nulls when it has no finite value.
@@ -149,8 +236,7 @@ pub struct TruthComparison {
 impl FitFile {
     /// Reads and checks `fit.json`: errors name the file and the field.
     pub fn read(path: &Path) -> Result<Self> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = crate::limits::read_text(path, "fit file", 16)?;
         let fit: FitFile = serde_json::from_str(&text)
             .with_context(|| format!("{}: not a valid {FIT_FORMAT} document", path.display()))?;
         if fit.format != FIT_FORMAT {
@@ -222,6 +308,15 @@ mod tests {
             method: "full".into(),
             film_ior: Some(1.37),
             film_index: Some("cauchy:1.36,3400".parse().unwrap()),
+            film_model: None,
+            substrate_fit: None,
+            nuisance: None,
+            noise: None,
+            chi2_per_dof: None,
+            model_selection: Vec::new(),
+            thickness_sigma_nm: None,
+            thickness_sigma_file: None,
+            not_identifiable_pixels: 0,
             film_ior_uncertainty: None,
             film_ior_uncertainty_reason: Some("index given by the user".into()),
             film_ior_note: "given".into(),

@@ -13,7 +13,7 @@
 
 use super::FilmMaterial;
 use crate::optics::{Ior, ThinFilm};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use serde_json::json;
 use std::path::Path;
 
@@ -96,9 +96,9 @@ pub fn write(material: &FilmMaterial, path: &Path, texture_name: &str) -> Result
 /// [`FilmMaterial`] (the thickness in nm after the texture's value range).
 pub fn read(path: &Path) -> Result<FilmMaterial> {
     let file = path.display().to_string();
-    let (doc, _, images) = ::gltf::import(path)
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("reading glTF {file}"))?;
+    // Validated before use, like a glTF scene (see `scene::gltf_check`).
+    let (doc, _, images) =
+        crate::limits::contain_panics(path, || crate::scene::gltf_check::import(path))?;
     for m in doc.materials() {
         let what = format!("{file}: material {:?}", m.name().unwrap_or(""));
         let Some((film_n, thickness)) =

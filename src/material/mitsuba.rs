@@ -86,8 +86,7 @@ pub fn write(material: &FilmMaterial, thickness_file: &str, note: &str) -> Strin
 /// Reads a `material.xml` (a `<bsdf type="thinfilm">` element; its thickness texture is
 /// found relative to the file) through the Mitsuba scene parser.
 pub fn read(path: &Path) -> Result<FilmMaterial> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = crate::limits::read_text(path, "material file", 16)?;
     // The element alone is not a scene: parse it as the BSDF of a shape.
     let body = text.trim_start();
     let body = body

@@ -14,7 +14,10 @@ mod fit_file;
 pub mod gltf;
 pub mod mitsuba;
 
-pub use fit_file::{finite, FitFile, MapStats, PixelCounts, TruthComparison, FIT_FORMAT};
+pub use fit_file::{
+    finite, FilmModelFit, FitFile, MapStats, ModelSelectionStep, NoiseFit, NuisanceFit,
+    PixelCounts, SubstrateFit, TruthComparison, FIT_FORMAT,
+};
 
 use crate::capture::GroundTruth;
 use crate::optics::Ior;

@@ -5,7 +5,7 @@
 use super::camera::Ray;
 use super::geometry::{Frame, SurfaceInteraction};
 use crate::scene::{Geometry, Scene, TriangleMesh};
-use glam::{Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3};
 use obvhs::cwbvh::CwBvh;
 use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
@@ -15,6 +15,8 @@ use obvhs::triangle::Triangle;
 pub struct SphereGeom {
     pub center: Vec3,
     pub radius: f32,
+    /// World → the sphere's local frame, where Mitsuba measures its (u, v).
+    pub to_local: Mat3,
     pub flip_normals: bool,
     pub shape: u32,
 }
@@ -113,6 +115,7 @@ impl Accel {
                 Geometry::Sphere {
                     center,
                     radius,
+                    rotation,
                     flip_normals,
                 } => {
                     if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
@@ -123,6 +126,7 @@ impl Accel {
                     spheres.push(SphereGeom {
                         center: *center,
                         radius: *radius,
+                        to_local: rotation.transpose(),
                         flip_normals: *flip_normals,
                         shape: si as u32,
                     });
@@ -392,10 +396,11 @@ impl Accel {
                 // Re-project onto the surface to curb error growth with distance.
                 let p = s.center + n * s.radius;
                 // Mitsuba's sphere UV: u = φ/2π, v = θ/π in the local frame (z up).
-                let phi = n.y.atan2(n.x);
+                let local = s.to_local * n;
+                let phi = local.y.atan2(local.x);
                 let uv = Vec2::new(
                     (phi * std::f32::consts::FRAC_1_PI * 0.5).rem_euclid(1.0),
-                    n.z.clamp(-1.0, 1.0).acos() * std::f32::consts::FRAC_1_PI,
+                    local.z.clamp(-1.0, 1.0).acos() * std::f32::consts::FRAC_1_PI,
                 );
                 if s.flip_normals {
                     n = -n;
@@ -1103,10 +1108,48 @@ mod tests {
     }
 
     #[test]
+    fn rotated_sphere_uv_turn_with_the_sphere() {
+        // Mitsuba 3.9 (scalar_rgb), sphere to_world = translate(0,0,1)·rotate(z, 225°): the
+        // rays hit (1,0,1) at uv (0.375, 0.5), (0,1,1) at (0.625, 0.5), (0,0,2) at (0, 0).
+        let scene = crate::scene::mitsuba::load_str(
+            r#"<scene version="3.0.0"><shape type="sphere"><transform name="to_world">
+                 <rotate z="1" angle="225"/><translate z="1"/></transform></shape></scene>"#,
+            std::path::Path::new("."),
+            &[],
+            "sphere.xml",
+        )
+        .unwrap();
+        let (accel, _) = Accel::build(&scene).unwrap();
+        for (origin, dir, uv) in [
+            (Vec3::new(5.0, 0.0, 1.0), -Vec3::X, Vec2::new(0.375, 0.5)),
+            (Vec3::new(0.0, 5.0, 1.0), -Vec3::Y, Vec2::new(0.625, 0.5)),
+            (Vec3::new(0.0, 0.0, 6.0), -Vec3::Z, Vec2::new(0.0, 0.0)),
+        ] {
+            let ray = Ray {
+                origin,
+                dir,
+                tmin: 0.0,
+                tmax: f32::INFINITY,
+            };
+            let si = accel.interaction(&ray, &accel.intersect(&ray).unwrap());
+            // u wraps at the seam (1 ≡ 0) and is undefined at the pole.
+            let du = (si.uv.x - uv.x)
+                .rem_euclid(1.0)
+                .min((uv.x - si.uv.x).rem_euclid(1.0));
+            assert!(
+                (du < 1e-4 || uv.y == 0.0) && (si.uv.y - uv.y).abs() < 1e-3,
+                "{origin}: {} vs Mitsuba's {uv}",
+                si.uv
+            );
+        }
+    }
+
+    #[test]
     fn sphere_hits_from_outside_and_inside() {
         let s = SphereGeom {
             center: Vec3::ZERO,
             radius: 1.0,
+            to_local: Mat3::IDENTITY,
             flip_normals: false,
             shape: 0,
         };

@@ -1061,6 +1061,7 @@ impl LightSet {
                     center,
                     radius,
                     flip_normals,
+                    ..
                 } => AreaGeometry::Sphere {
                     center: *center,
                     radius: *radius,

@@ -99,6 +99,10 @@ impl std::fmt::Debug for Cancel {
 /// `polarizer_spheres` (0.75/1.11/1.14/1.11 s), 1.45/0.94/0.48/0.41 on `bubble`
 /// (0.48/0.59/0.79/0.95 s), 2.12/1.65/1.45/1.45 on `lens` (1.6/2.1/2.5/2.3 s).
 pub const DEFAULT_FRESNEL_SPLITS: u32 = 3;
+/// Most samples per pixel one render takes (2^20; references use 2^14).
+pub const MAX_SPP: u32 = 1 << 20;
+/// Deepest a path may go without Russian roulette (see `prepare`).
+const MAX_UNROULETTED_DEPTH: i32 = 1024;
 /// Upper bound on `fresnel_splits`: 2^16 branches per camera sample at worst.
 pub const MAX_FRESNEL_SPLITS: u32 = 16;
 
@@ -347,6 +351,8 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         bail!("image resolution must be between 1×1 and 65536×65536, got {width}×{height}");
     }
     let sample_range = sample_range(scene, options)?;
+    let filter = Filter::new(&scene.film.filter)?;
+    check_render_memory(&filter, width, height, sample_range, options.threads)?;
     let mut settings = scene.integrator;
     if let Some(d) = options.max_depth {
         settings.max_depth = d;
@@ -355,6 +361,23 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         bail!(
             "max_depth must be −1 (unlimited) or ≥ 1, got {}",
             settings.max_depth
+        );
+    }
+    // A path ends at max_depth or, past rr_depth, by Russian roulette: with neither within
+    // reach, a path between two perfect mirrors would never end.
+    if (settings.max_depth == -1 || settings.max_depth > MAX_UNROULETTED_DEPTH)
+        && settings.rr_depth > MAX_UNROULETTED_DEPTH
+    {
+        bail!(
+            "rr_depth {} with max_depth {}: paths could bounce forever; give max_depth or rr_depth ≤ {MAX_UNROULETTED_DEPTH}",
+            settings.rr_depth,
+            settings.max_depth
+        );
+    }
+    if sample_range.1 - sample_range.0 > MAX_SPP {
+        bail!(
+            "{} samples per pixel: at most {MAX_SPP} per render (split larger ones with --sample-range)",
+            sample_range.1 - sample_range.0
         );
     }
     let camera = camera::PerspectiveCamera::new(&scene.camera, width, height)?;
@@ -393,7 +416,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         settings,
         width,
         height,
-        filter: Filter::new(&scene.film.filter)?,
+        filter,
         seed: options.seed.unwrap_or(scene.seed),
         sampler: options.sampler.unwrap_or(scene.sampler),
         sample_range,
@@ -422,6 +445,32 @@ fn sample_range(scene: &Scene, options: &RenderOptions) -> Result<(u32, u32)> {
             Ok((0, spp))
         }
     }
+}
+
+/// Refuses a render whose buffers would exceed the memory budget (see [`render_prepared`]):
+/// the rows of filter splats, the accumulated and final images and the PNG bytes, plus one
+/// pixel's samples per thread.
+fn check_render_memory(
+    filter: &Filter,
+    width: u32,
+    height: u32,
+    sample_range: (u32, u32),
+    threads: Option<usize>,
+) -> Result<()> {
+    let rows = match filter {
+        Filter::Box => 1,
+        _ => 2 * filter.radius().ceil() as u64 + 1,
+    };
+    let pixels = width as u64 * height as u64;
+    let threads = threads.unwrap_or_else(rayon::current_num_threads) as u64;
+    let samples = (sample_range.1 - sample_range.0) as u64;
+    let bytes = pixels
+        .saturating_mul(16 * rows + 16 + 12 + 3)
+        .saturating_add(threads.saturating_mul(samples).saturating_mul(12));
+    crate::limits::check_alloc(
+        format!("a {width}×{height} render of {samples} samples per pixel"),
+        bytes,
+    )
 }
 
 use batch::BATCH;

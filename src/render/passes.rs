@@ -78,6 +78,17 @@ pub fn remaining_nodes(range: (u32, u32), done_end: u32) -> Vec<(u32, u32)> {
     out
 }
 
+/// Part `index` of `count` equal parts of a render of `spp` samples per pixel: samples
+/// `⌊k·spp/N⌋ .. ⌊(k+1)·spp/N⌋`. When `spp` and `count` are powers of two every part is a
+/// node of the summation tree, so the parts merge bit-identically.
+pub fn part(spp: u32, index: u32, count: u32) -> anyhow::Result<(u32, u32)> {
+    if index >= count || count > spp {
+        anyhow::bail!("--part {index}/{count} must satisfy K < N ≤ {spp} (the samples per pixel)");
+    }
+    let at = |k: u32| (k as u64 * spp as u64 / count as u64) as u32;
+    Ok((at(index), at(index + 1)))
+}
+
 /// Whether `[a, b)` is a node of the summation tree of a render of `range` (see the module
 /// documentation): the tree's own subtrees, found by descending from the root.
 pub fn is_tree_node(range: (u32, u32), node: (u32, u32)) -> bool {
@@ -185,6 +196,23 @@ mod tests {
             }
             assert!(is_tree_node(range, (range.0, done)));
         }
+    }
+
+    #[test]
+    fn equal_parts_of_power_of_two_renders_are_tree_nodes() {
+        for (spp, count) in [(64, 4), (1024, 8), (16, 16), (256, 1)] {
+            let mut next = 0;
+            for k in 0..count {
+                let r = part(spp, k, count).unwrap();
+                assert_eq!(r.0, next);
+                assert!(is_tree_node((0, spp), r), "{r:?} of {spp}");
+                next = r.1;
+            }
+            assert_eq!(next, spp);
+        }
+        assert_eq!(part(100, 2, 3).unwrap(), (66, 100));
+        assert!(part(8, 3, 3).is_err());
+        assert!(part(4, 0, 8).is_err());
     }
 
     #[test]

@@ -37,7 +37,7 @@ use crate::optics::{Complex64, Ior};
 use crate::render::bsdf::{
     conductor::Conductor, dielectric::Dielectric, plastic::Plastic, thinfilm::ThinFilmBsdf, Bsdf,
 };
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use glam::{Mat4, Vec2, Vec3};
 use gltf::image::Format;
 use std::collections::HashMap;
@@ -298,9 +298,8 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         bail!("glTF file {} does not exist", path.display());
     }
     let file = path.display().to_string();
-    let (doc, buffers, images) = gltf::import(path)
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("reading glTF {file}"))?;
+    // Validated completely before any accessor is read (see `gltf_check`).
+    let (doc, buffers, images) = super::gltf_check::import(path)?;
     let mut loader = Loader {
         doc: &doc,
         images: &images,
@@ -317,6 +316,12 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
     let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
     while let Some((node, parent)) = stack.pop() {
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if !(world.is_finite() && world.determinant().is_normal()) {
+            bail!(
+                "{file}: node {}: its world transform is singular or not finite",
+                node.index()
+            );
+        }
         for c in node.children() {
             stack.push((c, world));
         }

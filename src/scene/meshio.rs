@@ -94,11 +94,86 @@ fn prop_list(p: &Property) -> Option<Vec<i64>> {
     })
 }
 
+/// Bytes of a PLY scalar type, or None for an unknown name.
+fn ply_type_size(name: &str) -> Option<u64> {
+    Some(match name {
+        "char" | "uchar" | "int8" | "uint8" => 1,
+        "short" | "ushort" | "int16" | "uint16" => 2,
+        "int" | "uint" | "int32" | "uint32" | "float" | "float32" => 4,
+        "double" | "float64" => 8,
+        _ => return None,
+    })
+}
+
+/// Checks a PLY header's element counts against the file before the reader allocates one
+/// record per element: an element occupies at least its fixed-size properties (and each
+/// list's count) in a binary file, one character and a separator per property in an ascii
+/// one — and an element without properties occupies nothing, so its count is unbounded.
+fn check_ply_header(path: &Path, what: &str) -> Result<()> {
+    use std::io::{BufRead, Read};
+    let file_len = std::fs::metadata(path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .len();
+    let mut reader = std::io::BufReader::new(std::fs::File::open(path)?);
+    let (mut header_len, mut ascii) = (0u64, false);
+    // (name, count, minimum bytes per element, properties)
+    let mut elements: Vec<(String, u64, u64, usize)> = Vec::new();
+    let mut line = Vec::new();
+    loop {
+        line.clear();
+        let n = reader.by_ref().take(4096).read_until(b'\n', &mut line)?;
+        if n == 0 || header_len > 1 << 20 {
+            return Ok(()); // no end_header: the reader reports it
+        }
+        header_len += n as u64;
+        let text = String::from_utf8_lossy(&line);
+        let words: Vec<&str> = text.split_whitespace().collect();
+        match words.as_slice() {
+            ["end_header"] => break,
+            ["format", f, ..] => ascii = *f == "ascii",
+            ["element", name, count] => {
+                let count = count.parse::<u64>().map_err(|_| {
+                    anyhow!("{what}: element '{name}' has count '{count}', not a whole number")
+                })?;
+                elements.push((name.to_string(), count, 0, 0));
+            }
+            ["property", "list", count_type, _, _] | ["property", count_type, _] => {
+                if let Some(e) = elements.last_mut() {
+                    let size = ply_type_size(count_type).unwrap_or(1);
+                    e.2 += if ascii { 2 } else { size };
+                    e.3 += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+    let body = file_len.saturating_sub(header_len);
+    let mut records = 0u64;
+    for (name, count, min_bytes, props) in &elements {
+        if *props == 0 && *count > 0 {
+            bail!("{what}: element '{name}' (count {count}) has no properties");
+        }
+        let need = count.saturating_mul(*min_bytes);
+        if need > body {
+            bail!(
+                "{what}: the header declares {count} '{name}' elements, at least {need} bytes, but only {body} bytes follow it"
+            );
+        }
+        records = records.saturating_add(*count);
+    }
+    // The reader keeps a map of named properties per element (~256 bytes each).
+    crate::limits::check_alloc(
+        format!("{what}: {records} elements"),
+        records.saturating_mul(256),
+    )
+}
+
 /// Loads a PLY mesh (ascii, binary little or big endian). Vertex properties x, y, z
 /// (required), nx, ny, nz and u, v / s, t / texture_u, texture_v (optional); faces from
 /// `vertex_indices` or `vertex_index`, polygons fan-triangulated.
 pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
     check_exists(path, "PLY")?;
+    check_ply_header(path, &format!("PLY {}", path.display()))?;
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let mut reader = std::io::BufReader::new(file);
     let ply = Parser::<DefaultElement>::new()

@@ -1,26 +1,19 @@
-//! Mitsuba 3 XML scene subset: the XML mechanics (values, references, transforms,
-//! parameters) and the plugins other than BSDFs.
+//! Mitsuba 3 XML scenes: the parser, Mitsuba's scene-description mechanics and the plugins
+//! the renderer can draw as Mitsuba draws them. docs/mitsuba-support.md lists every
+//! supported plugin and parameter, Mitsuba's defaults where one is omitted, and each
+//! deviation. BSDFs are the models registered in [`crate::render::bsdf`], each built by its
+//! own builder from [`PluginParams`] (the typed parameter access of [`params`]).
 //!
-//! Supported: `<scene version>`, `<default>` / `$param` substitution (with `-D` overrides),
-//! `id` / `<ref>`, transforms (`lookat`, `translate`, `rotate`, `scale`, `matrix`, composed in
-//! document order: each new operation is applied after the previous ones, M ← op · M),
-//! `perspective` sensor (`fov`, `fov_axis`, `focal_length`, `near_clip`, `far_clip`, `to_world`)
-//! with `hdrfilm`
-//! (`width`, `height`, `rfilter` box/tent/gaussian; format options accepted and ignored since
-//! they do not change pixel values) and any sampler (`sample_count`, `seed`; `independent` → PCG, the stratified types → Owen-scrambled Sobol'), `path`
-//! integrator (`max_depth`, `rr_depth`, `hide_emitters`), shapes `obj`, `ply`, `sphere`,
-//! `rectangle`, `cube`, `disk` (`to_world`, `flip_normals`, `face_normals`), emitters
-//! `envmap`, `constant`, `area`, `point`, the BSDFs registered in [`crate::render::bsdf`]
-//! (each built by its model's own builder from [`PluginParams`], the typed parameter access
-//! of [`params`]), the sensor extension `<string name="polarizer" value="s|p|DEG"/>`
-//! (scenes/README.md),
-//! textures `bitmap`, `checkerboard`, values `float`, `integer`, `boolean`, `string`, `rgb`,
-//! `spectrum`, `point`, `vector`.
+//! Mechanics: `<scene version>`, `<include>`, `<path>`, `<default>` / `$param` (with `-D`
+//! overrides), `id` / `<ref>` / `<alias>`, transforms composed in document order (each new
+//! operation applied after the previous ones, M ← op · M), `shapegroup` / `instance`.
 //!
-//! Everything else — elements, attributes, parameters, plugin types — is an error naming the
-//! file, line:column, element and plugin, never silently ignored. The only tolerated
-//! deviation: rough BSDFs with Mitsuba's default `beckmann` distribution are rendered with
-//! GGX (the renderer's only microfacet model) and a warning is printed.
+//! Everything else — elements, attributes, parameters, plugin types, values a plugin would
+//! need a model the renderer lacks (Beckmann microfacets, anisotropic roughness, scaled
+//! specular lobes, RGB-valued indices) — is an error naming the file, line:column, element,
+//! plugin and parameter. No plugin is silently replaced by another; parameters that change
+//! nothing in the image (e.g. `focus_distance` on a pinhole camera) are accepted as Mitsuba
+//! accepts them, and wrapper integrators say on stderr what they ignore.
 
 // `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -34,8 +27,9 @@ use super::{
     IntegratorSettings, Polarizer, ReconstructionFilter, SamplerKind, Scene, Shape, SpectrumDesc,
     TextureDesc, TextureFilter, TriangleMesh, WrapMode,
 };
+use crate::optics::Ior;
 use crate::render::bsdf::{self, Bsdf};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use roxmltree::{Document, Node};
 use std::collections::{HashMap, HashSet};
@@ -83,8 +77,7 @@ pub fn mitsuba_ior(name: &str) -> Option<f64> {
 /// directories (the last declared first), then the scene file's directory, then the current
 /// directory.
 pub fn load_file(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading scene file {}", path.display()))?;
+    let text = crate::limits::read_text(path, "scene file", 16)?;
     let base = path
         .parent()
         .map(Path::to_path_buf)
@@ -121,6 +114,7 @@ pub fn load_str(
             base_dir.to_path_buf(),
         )],
         include_stack: Vec::new(),
+        included_bytes: 0,
         search_paths,
         params: Vec::new(),
         pending: HashMap::new(),
@@ -131,6 +125,7 @@ pub fn load_str(
         emitters: Vec::new(),
         sensor: None,
         integrator: None,
+        depth: 0,
         instanced_triangles: 0,
         direct_strategies: None,
     };
@@ -250,6 +245,9 @@ struct Ctx<'a, 'i> {
     files: Vec<SourceFile>,
     /// Canonical paths of the `<include>` files being expanded (cycle detection).
     include_stack: Vec<PathBuf>,
+    /// Bytes of every included file read so far (an include tree without cycles can still
+    /// expand exponentially: ten includes of a file that includes ten …).
+    included_bytes: u64,
     /// Mitsuba's file resolver: directories searched in order for relative file names.
     search_paths: Vec<PathBuf>,
     /// `$name` substitutions, longest name first (Mitsuba substitutes in that order).
@@ -269,7 +267,9 @@ struct Ctx<'a, 'i> {
     instanced_triangles: usize,
     /// A `direct` integrator's strategies (emitter sampling, BSDF sampling), checked against
     /// the scene's lights and BSDFs once everything is loaded.
-    direct_strategies: Option<(Node<'a, 'i>, bool, bool)>,
+    direct_strategies: Option<(Node<'a, 'i>, u32, bool)>,
+    /// Objects being parsed around the current one (nesting depth).
+    depth: usize,
 }
 
 /// A node's identity across documents: (document address, node id).
@@ -312,6 +312,10 @@ struct Param {
 /// Mitsuba's include depth limit (`ParserConfig::max_include_depth`).
 const MAX_INCLUDE_DEPTH: usize = 15;
 
+/// Most `<include>` expansions in one scene (real scenes use a few dozen; without a cap, a
+/// tree of repeated includes 15 deep expands ten-fold per level).
+const MAX_INCLUDES: usize = 10_000;
+
 /// A child element of an object after `<include>` expansion, with the property name an
 /// `<include name="…">` gives an included non-scene object.
 #[derive(Clone)]
@@ -335,6 +339,48 @@ const SCENE_ACCEL_PROPS: &[&str] = &[
     "kd_exact_primitive_threshold",
 ];
 
+/// Deepest nesting of objects (a BSDF inside a BSDF inside a shape …) accepted; real scenes
+/// stay below 5, and the parser recurses once per level.
+const MAX_NESTING: usize = 32;
+
+/// Physical domains of numeric parameters, by name: Mitsuba gives each name one meaning
+/// across plugins, so one table checks every plugin's parameters as they are collected —
+/// finite, and inside these closed ranges (`(names, lowest, highest)`). Spectra and RGB
+/// values are checked component by component.
+const DOMAINS: &[(&[&str], f64, f64)] = &[
+    (
+        &[
+            "reflectance",
+            "diffuse_reflectance",
+            "specular_reflectance",
+            "specular_transmittance",
+            "transmittance",
+            "color0",
+            "color1",
+            "radiance",
+            "intensity",
+            "irradiance",
+            "scale",
+        ],
+        0.0,
+        f32::MAX as f64,
+    ),
+    (
+        &["radius", "near_clip", "far_clip"],
+        f32::MIN_POSITIVE as f64,
+        f32::MAX as f64,
+    ),
+    (&["stddev"], f32::MIN_POSITIVE as f64, 32.0),
+    (&["alpha", "alpha_u", "alpha_v"], 0.0, 10.0),
+    (
+        &["int_ior", "ext_ior", "film_ior", "substrate_ior", "eta"],
+        f32::MIN_POSITIVE as f64,
+        crate::limits::MAX_IOR,
+    ),
+    (&["k", "substrate_k"], 0.0, crate::limits::MAX_EXTINCTION),
+    (&["thickness"], 0.0, crate::limits::MAX_THICKNESS_NM),
+];
+
 const OBJECT_TAGS: &[&str] = &[
     "medium",
     "phase",
@@ -350,8 +396,13 @@ const OBJECT_TAGS: &[&str] = &[
     "rfilter",
 ];
 
+/// A number as scene files may hold it: finite and within single precision (the renderer's
+/// geometry and spectra are f32; `1e39` would silently become infinity).
 fn parse_f64(s: &str) -> Option<f64> {
-    s.trim().parse::<f64>().ok()
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && v.abs() <= f32::MAX as f64)
 }
 
 /// Splits "1, 2, 3" or "1 2 3".
@@ -504,15 +555,30 @@ impl<'a, 'i> Ctx<'a, 'i> {
     /// [`resolve_path`](Self::resolve_path) with `first` searched before the resolver.
     fn resolve_in(&self, node: Node, file: &str, first: &[PathBuf]) -> Result<PathBuf> {
         let p = Path::new(file);
+        let not_a_file = |f: &Path| {
+            self.err(
+                node,
+                format!(
+                    "'{}' is not a regular file (a folder or a device)",
+                    f.display()
+                ),
+            )
+        };
         if p.is_absolute() {
             if p.is_file() {
                 return Ok(p.to_path_buf());
+            }
+            if p.exists() {
+                return Err(not_a_file(p));
             }
             return Err(self.err(node, format!("file '{file}' not found")));
         }
         let dirs: Vec<&PathBuf> = first.iter().chain(&self.search_paths).collect();
         if let Some(found) = dirs.iter().map(|d| d.join(p)).find(|f| f.is_file()) {
             return Ok(found);
+        }
+        if let Some(other) = dirs.iter().map(|d| d.join(p)).find(|f| f.exists()) {
+            return Err(not_a_file(&other));
         }
         let looked: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
         Err(self.err(
@@ -584,9 +650,24 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 format!("<include> nested deeper than {MAX_INCLUDE_DEPTH} files"),
             ));
         }
+        if self.files.len() > MAX_INCLUDES {
+            return Err(self.err(
+                node,
+                format!("more than {MAX_INCLUDES} <include> expansions in one scene"),
+            ));
+        }
         let label = path.display().to_string();
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| self.err(node, format!("reading included file {label}: {e}")))?;
+        let text = crate::limits::read_text(&path, "included file", 16)
+            .map_err(|e| self.err(node, format!("{e:#}")))?;
+        self.included_bytes += text.len() as u64;
+        crate::limits::check_alloc(
+            format!(
+                "the files <include>d so far ({} bytes)",
+                self.included_bytes
+            ),
+            self.included_bytes.saturating_mul(16),
+        )
+        .map_err(|e| self.err(node, format!("{e:#}")))?;
         let text: &'i str = self.texts.alloc(text);
         let doc: &'a Document<'i> =
             self.docs.alloc(Document::parse(text).map_err(|e| {
@@ -670,6 +751,15 @@ impl<'a, 'i> Ctx<'a, 'i> {
         for Child { node: c, .. } in children {
             if self.built.contains(&node_key(c)) {
                 continue;
+            }
+            if let Some(id) = self.attr(c, "id")? {
+                if self
+                    .pending
+                    .get(&id)
+                    .is_some_and(|n| node_key(*n) == node_key(c))
+                {
+                    self.pending.remove(&id);
+                }
             }
             self.top_level(c)?;
         }
@@ -788,17 +878,30 @@ impl<'a, 'i> Ctx<'a, 'i> {
 
     /// A `direct` integrator without one of its strategies misses light the path tracer
     /// finds (see [`direct_integrator`](Self::direct_integrator)): refused when that light
-    /// exists in this scene.
-    fn check_direct_strategies(&self) -> Result<()> {
-        let Some((node, emitter_sampling, bsdf_sampling)) = self.direct_strategies else {
+    /// exists in this scene. With several emitter samples, Mitsuba 3.9 adds every sample of a
+    /// delta light (point) at full weight — its MIS weight for delta lights lacks the
+    /// 1/`emitter_samples` factor (`direct.cpp`) — so point lights come out
+    /// `emitter_samples` times brighter; thinfilm scales them to render what Mitsuba renders.
+    fn check_direct_strategies(&mut self) -> Result<()> {
+        let Some((node, emitter_samples, bsdf_sampling)) = self.direct_strategies else {
             return Ok(());
         };
-        if !emitter_sampling
-            && self
-                .emitters
-                .iter()
-                .any(|e| matches!(e, EmitterDesc::Point { .. }))
-        {
+        let has_point = self
+            .emitters
+            .iter()
+            .any(|e| matches!(e, EmitterDesc::Point { .. }));
+        if emitter_samples > 1 && has_point {
+            eprintln!(
+                "note: {}: direct with emitter_samples = {emitter_samples}: point lights are {emitter_samples}× as bright, as Mitsuba renders them (its delta-light weight omits 1/emitter_samples)",
+                self.loc(node)
+            );
+            for e in &mut self.emitters {
+                if let EmitterDesc::Point { intensity, .. } = e {
+                    *intensity = scaled_spectrum(intensity, emitter_samples as f32);
+                }
+            }
+        }
+        if emitter_samples == 0 && has_point {
             return Err(self.err(
                 node,
                 "direct with emitter_samples = 0 in a scene with point lights is not supported (Mitsuba never reaches them; thinfilm's path tracer would)",
@@ -951,7 +1054,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "float" => {
                 self.check_attrs(node, &["name", "value", "id"])?;
                 let v = self.req_attr(node, "value")?;
-                Val::Float(parse_f64(&v).ok_or_else(|| bad(self, "a number", &v))?)
+                Val::Float(parse_f64(&v).ok_or_else(|| bad(self, "a finite number", &v))?)
             }
             "integer" => {
                 self.check_attrs(node, &["name", "value", "id"])?;
@@ -1034,9 +1137,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let mut out = [default; 3];
         for (k, key) in ["x", "y", "z"].iter().enumerate() {
             if let Some(v) = self.attr(node, key)? {
-                out[k] = parse_f64(&v)
-                    .ok_or_else(|| self.err(node, format!("{key}=\"{v}\" is not a number")))?
-                    as f32;
+                out[k] = parse_f64(&v).ok_or_else(|| {
+                    self.err(node, format!("{key}=\"{v}\" is not a finite number"))
+                })? as f32;
             }
         }
         Ok(Vec3::from(out))
@@ -1064,7 +1167,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 if c.tag_name().name() == "float" && c.attribute("name") == Some("scale") {
                     let v = self.req_attr(c, "value")?;
                     scale = parse_f64(&v)
-                        .ok_or_else(|| self.err(c, format!("'{v}' is not a number")))?
+                        .ok_or_else(|| self.err(c, format!("'{v}' is not a finite number")))?
                         as f32;
                 } else {
                     return Err(self.err(c, "unsupported parameter of a d65 spectrum (only scale)"));
@@ -1111,12 +1214,13 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         None => self.xyz(c, 0.0)?,
                     };
                     let angle = self.req_attr(c, "angle")?;
-                    let angle = parse_f64(&angle)
-                        .ok_or_else(|| self.err(c, format!("angle=\"{angle}\" is not a number")))?;
-                    let axis = axis
-                        .try_normalize()
-                        .ok_or_else(|| self.err(c, "rotation axis is zero"))?;
-                    Mat4::from_axis_angle(axis, (angle as f32).to_radians())
+                    let angle = parse_f64(&angle).ok_or_else(|| {
+                        self.err(c, format!("angle=\"{angle}\" is not a finite number"))
+                    })?;
+                    if axis == Vec3::ZERO {
+                        return Err(self.err(c, "rotation axis is zero"));
+                    }
+                    mitsuba_rotation(axis, angle)
                 }
                 "matrix" => {
                     self.check_attrs(c, &["value"])?;
@@ -1227,6 +1331,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             } else {
                 name
             };
+            self.check_domain(c, &name, &val)?;
             // Unnamed nested objects ("<bsdf>") are checked by the plugin that takes them.
             if !name.starts_with('<') && list.iter().any(|p: &Prop| p.name == name) {
                 return Err(self.err(c, format!("parameter '{name}' given twice")));
@@ -1242,8 +1347,60 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     fn parse_object(&mut self, node: Node<'a, 'i>) -> Result<Val> {
+        if self.depth >= MAX_NESTING {
+            return Err(self.err(node, format!("objects nested more than {MAX_NESTING} deep")));
+        }
+        self.depth += 1;
+        let val = self.parse_object_inner(node);
+        self.depth -= 1;
+        val
+    }
+
+    /// Checks a parameter's value against its name's entry in [`DOMAINS`] (and an index
+    /// given as text against the physical index range).
+    fn check_domain(&self, node: Node, name: &str, val: &Val) -> Result<()> {
+        let Some(&(_, lo, hi)) = DOMAINS.iter().find(|(names, _, _)| names.contains(&name)) else {
+            return Ok(());
+        };
+        let values: Vec<f64> = match val {
+            Val::Float(v) => vec![*v],
+            Val::Int(v) => vec![*v as f64],
+            Val::Rgb(c) => c.iter().map(|&x| x as f64).collect(),
+            Val::Spectrum(s) | Val::Texture(TextureDesc::Value(s)) => match s {
+                SpectrumDesc::Constant(v) | SpectrumDesc::D65 { scale: v } => vec![*v as f64],
+                SpectrumDesc::Rgb(c) => c.iter().map(|&x| x as f64).collect(),
+                SpectrumDesc::Tabulated(t) => t.iter().map(|p| p.1 as f64).collect(),
+            },
+            Val::Str(s) if lo > 0.0 && mitsuba_ior(s).is_none() => {
+                // An index written as text ("1.5", "2+0.1i", "cauchy:…"): physical range.
+                if let Ok(ior) = s.parse::<Ior>() {
+                    crate::limits::check_index(format!("parameter '{name}'"), &ior)
+                        .map_err(|e| self.err(node, e))?;
+                }
+                Vec::new()
+            }
+            _ => Vec::new(),
+        };
+        if let Some(v) = values
+            .iter()
+            .find(|v| !(v.is_finite() && **v >= lo && **v <= hi))
+        {
+            return Err(self.err(
+                node,
+                format!("parameter '{name}' = {v} is outside [{lo}, {hi}]"),
+            ));
+        }
+        Ok(())
+    }
+
+    fn parse_object_inner(&mut self, node: Node<'a, 'i>) -> Result<Val> {
         let tag = node.tag_name().name();
-        self.check_attrs(node, &["type", "id", "name"])?;
+        if node.parent().is_some_and(|p| p.is_root()) {
+            // The root element of an included file carries the scene version.
+            self.check_attrs(node, &["type", "id", "name", "version"])?;
+        } else {
+            self.check_attrs(node, &["type", "id", "name"])?;
+        }
         if matches!(tag, "medium" | "phase" | "volume") {
             let plugin = self.attr(node, "type")?.unwrap_or_default();
             return Err(self.err(
@@ -1577,14 +1734,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         to_world: &Mat4,
         flip_normals: bool,
     ) -> Result<Geometry> {
-        let center = match p.take("center") {
-            Some(Prop {
-                val: Val::Point(v) | Val::Vector(v),
-                ..
-            }) => v,
-            Some(q) => return Err(self.err(q.node, "center must be a <point>")),
-            None => Vec3::ZERO,
-        };
+        let center = self.point(p, "center", Vec3::ZERO)?;
         let radius = p.float(self, "radius", 1.0)? as f32;
         let m = *to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
         sphere_geometry(&m, flip_normals).map_err(|e| self.err(p.node, e))
@@ -1600,12 +1750,14 @@ impl<'a, 'i> Ctx<'a, 'i> {
     ) -> Result<TriangleMesh> {
         let mut to_world = *to_world;
         let mut file_face_normals = false;
+        let mut what = self.loc(p.node);
         let mut mesh = match p.plugin.as_str() {
             "obj" | "ply" | "serialized" => {
                 let file = p
                     .string(self, "filename")?
                     .ok_or_else(|| self.err(p.node, "missing parameter 'filename'"))?;
                 let path = self.resolve_path(p.node, &file)?;
+                what = format!("{what}: mesh {}", path.display());
                 let loaded = match p.plugin.as_str() {
                     // Mitsuba flips OBJ texture coordinates by default (v ↦ 1 − v), PLY not.
                     "obj" => super::meshio::load_obj(&path).map(|m| (m, true)),
@@ -1666,7 +1818,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         if flip_normals {
             mesh.flip();
         }
-        mesh.validate(&self.loc(p.node))?;
+        mesh.validate(&what)?;
         Ok(mesh)
     }
 
@@ -1822,7 +1974,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let width = p.int(self, "width", 768)?;
         let height = p.int(self, "height", 576)?;
         if !(1..=65536).contains(&width) || !(1..=65536).contains(&height) {
-            return Err(self.err(p.node, format!("film size {width}×{height} out of range")));
+            return Err(self.err(
+                p.node,
+                format!("film width {width} × height {height}: each must be in 1..=65536"),
+            ));
         }
         // A crop window other than the whole film is not supported.
         let crop = [
@@ -1873,8 +2028,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "box" => ReconstructionFilter::Box,
             "tent" => {
                 let radius = p.float(self, "radius", 1.0)? as f32;
-                if !(radius > 0.0) {
-                    return Err(self.err(p.node, "tent radius must be > 0"));
+                // The filter's footprint is allocated per image row: keep it to pixels.
+                if !(radius > 0.0 && radius <= 32.0) {
+                    return Err(self.err(
+                        p.node,
+                        format!("tent radius {radius} must be in (0, 32] pixels"),
+                    ));
                 }
                 ReconstructionFilter::Tent { radius }
             }
@@ -2001,7 +2160,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 "need at least one BSDF or emitter sample (counts ≥ 0)",
             ));
         }
-        self.direct_strategies = Some((p.node, emitter > 0, bsdf > 0));
+        self.direct_strategies = Some((p.node, emitter.min(u32::MAX as i64) as u32, bsdf > 0));
         Ok(IntegratorSettings {
             max_depth: 2,
             rr_depth: i32::MAX,
@@ -2090,6 +2249,44 @@ fn mitsuba_default_camera(bounds: Option<(Vec3, Vec3)>) -> Camera {
     }
 }
 
+/// Mitsuba's `<rotate>` (drjit's `rotate`): Rodrigues' formula with the axis as given, *not*
+/// normalised — an axis of length ≠ 1 also scales and shears, exactly as in Mitsuba 3.9
+/// (`rotate x="0" y="1" z="1" angle="15"` gives a matrix with unit diagonal entries on y, z).
+fn mitsuba_rotation(axis: Vec3, angle_deg: f64) -> Mat4 {
+    let (s, c) = angle_deg.to_radians().sin_cos();
+    let a = axis.as_dvec3();
+    let k = 1.0 - c;
+    let m = glam::DMat3::from_cols(
+        glam::DVec3::new(
+            c + a.x * a.x * k,
+            a.x * a.y * k + a.z * s,
+            a.x * a.z * k - a.y * s,
+        ),
+        glam::DVec3::new(
+            a.x * a.y * k - a.z * s,
+            c + a.y * a.y * k,
+            a.y * a.z * k + a.x * s,
+        ),
+        glam::DVec3::new(
+            a.x * a.z * k + a.y * s,
+            a.y * a.z * k - a.x * s,
+            c + a.z * a.z * k,
+        ),
+    );
+    Mat4::from_mat3(m.as_mat3())
+}
+
+fn scaled_spectrum(s: &SpectrumDesc, k: f32) -> SpectrumDesc {
+    match s {
+        SpectrumDesc::Constant(v) => SpectrumDesc::Constant(v * k),
+        SpectrumDesc::Rgb(c) => SpectrumDesc::Rgb(c.map(|x| x * k)),
+        SpectrumDesc::Tabulated(t) => {
+            SpectrumDesc::Tabulated(t.iter().map(|&(l, v)| (l, v * k)).collect())
+        }
+        SpectrumDesc::D65 { scale } => SpectrumDesc::D65 { scale: scale * k },
+    }
+}
+
 /// Cap on the triangles `instance`s add (each instance is a world-space copy).
 const MAX_INSTANCED_TRIANGLES: usize = 1 << 26;
 
@@ -2115,6 +2312,7 @@ fn sphere_geometry(m: &Mat4, flip_normals: bool) -> std::result::Result<Geometry
     Ok(Geometry::Sphere {
         center: c,
         radius: r,
+        rotation: Mat3::from_cols(axes[0] / r, axes[1] / r, axes[2] / r),
         flip_normals,
     })
 }
@@ -2130,9 +2328,12 @@ fn transformed_shape(shape: &Shape, m: &Mat4) -> std::result::Result<Shape, Stri
         Geometry::Sphere {
             center,
             radius,
+            rotation,
             flip_normals,
         } => {
-            let to_unit = Mat4::from_translation(*center) * Mat4::from_scale(Vec3::splat(*radius));
+            let to_unit = Mat4::from_translation(*center)
+                * Mat4::from_mat3(*rotation)
+                * Mat4::from_scale(Vec3::splat(*radius));
             sphere_geometry(&(*m * to_unit), *flip_normals)
                 .map_err(|e| format!("instanced sphere: {e}"))?
         }
@@ -2219,8 +2420,7 @@ fn check_tabulated(pairs: Vec<(f32, f32)>) -> std::result::Result<SpectrumDesc, 
 
 /// Reads a `.spd` file: lines "λ value" (whitespace or comma separated), `#` comments.
 pub fn read_spd(path: &Path) -> Result<SpectrumDesc> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading spectrum file {}", path.display()))?;
+    let text = crate::limits::read_text(path, "spectrum file", 16)?;
     let mut pairs = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
@@ -2271,13 +2471,35 @@ impl<'a, 'i> Props<'a, 'i> {
 
     /// Removes the named parameters if present, checking their type with `ok`.
     fn accept(&mut self, names: &[&str], ctx: &Ctx, ok: impl Fn(&Val) -> bool) -> Result<()> {
+        self.accept_or(names, ctx, ok, "")
+    }
+
+    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
+    /// default, 1, is supported — a scaled or textured lobe is refused, not dropped.
+    fn unit_factors(&mut self, names: &[&str], ctx: &Ctx) -> Result<()> {
+        self.accept_or(
+            names,
+            ctx,
+            is_unit,
+            ": only 1 (Mitsuba's default) is supported, not a scaled or textured lobe",
+        )
+    }
+
+    /// [`Self::accept`] with `why` appended to the error message.
+    fn accept_or(
+        &mut self,
+        names: &[&str],
+        ctx: &Ctx,
+        ok: impl Fn(&Val) -> bool,
+        why: &str,
+    ) -> Result<()> {
         for n in names {
             if let Some(q) = self.take(n) {
                 if !ok(&q.val) {
                     return Err(ctx.err(
                         q.node,
                         format!(
-                            "unsupported value for '{n}' of {} plugin \"{}\"",
+                            "unsupported value for '{n}' of {} plugin \"{}\"{why}",
                             self.tag, self.plugin
                         ),
                     ));
@@ -2351,6 +2573,17 @@ impl<'a, 'i> Props<'a, 'i> {
         match self.take(name) {
             None => Ok(Mat4::IDENTITY),
             Some(q) => match q.val {
+                // A singular object or camera transform has no inverse: normals and camera
+                // rays would be NaN. (`to_uv` may legitimately collapse a texture.)
+                Val::Transform(m)
+                    if name == "to_world"
+                        && !(m.determinant().is_normal() && m.inverse().is_finite()) =>
+                {
+                    Err(ctx.err(
+                        q.node,
+                        "to_world is singular (a zero scale or a degenerate matrix)",
+                    ))
+                }
                 Val::Transform(m) => Ok(m),
                 _ => Err(Self::type_err(ctx, &q, "a <transform>")),
             },

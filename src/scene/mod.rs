@@ -153,9 +153,13 @@ pub struct Shape {
 pub enum Geometry {
     Mesh(TriangleMesh),
     /// Analytic sphere (world space), normals pointing out (in if `flip_normals`).
+    /// `rotation` takes the sphere's local frame to world space (orthonormal; a reflection if
+    /// its `to_world` mirrors): Mitsuba measures a sphere's (u, v) in the local frame, so a
+    /// rotated sphere turns its textures with it.
     Sphere {
         center: Vec3,
         radius: f32,
+        rotation: Mat3,
         flip_normals: bool,
     },
 }
@@ -243,6 +247,7 @@ pub enum EmitterDesc {
     },
 }
 
+pub(crate) mod gltf_check;
 pub mod gltf_scene;
 pub mod meshio;
 pub mod mitsuba;
@@ -269,6 +274,30 @@ pub fn load(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
+    // Parsed text and meshes take a multiple of the file in memory (DOM nodes, per-vertex
+    // maps of the PLY reader): refuse files whose parse could not fit the budget.
+    let expansion = match ext.as_str() {
+        "ply" => 32,
+        "gltf" | "glb" => 4,
+        _ => 16,
+    };
+    let bytes = std::fs::metadata(path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .len();
+    crate::limits::check_alloc(
+        format!("scene file {} ({bytes} bytes)", path.display()),
+        bytes.saturating_mul(expansion),
+    )?;
+    let mut scene = crate::limits::contain_panics(path, || load_format(path, &ext, defaults))?;
+    scene.source = Some(path.to_path_buf());
+    scene
+        .validate()
+        .with_context(|| format!("scene {}", path.display()))?;
+    Ok(scene)
+}
+
+/// The reader for `ext` (see [`load`]).
+fn load_format(path: &Path, ext: &str, defaults: &[(String, String)]) -> Result<Scene> {
     let non_xml_defaults = || -> Result<()> {
         if let Some((k, _)) = defaults.first() {
             bail!(
@@ -278,7 +307,7 @@ pub fn load(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
         }
         Ok(())
     };
-    let mut scene = match ext.as_str() {
+    Ok(match ext {
         "xml" => mitsuba::load_file(path, defaults)?,
         "gltf" | "glb" => {
             non_xml_defaults()?;
@@ -297,12 +326,7 @@ pub fn load(path: &Path, defaults: &[(String, String)]) -> Result<Scene> {
             "{}: unknown scene format '.{ext}' (expected .xml, .gltf, .glb, .obj or .ply)",
             path.display()
         ),
-    };
-    scene.source = Some(path.to_path_buf());
-    scene
-        .validate()
-        .with_context(|| format!("scene {}", path.display()))?;
-    Ok(scene)
+    })
 }
 
 /// Default resolution for formats that carry none (OBJ, PLY, glTF).

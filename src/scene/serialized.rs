@@ -36,6 +36,11 @@ const MAGIC: u16 = 0x041C;
 /// so that a corrupt count fails with a message instead of an allocation failure.
 const MAX_COUNT: u64 = 1 << 28;
 
+/// Deflate (zlib) expands at most 1032:1 (a run of one byte, 258 bytes per 2-bit code): a
+/// header declaring more vertex and face data than that over the compressed bytes left in
+/// the file is corrupt, or a decompression bomb.
+const MAX_ZLIB_RATIO: u64 = 1032;
+
 /// A mesh read from a `.serialized` file, in object space.
 #[derive(Debug)]
 pub struct SerializedMesh {
@@ -47,8 +52,7 @@ pub struct SerializedMesh {
 
 /// Reads mesh number `shape_index` (0-based) of a `.serialized` file.
 pub fn load(path: &Path, shape_index: usize) -> Result<SerializedMesh> {
-    let bytes = std::fs::read(path)
-        .with_context(|| format!("reading serialized mesh {}", path.display()))?;
+    let bytes = crate::limits::read_file(path, "serialized mesh", 1)?;
     parse(&bytes, shape_index).with_context(|| {
         format!(
             "serialized mesh {} (shape_index {shape_index})",
@@ -75,11 +79,15 @@ pub fn parse(bytes: &[u8], shape_index: usize) -> Result<SerializedMesh> {
     if magic != MAGIC || v != version {
         bail!("mesh {shape_index} at byte {offset} has no valid header");
     }
-    let mut z = ZlibDecoder::new(&bytes[offset + 4..]);
+    let compressed = &bytes[offset + 4..];
+    let mut r = Reader {
+        r: &mut ZlibDecoder::new(compressed),
+        compressed: compressed.len() as u64,
+    };
     if version == 5 {
-        read_v5(&mut z)
+        read_v5(&mut r)
     } else {
-        read_legacy(&mut z, version)
+        read_legacy(&mut r, version)
     }
 }
 
@@ -132,15 +140,48 @@ fn mesh_offset(bytes: &[u8], version: u16, index: usize) -> Result<usize> {
 
 struct Reader<'r, R: Read> {
     r: &'r mut R,
+    /// Bytes of the compressed stream (from the mesh header to the end of the file).
+    compressed: u64,
 }
 
 impl<R: Read> Reader<'_, R> {
+    /// The next `n` decompressed bytes. The buffer grows with the data actually decoded, so
+    /// a truncated stream fails before it allocates what the header declared.
     fn bytes(&mut self, n: usize) -> Result<Vec<u8>> {
-        let mut buf = vec![0u8; n];
+        let mut buf = Vec::new();
         self.r
-            .read_exact(&mut buf)
-            .context("compressed data ends early (truncated or corrupt file)")?;
+            .by_ref()
+            .take(n as u64)
+            .read_to_end(&mut buf)
+            .context("corrupt compressed data")?;
+        if buf.len() < n {
+            bail!("compressed data ends early (truncated or corrupt file)");
+        }
         Ok(buf)
+    }
+    /// Checks the data a header declares — `vertices` records of `vertex_bytes` and `faces` of
+    /// `face_bytes` — against what the compressed stream can hold and the memory budget
+    /// (the decoded records plus the mesh built from them: 32 bytes a vertex, 12 a face).
+    fn check_declared(
+        &self,
+        (vertices, vertex_bytes): (usize, u64),
+        (faces, face_bytes): (usize, u64),
+    ) -> Result<()> {
+        let (v, f) = (vertices as u64, faces as u64);
+        // Counts are at most 2^28 and record sizes at most 96 bytes: no overflow.
+        let raw = v * vertex_bytes + f * face_bytes;
+        if raw > self.compressed.saturating_mul(MAX_ZLIB_RATIO) {
+            bail!(
+                "the header declares {vertices} vertices and {faces} faces ({raw} bytes), but \
+                 the compressed mesh has {} bytes and zlib expands at most {MAX_ZLIB_RATIO}:1 \
+                 (corrupt file)",
+                self.compressed
+            );
+        }
+        crate::limits::check_alloc(
+            format!("{vertices} vertices and {faces} faces"),
+            raw + v * 32 + f * 12,
+        )
     }
     fn u32(&mut self) -> Result<u32> {
         Ok(u32::from_le_bytes(self.bytes(4)?.try_into().unwrap()))
@@ -181,8 +222,7 @@ fn vec3s(v: &[f32]) -> Vec<Vec3> {
     v.chunks_exact(3).map(Vec3::from_slice).collect()
 }
 
-fn read_legacy<R: Read>(z: &mut R, version: u16) -> Result<SerializedMesh> {
-    let mut r = Reader { r: z };
+fn read_legacy<R: Read>(r: &mut Reader<R>, version: u16) -> Result<SerializedMesh> {
     let flags = r.u32()?;
     if version == 4 {
         // NUL-terminated shape name.
@@ -197,6 +237,18 @@ fn read_legacy<R: Read>(z: &mut R, version: u16) -> Result<SerializedMesh> {
     let vertices = r.count("vertex")?;
     let faces = r.count("face")?;
     let double = flags & 0x2000 != 0;
+    let channels = [
+        (true, 3),
+        (flags & 0x1 != 0, 3),
+        (flags & 0x2 != 0, 2),
+        (flags & 0x8 != 0, 3),
+    ]
+    .iter()
+    .filter(|c| c.0)
+    .map(|c| c.1)
+    .sum::<u64>();
+    let float_bytes = if double { 8 } else { 4 };
+    r.check_declared((vertices, channels * float_bytes), (faces, 12))?;
     let positions = vec3s(&r.floats(3 * vertices, double)?);
     let normals = if flags & 0x1 != 0 {
         vec3s(&r.floats(3 * vertices, double)?)
@@ -226,8 +278,7 @@ fn read_legacy<R: Read>(z: &mut R, version: u16) -> Result<SerializedMesh> {
     })
 }
 
-fn read_v5<R: Read>(z: &mut R) -> Result<SerializedMesh> {
-    let mut r = Reader { r: z };
+fn read_v5<R: Read>(r: &mut Reader<R>) -> Result<SerializedMesh> {
     let flags = r.u32()?;
     if flags & 0x1000 == 0 {
         bail!("version 5 meshes must be stored in single precision (flag 0x1000)");
@@ -248,6 +299,8 @@ fn read_v5<R: Read>(z: &mut R) -> Result<SerializedMesh> {
     if points > vertices || groups > vertices {
         bail!("invalid header: more surface points or normal groups than vertices");
     }
+    let maps = 4 * (points > 0) as u64 + 4 * (groups > 0) as u64;
+    r.check_declared((vertices, 32 + maps), (faces, 16))?;
     let records = r.floats(8 * vertices, false)?;
     let faces = triangles(&r.u32s(4 * faces)?, 4, vertices)?;
     // The surface-point and normal-group maps only tell Mitsuba which vertices to weld when
@@ -310,6 +363,17 @@ mod tests {
     use flate2::Compression;
     use std::io::Write;
 
+    /// One mesh as stored: the uncompressed header, then `body` zlib-compressed.
+    fn compressed(version: u16, body: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        out.extend(MAGIC.to_le_bytes());
+        out.extend(version.to_le_bytes());
+        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
+        e.write_all(body).unwrap();
+        out.extend(e.finish().unwrap());
+        out
+    }
+
     /// A version-3/4 mesh stream: one triangle, with normals and uvs.
     fn legacy_mesh(version: u16, z_shift: f32, double: bool) -> Vec<u8> {
         let mut body = Vec::new();
@@ -343,13 +407,7 @@ mod tests {
         for i in [0u32, 1, 2] {
             body.extend(i.to_le_bytes());
         }
-        let mut out = Vec::new();
-        out.extend(MAGIC.to_le_bytes());
-        out.extend(version.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        out.extend(e.finish().unwrap());
-        out
+        compressed(version, &body)
     }
 
     /// Concatenated meshes plus the end-of-file offset table.
@@ -418,13 +476,7 @@ mod tests {
             body.extend(i.to_le_bytes());
         }
         body.extend(0u32.to_le_bytes()); // no attributes
-        let mut mesh = Vec::new();
-        mesh.extend(MAGIC.to_le_bytes());
-        mesh.extend(5u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        mesh.extend(e.finish().unwrap());
-        let s = parse(&file(5, &[mesh]), 0).unwrap();
+        let s = parse(&file(5, &[compressed(5, &body)]), 0).unwrap();
         assert!(s.face_normals);
         assert_eq!(s.mesh.indices, vec![[0, 2, 1]]);
         assert_eq!(s.mesh.positions[1], Vec3::new(2.0, 0.0, 1.0));
@@ -459,28 +511,35 @@ mod tests {
         for i in [0u32, 0, 5] {
             body.extend(i.to_le_bytes());
         }
-        let mut m = Vec::new();
-        m.extend(MAGIC.to_le_bytes());
-        m.extend(4u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        m.extend(e.finish().unwrap());
-        let e = parse(&file(4, &[m]), 0).unwrap_err().to_string();
+        let e = parse(&file(4, &[compressed(4, &body)]), 0)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("refers to vertex 5"), "{e}");
         // A huge vertex count fails cleanly.
         let mut body = Vec::new();
         body.extend(0x1000u32.to_le_bytes());
         body.extend(b"\0");
         body.extend(u64::MAX.to_le_bytes());
-        let mut m = Vec::new();
-        m.extend(MAGIC.to_le_bytes());
-        m.extend(4u16.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(&body).unwrap();
-        m.extend(e.finish().unwrap());
-        assert!(parse(&file(4, &[m]), 0)
+        assert!(parse(&file(4, &[compressed(4, &body)]), 0)
             .unwrap_err()
             .to_string()
             .contains("exceeds the limit"));
+    }
+
+    /// Counts within the per-field limit that declare more data than the compressed bytes can
+    /// expand to are refused before anything is allocated for them.
+    #[test]
+    fn counts_beyond_the_compressed_size_are_refused() {
+        let mut body = Vec::new();
+        body.extend(0x1000u32.to_le_bytes());
+        body.extend(b"\0");
+        body.extend((100_000_000u64).to_le_bytes());
+        body.extend((100_000_000u64).to_le_bytes());
+        let m = compressed(4, &body);
+        let e = format!("{:#}", parse(&file(4, &[m]), 0).unwrap_err());
+        assert!(
+            e.contains("100000000 vertices") && e.contains("1032:1"),
+            "{e}"
+        );
     }
 }

@@ -94,6 +94,18 @@ impl TriangleMesh {
         if !self.normals.is_empty() && self.normals.len() != n {
             bail!("{what}: {} normals for {n} vertices", self.normals.len());
         }
+        if let Some(i) = self.normals.iter().position(|v| !v.is_finite()) {
+            bail!(
+                "{what}: vertex {i} has a non-finite normal {:?}",
+                self.normals[i]
+            );
+        }
+        if let Some(i) = self.uvs.iter().position(|v| !v.is_finite()) {
+            bail!(
+                "{what}: vertex {i} has non-finite texture coordinates {:?}",
+                self.uvs[i]
+            );
+        }
         if !self.uvs.is_empty() && self.uvs.len() != n {
             bail!("{what}: {} uvs for {n} vertices", self.uvs.len());
         }

@@ -189,16 +189,20 @@ impl BitmapTexture {
     /// `.hdr`: RGB float. `.png`: 8/16-bit, sRGB-decoded unless `raw`.
     pub fn load(path: &Path, raw: bool) -> Result<Self> {
         let ext = extension(path);
+        // Checks of the decoded texels (e.g. a 0×0 image) name the file too.
+        let new = |w, h, c, data| {
+            BitmapTexture::new(w, h, c, data).with_context(|| path.display().to_string())
+        };
         let mut tex = match ext.as_str() {
             "exr" => {
                 let (w, h, channels) = image_io::read_exr_channels(path)?;
                 let find = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, p)| p);
                 if let (Some(r), Some(g), Some(b)) = (find("R"), find("G"), find("B")) {
                     let data = (0..w * h).flat_map(|i| [r[i], g[i], b[i]]).collect();
-                    BitmapTexture::new(w, h, 3, data)?
+                    new(w, h, 3, data)?
                 } else if channels.len() == 1 || find("Y").is_some() {
                     let plane = find("Y").unwrap_or(&channels[0].1).clone();
-                    BitmapTexture::new(w, h, 1, plane)?
+                    new(w, h, 1, plane)?
                 } else {
                     let names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
                     bail!(
@@ -211,7 +215,7 @@ impl BitmapTexture {
             e if e == "hdr" || INTEGER_FORMATS.contains(&e) => {
                 let img = load_rgb_image_raw(path, raw)?;
                 let data = img.pixels.iter().flatten().copied().collect();
-                BitmapTexture::new(img.width, img.height, 3, data)?
+                new(img.width, img.height, 3, data)?
             }
             _ => bail!(
                 "{}: unsupported texture format '.{ext}' ({})",
@@ -256,7 +260,7 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
     match extension(path).as_str() {
         "exr" => image_io::read_exr_rgb(path),
         "hdr" => {
-            let img = image::open(path)
+            let img = image_io::read_image(path, 24)
                 .with_context(|| format!("reading Radiance HDR {}", path.display()))?
                 .to_rgb32f();
             let (w, h) = (img.width() as usize, img.height() as usize);
@@ -268,7 +272,7 @@ fn load_rgb_image_raw(path: &Path, raw: bool) -> Result<RgbImage> {
             })
         }
         e if INTEGER_FORMATS.contains(&e) => {
-            let img = image::open(path)
+            let img = image_io::read_image(path, 24)
                 .with_context(|| format!("reading image {}", path.display()))?
                 .to_rgb16();
             let (w, h) = (img.width() as usize, img.height() as usize);

@@ -220,6 +220,11 @@ BLOCKER_PATTERNS = [
      lambda m: f"{m.group(1)} on {m.group(3)} \"{m.group(4)}\""),
     (r"unsupported value for '(\w+)' of (\w+) plugin \"(\w+)\"",
      lambda m: f"{m.group(1)} ≠ default on {m.group(2)} \"{m.group(3)}\""),
+    (r'(\w+) "(\w+)": the Beckmann microfacet distribution',
+     lambda m: f'Beckmann distribution on {m.group(1)} "{m.group(2)}"'),
+    (r'(\w+) "(\w+)": anisotropic roughness', lambda m: f'anisotropic {m.group(1)} "{m.group(2)}"'),
+    (r"'(\w+)' of (\w+) \"(\w+)\" must be a number or a <spectrum>.*not rgb",
+     lambda m: f'RGB {m.group(1)} on {m.group(2)} "{m.group(3)}"'),
     (r'is not supported|unsupported', lambda m: None),
 ]
 
@@ -232,9 +237,11 @@ def blocker_name(err):
             if n:
                 return n
             break
-    # Strip the location prefix "file:line:col: <elem>: ".
+    # Keep what follows the last location "file.xml:line:col: <elem>: " (or the
+    # "rendering FILE: " prefix of a render-time error).
     short = re.sub(r"^error:\s*", "", err, flags=re.I)
-    short = re.sub(r"^\S+:\d+:\d+:\s*(<[^>]*>:\s*)?", "", short)
+    short = re.split(r"\S+\.xml:\d+:\d+:\s*(?:<[^>]*>:\s*)?", short)[-1]
+    short = re.sub(r"^rendering \S+:\s*(BSDF \d+:\s*)?", "", short)
     return short[:90]
 
 
@@ -413,6 +420,8 @@ def references(args):
         write_exr(mi, exr, (acc / args.ref_spp).astype("float32"))
         entry.update({"reference": os.path.relpath(exr, root), "width": size[0], "height": size[1],
                       "spp": args.ref_spp, "seconds": round(secs, 1)})
+    if args.only and "command" in manifest:
+        command = manifest["command"]  # a partial re-render keeps the full command
     manifest.update({"mitsuba_version": mi.__version__, "variant": VARIANT, "command": command})
     with open(manifest_path + ".partial", "w") as f:
         json.dump(manifest, f, indent=2, sort_keys=True)
@@ -432,11 +441,24 @@ def main():
     ap.add_argument("--timeout", type=int, default=600, help="seconds per thinfilm render")
     ap.add_argument("--only", action="append", default=[], help="scene name substring (repeatable)")
     ap.add_argument("--rerender-mitsuba", action="store_true", help="ignore cached Mitsuba renders")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite the report from --out's coverage.json (no rendering)")
     ap.add_argument("--references", help="reference mode: a directory with manifest.json")
     ap.add_argument("--ref-spp", type=int, default=4096, help="reference mode: samples per pixel")
     args = ap.parse_args()
     if args.references:
         references(args)
+    elif args.report_only:
+        with open(os.path.join(args.out, "coverage.json")) as f:
+            results = json.load(f)
+        for r in results:
+            if r.get("error"):
+                r["blocker"] = blocker_name(r["error"])
+        text = report(results, args)
+        if args.report:
+            with open(args.report, "w") as f:
+                f.write(text)
+        print(text)
     elif args.corpus_root:
         coverage(args)
     else:

@@ -68,14 +68,16 @@ impl BsdfPlugin for Conductor {
     /// perfect mirror) or `eta`/`k` (numbers or spectra; Mitsuba's defaults 0 and 1), and for
     /// `roughconductor` the microfacet roughness.
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
-        let (alpha_u, alpha_v) = if p.plugin() == "roughconductor" {
+        let alpha = if p.plugin() == "roughconductor" {
             p.microfacet()?
         } else {
-            (0.0, 0.0)
+            0.0
         };
         let material = p.string("material")?;
-        let (eta, k) = (p.real_spectrum("eta")?, p.real_spectrum("k")?);
-        p.accept_unit(&["specular_reflectance"])?;
+        let plugin = p.plugin().to_string();
+        let eta = p.real_spectrum_as("eta", &format!("'eta' of bsdf \"{plugin}\""))?;
+        let k = p.real_spectrum_as("k", &format!("'k' of bsdf \"{plugin}\""))?;
+        p.unit_factors(&["specular_reflectance"])?;
         let ior = match (material, eta, k) {
             (Some(_), Some(_), _) | (Some(_), None, Some(_)) => {
                 return Err(p.error("give either 'material' or 'eta'/'k', not both"))
@@ -91,7 +93,7 @@ impl BsdfPlugin for Conductor {
                 p.complex_index(&n, &k, "eta/k")
             }
         };
-        Conductor::new(ior, alpha_u, alpha_v).map_err(|e| p.error(e))
+        Conductor::new(ior, alpha, alpha).map_err(|e| p.error(e))
     }
 }
 

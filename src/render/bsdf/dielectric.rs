@@ -86,7 +86,7 @@ impl BsdfPlugin for Dielectric {
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
         let int_ior = p.dielectric_ior("int_ior", 1.5046)?;
         let ext_ior = p.dielectric_ior("ext_ior", 1.000277)?;
-        p.accept_unit(&["specular_reflectance", "specular_transmittance"])?;
+        p.unit_factors(&["specular_reflectance", "specular_transmittance"])?;
         Ok(Dielectric::new(int_ior, ext_ior))
     }
 }

@@ -105,11 +105,7 @@ impl BsdfPlugin for Plastic {
     /// microfacet roughness.
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
         let alpha = if p.plugin() == "roughplastic" {
-            let (au, av) = p.microfacet()?;
-            if au != av {
-                return Err(p.error("anisotropic roughplastic is not supported"));
-            }
-            au
+            p.microfacet()?
         } else {
             0.0
         };
@@ -117,7 +113,7 @@ impl BsdfPlugin for Plastic {
         let int_ior = p.ior_number("int_ior", 1.49)? as f32;
         let ext_ior = p.ior_number("ext_ior", 1.000277)? as f32;
         let nonlinear = p.bool("nonlinear", false)?;
-        p.accept_unit(&["specular_reflectance"])?;
+        p.unit_factors(&["specular_reflectance"])?;
         Plastic::new(&diffuse, int_ior, ext_ior, nonlinear, alpha).map_err(|e| p.error(e))
     }
 }

@@ -89,7 +89,6 @@ fn test_bsdfs() -> Vec<(&'static str, Bsdf)> {
     vec![
         ("diffuse", diffuse(0.7)),
         ("roughconductor", conductor("0.2+3.9i", 0.3, 0.3)),
-        ("roughconductor-aniso", conductor("0.2+3.9i", 0.1, 0.5)),
         ("roughplastic", plastic(0.2, false)),
         ("plastic", plastic(0.0, true)),
         ("roughthinfilm", thin_film(0.25, 400.0)),
@@ -380,7 +379,6 @@ fn reflection_models_are_reciprocal() {
     for (name, b) in [
         ("diffuse", diffuse(0.7)),
         ("roughconductor", conductor("0.2+3.9i", 0.3, 0.3)),
-        ("roughconductor-aniso", conductor("0.2+3.9i", 0.1, 0.5)),
         ("roughthinfilm", thin_film(0.25, 400.0)),
     ] {
         assert_reciprocal(name, &b, 1e-4);

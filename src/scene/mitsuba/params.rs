@@ -6,7 +6,7 @@
 // `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::{is_unit, mitsuba_ior, Ctx, Prop, Props, Val, MITSUBA_IOR_TABLE};
+use super::{mitsuba_ior, Ctx, Prop, Props, Val, MITSUBA_IOR_TABLE};
 use crate::optics::{dispersion, Complex64, Ior};
 use crate::render::bsdf::Bsdf;
 use crate::scene::{BitmapTexture, SpectrumDesc, TextureDesc};
@@ -125,10 +125,11 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         self.props.texture(self.ctx, name, default)
     }
 
-    /// Accepts specular reflectance/transmittance factors Mitsuba has and this renderer
-    /// ignores, when they are 1 (Mitsuba's default), however written.
-    pub fn accept_unit(&mut self, names: &[&str]) -> Result<()> {
-        self.props.accept(names, self.ctx, is_unit)
+    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
+    /// default, 1 (however written), is supported — a scaled or textured lobe is refused, not
+    /// dropped.
+    pub fn unit_factors(&mut self, names: &[&str]) -> Result<()> {
+        self.props.unit_factors(names, self.ctx)
     }
 
     /// Accepts a `<boolean>` parameter Mitsuba has and this renderer ignores, if `ok(value)`.
@@ -159,9 +160,14 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
 
     /// A real value that may depend on wavelength: a number or a tabulated `<spectrum>`.
     pub fn real_spectrum(&mut self, name: &str) -> Result<Option<RealSpectrum>> {
+        self.real_spectrum_as(name, name)
+    }
+
+    /// [`Self::real_spectrum`], naming the parameter `what` in errors.
+    pub fn real_spectrum_as(&mut self, name: &str, what: &str) -> Result<Option<RealSpectrum>> {
         match self.take(name) {
             None => Ok(None),
-            Some(q) => self.spectral_of(&q, name).map(Some),
+            Some(q) => self.spectral_of(&q, what).map(Some),
         }
     }
 
@@ -278,17 +284,27 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         Ok(ior)
     }
 
-    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`.
-    pub fn microfacet(&mut self) -> Result<(f32, f32)> {
+    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`, as one isotropic α.
+    /// Only GGX is implemented: Beckmann — also Mitsuba's default when `distribution` is
+    /// omitted — is refused rather than rendered as GGX (the highlights differ in shape and
+    /// tails). Anisotropic roughness is refused too: Mitsuba stretches α_u along its shading
+    /// tangent dp/du, and the renderer's BSDF frame is built from the normal alone.
+    pub fn microfacet(&mut self) -> Result<f32> {
         let dist = self.string("distribution")?;
         match dist.as_deref() {
             Some("ggx") => {}
-            Some("beckmann") | None => eprintln!(
-                "warning: {}: {} \"{}\" uses Mitsuba's default Beckmann distribution; rendering with GGX (add <string name=\"distribution\" value=\"ggx\"/> to match exactly)",
-                self.ctx.loc(self.props.node),
-                self.props.tag,
-                self.props.plugin
-            ),
+            Some("beckmann") | None => {
+                return Err(self.error(format!(
+                    "{} \"{}\": the Beckmann microfacet distribution ({}) is not supported; only GGX is implemented — add <string name=\"distribution\" value=\"ggx\"/> to render it with GGX, knowing the highlight will differ from Mitsuba's",
+                    self.props.tag,
+                    self.props.plugin,
+                    if dist.is_some() {
+                        "'distribution' = \"beckmann\""
+                    } else {
+                        "Mitsuba's default when 'distribution' is omitted"
+                    }
+                )))
+            }
             Some(other) => {
                 return Err(self.ctx.err(self.props.node, format!("unknown distribution \"{other}\" (ggx, beckmann)")))
             }
@@ -311,7 +327,16 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         if !(u >= 0.0 && v >= 0.0) {
             return Err(self.ctx.err(self.props.node, "roughness must be ≥ 0"));
         }
-        Ok((u as f32, v as f32))
+        if u != v {
+            // Mitsuba stretches α_u along its shading tangent s = dp/du made ⟂ n (the
+            // texture's u direction); the renderer's BSDF frame is built from the normal
+            // alone, so the highlight would be rotated: refused, not substituted.
+            return Err(self.error(format!(
+                "{} \"{}\": anisotropic roughness (alpha_u = {u} ≠ alpha_v = {v}) is not supported (the renderer does not orient α_u along dp/du as Mitsuba does); give one 'alpha'",
+                self.props.tag, self.props.plugin
+            )));
+        }
+        Ok(u as f32)
     }
 
     /// A conductor `material`: a metal of the dispersion library, or Mitsuba's `none`.
@@ -343,7 +368,7 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
             v => Err(self.ctx.err(
                 q.node,
                 format!(
-                    "{what} must be a number or a <spectrum> of λ:value pairs, not {} (RGB indices have no physical meaning)",
+                    "{what} must be a number or a <spectrum> of λ:value pairs, not {}: RGB-valued indices are not supported (Mitsuba upsamples them like colours; a measured index is a spectrum)",
                     v.kind()
                 ),
             )),
@@ -478,6 +503,7 @@ pub(super) fn combine_ior(label: &str, n: &RealSpectrum, k: &RealSpectrum) -> Io
 /// of the dispersion library (`MgF2`, `TiO2`, `SiO2`, …). A group in parentheses followed by
 /// `xN` repeats N times: `(TiO2:52, SiO2:94)x6, TiO2:52` is a 13-layer quarter-wave mirror.
 pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> {
+    const MAX_LAYERS: usize = 10_000;
     fn items(text: &str) -> std::result::Result<Vec<&str>, String> {
         let mut out = Vec::new();
         let (mut depth, mut start) = (0i32, 0);
@@ -529,6 +555,9 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
                 }
                 let mut group = Vec::new();
                 parse(&body[..close], &mut group, level + 1)?;
+                if out.len() + group.len().saturating_mul(count) > MAX_LAYERS {
+                    return Err(format!("'{item}' makes more than {MAX_LAYERS} layers"));
+                }
                 for _ in 0..count {
                     out.extend(group.iter().cloned());
                 }
@@ -552,9 +581,11 @@ pub fn parse_layers(text: &str) -> std::result::Result<Vec<(Ior, f64)>, String> 
                 .trim()
                 .parse()
                 .map_err(|e| format!("layer '{item}': {e}"))?;
+            crate::limits::check_index(format!("layer '{item}'"), &ior)
+                .map_err(|e| e.to_string())?;
             out.push((ior, d));
-            if out.len() > 10_000 {
-                return Err("more than 10000 layers".into());
+            if out.len() > MAX_LAYERS {
+                return Err(format!("more than {MAX_LAYERS} layers"));
             }
         }
         Ok(())

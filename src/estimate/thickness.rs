@@ -1,0 +1,257 @@
+//! Thickness stage of `full`: d for every pixel with the shared parameters fixed, on the
+//! tabulated whitened model ([`super::solver`]).
+//!
+//! Small images get the global search everywhere. Large ones: global search on a seed
+//! lattice, then each row left to right from its left neighbour's thickness (d is smooth,
+//! seed assumption 3 — Gauss–Newton converges in one or two steps), falling back to the
+//! seeds and then to the global search where the fit is poor. Finally order jumps are
+//! removed with the spatial smoothness of d: where d leaves its neighbourhood median by
+//! more than a fraction of a fringe, the fit from the median is kept when about as good.
+
+use super::data::{median, Observations, PixelData};
+use super::nuisance::Whitening;
+use super::solver::{FixedModel, ThicknessSolver};
+use super::stage::{Context, FilmSolution, ThicknessMap, ThicknessStage};
+use anyhow::Result;
+use rayon::prelude::*;
+
+/// The `full` method's thickness stage.
+pub struct TableThickness;
+
+/// One pixel's fit: (d, χ², samples, curvature).
+type PixelFit = (f32, f32, u32, f32);
+
+const NONE: PixelFit = (f32::NAN, 0.0, 0, 0.0);
+
+impl ThicknessStage for TableThickness {
+    fn run(&self, cx: &Context, sol: &FilmSolution) -> Result<ThicknessMap> {
+        let obs = &cx.obs;
+        let fixed = FixedModel::of(&obs.geom, sol);
+        let solver = ThicknessSolver::new(
+            &fixed,
+            cx.opts.min_thickness_nm,
+            cx.opts.max_thickness_nm,
+            true,
+        );
+        let white = Whitening::new(&sol.nuisance, &sol.sigma, obs.angles, obs.stride);
+        Ok(fit_all(cx, sol, &solver, &white))
+    }
+}
+
+fn fit_all(
+    cx: &Context,
+    sol: &FilmSolution,
+    solver: &ThicknessSolver,
+    white: &Whitening,
+) -> ThicknessMap {
+    let obs = &cx.obs;
+    let (w, h) = (obs.width, obs.height);
+    let film = &sol.film;
+    // A few hundred seeds get the global search; the rest start from a neighbour.
+    let stride = (((w * h) as f64 / 384.0).sqrt().floor() as usize).clamp(1, 48);
+    let mut out = vec![NONE; w * h];
+    let pb = cx.progress_bar(w * h, "thickness");
+    let load = |px: &mut PixelData, p: usize| px.load(obs, white, film, p) > 0;
+    // 1. Seeds.
+    let seeds: Vec<usize> = (0..h)
+        .step_by(stride)
+        .flat_map(|y| (0..w).step_by(stride).map(move |x| y * w + x))
+        .collect();
+    let seed_fits: Vec<(usize, PixelFit)> = seeds
+        .par_iter()
+        .map_init(
+            || PixelData::new(obs),
+            |px, &p| {
+                if !load(px, p) {
+                    return (p, NONE);
+                }
+                let (d, s, hs) = solver.search(px);
+                (p, (d as f32, s as f32, px.samples as u32, hs as f32))
+            },
+        )
+        .collect();
+    pb.inc(seeds.len() as u64);
+    for (p, f) in seed_fits {
+        out[p] = f;
+    }
+    // 2. Propagate to the rest.
+    if stride > 1 {
+        let (gw, gh) = (w.div_ceil(stride), h.div_ceil(stride));
+        let seed_d: Vec<f32> = (0..gh)
+            .flat_map(|gy| (0..gw).map(move |gx| (gy, gx)))
+            .map(|(gy, gx)| out[(gy * stride) * w + gx * stride].0)
+            .collect();
+        let mut seed_chi: Vec<f64> = seeds
+            .iter()
+            .filter(|&&p| out[p].0.is_finite() && out[p].2 > 0)
+            .map(|&p| out[p].1 as f64 / out[p].2 as f64)
+            .collect();
+        let typical = median(&mut seed_chi).unwrap_or(1.0);
+        // A fit this good is taken as the right order (no global search).
+        let good = 2.0 * typical + 1e-6;
+        let rows: Vec<(usize, Vec<PixelFit>)> = (0..h)
+            .into_par_iter()
+            .map_init(
+                || PixelData::new(obs),
+                |px, yy| {
+                    let mut row = Vec::with_capacity(w);
+                    let mut left: Option<f64> = None;
+                    for x in 0..w {
+                        let p = yy * w + x;
+                        if yy % stride == 0 && x % stride == 0 {
+                            let f = out[p];
+                            row.push(f);
+                            let ok = f.2 > 0 && (f.1 as f64 / f.2 as f64) <= good;
+                            left = (ok && f.0.is_finite()).then_some(f.0 as f64);
+                            continue;
+                        }
+                        if !load(px, p) {
+                            row.push(NONE);
+                            left = None;
+                            continue;
+                        }
+                        let n = px.samples as f64;
+                        let seed = interpolate_seed(&seed_d, gw, gh, stride, x, yy);
+                        let mut best = match left.or(seed) {
+                            Some(d0) => solver.refine(px, d0, 5),
+                            None => (f64::NAN, f64::INFINITY, 0.0),
+                        };
+                        if !(best.1 / n <= good) && left.is_some() {
+                            // The neighbour may sit on another order: try the seeds.
+                            if let Some(d0) = seed {
+                                let r = solver.refine(px, d0, 5);
+                                if r.1 < best.1 {
+                                    best = r;
+                                }
+                            }
+                        }
+                        if !(best.1 / n <= good) {
+                            let r = solver.search(px);
+                            if r.1 < best.1 {
+                                best = r;
+                            }
+                        }
+                        let ok = best.1 / n <= good;
+                        left = (ok && best.0.is_finite()).then_some(best.0);
+                        row.push((best.0 as f32, best.1 as f32, n as u32, best.2 as f32));
+                    }
+                    (yy, row)
+                },
+            )
+            .inspect(|_| pb.inc(w as u64))
+            .collect();
+        for (yy, row) in rows {
+            out[yy * w..(yy + 1) * w].copy_from_slice(&row);
+        }
+    } else {
+        pb.inc((w * h - seeds.len()) as u64);
+    }
+    pb.finish_and_clear();
+    resolve_orders(obs, solver, white, film, &mut out);
+    ThicknessMap {
+        d: out.iter().map(|f| f.0).collect(),
+        chi2: out.iter().map(|f| f.1).collect(),
+        samples: out.iter().map(|f| f.2).collect(),
+        curvature: Some(out.iter().map(|f| f.3).collect()),
+    }
+}
+
+/// Spatial order resolution (twice): where d jumps from its neighbourhood median by more
+/// than a quarter fringe, re-fit from the median and keep it when the fit is about as good
+/// (an order jump with equal residual is the smoothness prior's call).
+fn resolve_orders(
+    obs: &Observations,
+    solver: &ThicknessSolver,
+    white: &Whitening,
+    film: &super::film::FilmIndex,
+    out: &mut [PixelFit],
+) {
+    let (w, h) = (obs.width, obs.height);
+    for _ in 0..2 {
+        let d: Vec<f32> = out.iter().map(|f| f.0).collect();
+        let med = median_filter(&d, w, h, 2);
+        let tau = solver.scan_step * 2.0;
+        let changes: Vec<(usize, PixelFit)> = (0..w * h)
+            .into_par_iter()
+            .filter(|&p| {
+                d[p].is_finite() && med[p].is_finite() && (d[p] - med[p]).abs() as f64 > tau
+            })
+            .map_init(
+                || PixelData::new(obs),
+                |px, p| {
+                    px.load(obs, white, film, p);
+                    let (d2, s2, h2) = solver.refine(px, med[p] as f64, 8);
+                    let tol = 1.25 * out[p].1 as f64 + 1e-9;
+                    if s2 <= tol && (d2 - med[p] as f64).abs() < tau {
+                        (p, (d2 as f32, s2 as f32, out[p].2, h2 as f32))
+                    } else {
+                        (p, out[p])
+                    }
+                },
+            )
+            .collect();
+        if changes.is_empty() {
+            break;
+        }
+        for (p, f) in changes {
+            out[p] = f;
+        }
+    }
+}
+
+fn interpolate_seed(
+    seed: &[f32],
+    gw: usize,
+    gh: usize,
+    stride: usize,
+    x: usize,
+    y: usize,
+) -> Option<f64> {
+    let fx = x as f64 / stride as f64;
+    let fy = y as f64 / stride as f64;
+    let x0 = (fx.floor() as usize).min(gw - 1);
+    let y0 = (fy.floor() as usize).min(gh - 1);
+    let x1 = (x0 + 1).min(gw - 1);
+    let y1 = (y0 + 1).min(gh - 1);
+    let tx = fx - x0 as f64;
+    let ty = fy - y0 as f64;
+    let mut acc = 0.0;
+    let mut wsum = 0.0;
+    for (gx, gy, wt) in [
+        (x0, y0, (1.0 - tx) * (1.0 - ty)),
+        (x1, y0, tx * (1.0 - ty)),
+        (x0, y1, (1.0 - tx) * ty),
+        (x1, y1, tx * ty),
+    ] {
+        let v = seed[gy * gw + gx];
+        if v.is_finite() {
+            acc += wt.max(1e-6) * v as f64;
+            wsum += wt.max(1e-6);
+        }
+    }
+    (wsum > 0.0).then(|| acc / wsum)
+}
+
+/// Median over the (2r+1)² neighbourhood, ignoring NaN.
+pub fn median_filter(d: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    (0..w * h)
+        .into_par_iter()
+        .map_init(Vec::new, |buf: &mut Vec<f32>, p| {
+            let (x, y) = (p % w, p / w);
+            buf.clear();
+            for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                    let v = d[yy * w + xx];
+                    if v.is_finite() {
+                        buf.push(v);
+                    }
+                }
+            }
+            if buf.is_empty() {
+                return f32::NAN;
+            }
+            let mid = buf.len() / 2;
+            *buf.select_nth_unstable_by(mid, f32::total_cmp).1
+        })
+        .collect()
+}

@@ -1207,8 +1207,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         None => self.xyz(c, 0.0)?,
                     };
                     let angle = self.req_attr(c, "angle")?;
-                    let angle = parse_f64(&angle)
-                        .ok_or_else(|| self.err(c, format!("angle=\"{angle}\" is not a finite number")))?;
+                    let angle = parse_f64(&angle).ok_or_else(|| {
+                        self.err(c, format!("angle=\"{angle}\" is not a finite number"))
+                    })?;
                     if axis == Vec3::ZERO {
                         return Err(self.err(c, "rotation axis is zero"));
                     }

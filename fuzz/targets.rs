@@ -512,7 +512,7 @@ fn run_inner(target: Target, data: &[u8], dir: &Path) -> anyhow::Result<()> {
             let p = write("capture.json")?;
             let set = thinfilm::capture::load_capture_set(&p)?;
             let opts = thinfilm::estimate::Options {
-                film_ior: (set.angles.len() < 2).then_some(1.4),
+                film_ior: (set.angles.len() < 2).then(|| thinfilm::optics::Ior::real(1.4)),
                 ..thinfilm::estimate::Options::default()
             };
             thinfilm::estimate::estimate(&set, &opts)?;

@@ -410,17 +410,6 @@ mod tests {
         compressed(version, &body)
     }
 
-    /// A mesh: its header (`version`) and the zlib-compressed `body`.
-    fn compressed(version: u16, body: &[u8]) -> Vec<u8> {
-        let mut out = Vec::new();
-        out.extend(MAGIC.to_le_bytes());
-        out.extend(version.to_le_bytes());
-        let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
-        e.write_all(body).unwrap();
-        out.extend(e.finish().unwrap());
-        out
-    }
-
     /// Concatenated meshes plus the end-of-file offset table.
     fn file(version: u16, meshes: &[Vec<u8>]) -> Vec<u8> {
         let mut out = Vec::new();

@@ -109,6 +109,9 @@ const MAX_GRID_THICKNESS_STEPS: f64 = 1e6;
 
 /// Relations between options that clap checks one by one.
 fn check_ranges(args: &Args) -> Result<()> {
+    if let Some(ior) = &args.film_ior {
+        thinfilm::limits::check_index("--film-ior", ior)?;
+    }
     for (what, lo, hi) in [
         ("thickness-nm", args.min_thickness_nm, args.max_thickness_nm),
         ("film-ior", args.min_film_ior, args.max_film_ior),

@@ -651,7 +651,7 @@ fn cylinders_lie_where_mitsuba_puts_them() {
     }
     assert!(
         err(r#"<shape type="cylinder"><float name="radius" value="0"/></shape>"#)
-            .contains("'radius' = 0 is outside")
+            .contains("'radius' = 0 must be a finite number > 0")
     );
 }
 

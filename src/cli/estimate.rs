@@ -48,7 +48,7 @@ pub struct Args {
     /// Known film index: fit the thickness only (works with a single angle). A number
     /// (1.33), n+ki, a material name (water, MgF2, …), cauchy:A,B[,C] (λ in nm) or
     /// sellmeier:B1,C1,… (λ in µm).
-    #[arg(long, value_parser = super::args::index)]
+    #[arg(long)]
     pub film_ior: Option<Ior>,
     /// Film index model to fit: constant, cauchy (A + B/λ²) or cauchy3 (+ C/λ⁴). Default:
     /// the capture's "film_model", else chosen by the data (information criterion).
@@ -109,6 +109,9 @@ const MAX_GRID_THICKNESS_STEPS: f64 = 1e6;
 
 /// Relations between options that clap checks one by one.
 fn check_ranges(args: &Args) -> Result<()> {
+    if let Some(ior) = &args.film_ior {
+        thinfilm::limits::check_index("--film-ior", ior)?;
+    }
     for (what, lo, hi) in [
         ("thickness-nm", args.min_thickness_nm, args.max_thickness_nm),
         ("film-ior", args.min_film_ior, args.max_film_ior),

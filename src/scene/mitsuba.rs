@@ -1385,10 +1385,20 @@ impl<'a, 'i> Ctx<'a, 'i> {
             .iter()
             .find(|v| !(v.is_finite() && **v >= lo && **v <= hi))
         {
-            return Err(self.err(
-                node,
-                format!("parameter '{name}' = {v} is outside [{lo}, {hi}]"),
-            ));
+            // f32::MIN_POSITIVE / f32::MAX stand for "> 0" / "no upper bound": say so.
+            let lower = if lo == f32::MIN_POSITIVE as f64 {
+                "> 0".to_string()
+            } else {
+                format!("≥ {lo}")
+            };
+            let range = if hi >= f32::MAX as f64 {
+                format!("must be a finite number {lower}")
+            } else if lo == f32::MIN_POSITIVE as f64 {
+                format!("is outside (0, {hi}]")
+            } else {
+                format!("is outside [{lo}, {hi}]")
+            };
+            return Err(self.err(node, format!("parameter '{name}' = {v} {range}")));
         }
         Ok(())
     }

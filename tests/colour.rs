@@ -288,7 +288,7 @@ fn rgb_illuminant_white_renders_white() {
         );
     }
     // An env-map texel (0.8, 0.3, 0.1): Mitsuba 3 renders it as (0.7998, 0.2997, 0.0998)
-    // (`docs/conventions.md`, "Environment map"); ours must land as close to the input.
+    // (`docs/physics-and-formats.md`, "Environment map"); ours must land as close to the input.
     let e = RgbIlluminantSpectrum::new([0.8, 0.3, 0.1]);
     let rgb = xyz_to_linear_srgb(emission_xyz(|l| e.eval(l as f32) as f64));
     eprintln!("RGB illuminant (0.8, 0.3, 0.1) renders {rgb:?}");

@@ -517,7 +517,7 @@ fn bsdfs() {
     );
     match bsdf(r#"<bsdf type="twosided"><bsdf type="thinfilm"/></bsdf>"#) {
         Bsdf::TwoSided(t) => {
-            // The thinfilm defaults (docs/conventions.md).
+            // The thinfilm defaults (docs/physics-and-formats.md).
             let (film_ior, d, substrate_ior, alpha) = film(*t.inner);
             assert_eq!(
                 (film_ior, d, substrate_ior, alpha),

@@ -1,4 +1,4 @@
-//! `capture.json` (format `thinfilm-capture/1`, `docs/conventions.md`, "Data formats") and the simulator's ground
+//! `capture.json` (format `thinfilm-capture/1`, `docs/physics-and-formats.md`, "Data formats") and the simulator's ground
 //! truth (`ground_truth/ground_truth.json` + `thickness.exr`).
 //!
 //! Reflectance per sample is the cube value, or with references

@@ -1,6 +1,6 @@
 //! Film index (global) and per-pixel thickness from multi-angle hyperspectral captures
 //! or point spectra (the seed paper's §4, made robust for real captures; the corrections are in
-//! `docs/conventions.md`, "Thin-film physics").
+//! `docs/physics-and-formats.md`, "Thin-film physics").
 //!
 //! The estimator is a pipeline of stages ([`stage`]): noise estimate → index → joint
 //! refinement → thickness → checks, over one forward model ([`model`]: the Airy film,

@@ -2,7 +2,7 @@
 //! difference is a whole — or, when n2 > n3, half — number of wavelengths).
 //!
 //! Two flavours: the seed's band-quantised maximum (the peak wavelength is a band centre,
-//! which limits Sample 3 — `docs/conventions.md`, "Thin-film physics"), and sub-band localisation by a least-squares
+//! which limits Sample 3 — `docs/physics-and-formats.md`, "Thin-film physics"), and sub-band localisation by a least-squares
 //! parabola through the samples around each maximum.
 
 /// One detected maximum.

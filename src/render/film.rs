@@ -3,7 +3,7 @@
 //! Each sample's spectrum becomes linear sRGB through the RGB matching functions
 //! ([`crate::spectrum::sampled::rgb_cmf_d65_f32_lanes`]: the mean over the four wavelengths of
 //! cmf·L/pdf, Mitsuba/pbrt-v4; Rec.709, D65, no adaptation, no clamping;
-//! `docs/conventions.md`, "Film").
+//! `docs/physics-and-formats.md`, "Film").
 //!
 //! Box filter (every sample stays in its pixel): a pixel's samples are summed in a fixed
 //! binary tree over their *global* sample indices ([`tree_sum`]). A render of samples

@@ -1,7 +1,7 @@
 //! The `path` integrator: unidirectional path tracing with hero-wavelength spectral transport
 //! (four wavelengths follow one path), next-event estimation with multiple importance sampling
 //! (power heuristic) between BSDF and emitter sampling, and Russian roulette, all with Mitsuba 3
-//! semantics (`docs/conventions.md`, "Path integrator"):
+//! semantics (`docs/physics-and-formats.md`, "Path integrator"):
 //! - `max_depth` counts path vertices: 1 = directly visible emitters only, −1 = unlimited;
 //! - from depth ≥ `rr_depth` a path survives with probability min(max β · η², 0.95).
 //!

@@ -342,7 +342,7 @@ impl EnvMap {
         })
     }
 
-    /// Texture coordinates of a world direction (`docs/conventions.md`, "Environment map").
+    /// Texture coordinates of a world direction (`docs/physics-and-formats.md`, "Environment map").
     #[inline]
     fn uv_of(&self, dir: Vec3) -> Vec2 {
         let d = (self.to_local * dir).normalize();

@@ -1,7 +1,7 @@
 //! Spectra and textures as the renderer evaluates them: scene descriptions
 //! ([`crate::scene::SpectrumDesc`], [`crate::scene::TextureDesc`]) turned into values at the
 //! four path wavelengths. RGB reflectances use Jakob & Hanika 2019 upsampling, RGB emitters
-//! Mitsuba's `srgb_d65` (`docs/conventions.md`, "Environment map").
+//! Mitsuba's `srgb_d65` (`docs/physics-and-formats.md`, "Environment map").
 
 use crate::scene::{BitmapTexture, SpectrumDesc, TextureDesc};
 use crate::spectrum::{

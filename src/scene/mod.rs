@@ -2,7 +2,7 @@
 //! Loaders (Mitsuba XML subset, glTF, OBJ, PLY) produce a [`Scene`]; the renderer consumes it.
 //!
 //! CONTRACT between the scene loaders and the renderer. Geometry is in world space.
-//! Conventions are Mitsuba 3's (`docs/conventions.md`): the camera looks along +Z of its
+//! Conventions are Mitsuba 3's (`docs/physics-and-formats.md`): the camera looks along +Z of its
 //! `to_world` frame with +Y up; environment maps use Mitsuba's lat-long mapping. BSDFs are
 //! the renderer's models ([`crate::render::bsdf`]), each built from a file by its own builder.
 

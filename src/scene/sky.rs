@@ -14,7 +14,7 @@
 //!   (azimuth × elevation), radiance 6 (neutral) and ≈4 (slightly cool), with smoothstep
 //!   edges 3° wide.
 //!
-//! Texel convention (`docs/conventions.md`, "Environment map"): column j is centred at u = (j+½)/W, row i at
+//! Texel convention (`docs/physics-and-formats.md`, "Environment map"): column j is centred at u = (j+½)/W, row i at
 //! v = i/(H−1); direction d = (sinθ sinφ, cosθ, −sinθ cosφ) with φ = 2πu, θ = πv.
 //! Values are rounded to half precision, the precision of the committed EXR (f16 channels
 //! keep `studio.exr` at ≈ 40 kB), so the in-memory map and the file are identical.

@@ -1,6 +1,6 @@
 //! Free-standing thin film (scene type `thinfilm_bubble`): a soap bubble or any lossless or
 //! absorbing film of index n_f and thickness d with the same ambient medium n_a on both
-//! sides. Reflection and transmission are the coherent Airy sums (`docs/conventions.md`,
+//! sides. Reflection and transmission are the coherent Airy sums (`docs/physics-and-formats.md`,
 //! "Thin-film optics") with n1 = n3 = n_a (seed eq. 4 for r;
 //! t = t12 t23 e^{iβ} / (1 + r12 r23 e^{2iβ})), averaged over s and p (unpolarised light).
 //!

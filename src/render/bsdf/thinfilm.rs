@@ -1,5 +1,5 @@
 //! Opaque thin film on a substrate (scene type `thinfilm`, the estimator's material;
-//! `docs/conventions.md`, "The thin-film BSDF"): the Fresnel term is the Airy single-film
+//! `docs/physics-and-formats.md`, "The thin-film BSDF"): the Fresnel term is the Airy single-film
 //! reflectance R(λ, θ) of [`crate::optics::ThinFilm`] (seed eq. 4), averaged over s and p.
 //! Smooth: a mirror lobe weighted by R. Rough (α > 0): a GGX microfacet lobe with the Airy
 //! term evaluated at the microfacet angle (the "rough thin film" of Belcour & Barla 2017

@@ -673,7 +673,11 @@ fn vertex<C: Carrier>(
         wi: frame.to_local(-ray.dir),
         wi_world: -ray.dir,
     };
-    let ctx = ShadingCtx { wl, uv: si.uv };
+    let ctx = ShadingCtx {
+        wl,
+        uv: si.uv,
+        segment: si.t, // glTF volume absorption (gltf branch hook)
+    };
 
     // ---- Emitter sampling (the shadow ray is traced with the batch's others) ----
     if bsdf.has_smooth_lobe() && !lights.lights.is_empty() {

@@ -34,23 +34,13 @@ use super::{
     TextureDesc, TextureFilter, TriangleMesh, WrapMode, DEFAULT_RESOLUTION, DEFAULT_SPP,
 };
 use crate::optics::{Complex64, Ior};
-use crate::render::bsdf::{
-    conductor::Conductor, dielectric::Dielectric, plastic::Plastic, thinfilm::ThinFilmBsdf, Bsdf,
-};
+use crate::render::bsdf::Bsdf;
 use anyhow::{bail, Context, Result};
 use glam::{Mat4, Vec2, Vec3};
 use gltf::image::Format;
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
-
-fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
 
 /// One channel of a decoded glTF image as floats in [0,1] (row-major, top row first).
 fn image_channel(img: &gltf::image::Data, channel: usize) -> Result<Vec<f32>> {
@@ -194,6 +184,8 @@ pub(crate) fn iridescent_film(
 }
 
 impl Loader<'_> {
+    /// Material `m` as a [`GltfPbr`](crate::render::bsdf::gltf_pbr::GltfPbr) (see
+    /// [`super::gltf_material`]) and its emission, built once per material.
     fn material(&mut self, m: &gltf::Material) -> Result<(usize, Option<SpectrumDesc>)> {
         if let Some(v) = self.materials.get(&m.index()) {
             return Ok(v.clone());
@@ -201,80 +193,22 @@ impl Loader<'_> {
         let what = format!(
             "{}: material {}",
             self.file,
-            m.name()
-                .map(str::to_string)
-                .unwrap_or_else(|| format!("#{:?}", m.index()))
-        );
-        let pbr = m.pbr_metallic_roughness();
-        let roughness = pbr.roughness_factor().clamp(0.0, 1.0);
-        let alpha = roughness * roughness;
-        let ior = m.ior().unwrap_or(1.5) as f64;
-        let bsdf = if let Some((film_n, thickness_nm)) =
-            iridescent_film(m, self.doc, self.images, &what)?
-        {
-            ThinFilmBsdf::new(Ior::real(film_n), &thickness_nm, Ior::real(ior), alpha)
-                .with_context(|| what.clone())?
-                .into()
-        } else {
-            let transmission = m
-                .transmission()
-                .map(|t| t.transmission_factor())
-                .unwrap_or(0.0);
-            let base = pbr.base_color_factor();
-            if transmission >= 0.5 {
-                if alpha > 0.0 {
-                    bail!("{what}: rough transmission (roughness {roughness}) is not supported: only smooth glass");
-                }
-                Dielectric::new(Ior::real(ior), Ior::real(1.0)).into()
-            } else if pbr.metallic_factor() >= 0.5 {
-                Conductor::new(grey_conductor(base[0], base[1], base[2]), alpha, alpha)
-                    .with_context(|| what.clone())?
-                    .into()
-            } else {
-                let diffuse = match pbr.base_color_texture() {
-                    None => TextureDesc::Value(SpectrumDesc::Rgb([base[0], base[1], base[2]])),
-                    Some(info) => {
-                        let (img, tex) = texture_image(
-                            self.doc,
-                            self.images,
-                            &self.file,
-                            info.texture().index(),
-                        )?;
-                        let planes: Vec<Vec<f32>> = (0..3)
-                            .map(|c| image_channel(img, c.min(channel_count(img.format) - 1)))
-                            .collect::<Result<_>>()?;
-                        let data = (0..planes[0].len())
-                            .flat_map(|i| (0..3).map(move |c| (i, c)))
-                            .map(|(i, c)| srgb_to_linear(planes[c][i]) * base[c])
-                            .collect();
-                        let mut b =
-                            BitmapTexture::new(img.width as usize, img.height as usize, 3, data)?;
-                        b.wrap = wrap_mode(tex.sampler().wrap_s());
-                        b.filter = filter_of(&tex);
-                        TextureDesc::Bitmap(Arc::new(b))
-                    }
-                };
-                Plastic::new(&diffuse, ior as f32, 1.0, false, alpha)
-                    .with_context(|| what.clone())?
-                    .into()
+            match (m.name(), m.index()) {
+                (Some(n), Some(i)) => format!("{n:?} (#{i})"),
+                (None, Some(i)) => format!("#{i}"),
+                (_, None) => "default".to_string(),
             }
+        );
+        let reader = super::gltf_material::MaterialReader {
+            doc: self.doc,
+            images: self.images,
+            what,
         };
-        let strength = m.emissive_strength().unwrap_or(1.0);
-        let e = m.emissive_factor().map(|c| c * strength);
-        let emission = e.iter().any(|&c| c > 0.0).then_some(SpectrumDesc::Rgb(e));
+        let (bsdf, emission) = reader.read(m)?;
         self.bsdfs.push(bsdf);
         let entry = (self.bsdfs.len() - 1, emission);
         self.materials.insert(m.index(), entry.clone());
         Ok(entry)
-    }
-}
-
-fn channel_count(f: Format) -> usize {
-    match f {
-        Format::R8 | Format::R16 => 1,
-        Format::R8G8 | Format::R16G16 => 2,
-        Format::R8G8B8 | Format::R16G16B16 | Format::R32G32B32FLOAT => 3,
-        _ => 4,
     }
 }
 

@@ -248,6 +248,7 @@ pub enum EmitterDesc {
 }
 
 pub(crate) mod gltf_check;
+mod gltf_material;
 pub mod gltf_scene;
 pub mod meshio;
 pub mod mitsuba;

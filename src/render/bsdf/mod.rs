@@ -35,6 +35,10 @@ use glam::{Vec2, Vec3};
 pub struct ShadingCtx<'a> {
     pub wl: &'a SampledWavelengths,
     pub uv: Vec2,
+    /// Length of the ray segment that arrived at this point (scene units; 0 where unknown):
+    /// a model with an absorbing interior attenuates light that crossed it (glTF
+    /// `KHR_materials_volume`, Beer–Lambert).
+    pub segment: f32,
 }
 
 /// A sampled direction.
@@ -350,6 +354,7 @@ bsdf_models! {
     TwoSided(twosided::TwoSided),
     Polarizer(polarizer::PolarizerBsdf),
     Blend(blend::BlendBsdf),
+    GltfPbr(gltf_pbr::GltfPbr),
 }
 
 impl Bsdf {

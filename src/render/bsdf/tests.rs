@@ -181,6 +181,7 @@ pub(super) fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) ->
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
+        segment: 0.0,
     };
     let mut observed = vec![0.0f64; THETA_BINS * PHI_BINS];
     let mut sampler = Sampler::from_seed(seed);
@@ -294,6 +295,7 @@ fn chi2_rejects_a_wrong_pdf() {
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
+        segment: 0.0,
     };
     counters::take();
     let mut s = Sampler::from_seed(1);
@@ -419,6 +421,7 @@ fn thin_film_conserves_energy_when_lossless() {
             let ctx = ShadingCtx {
                 wl: &wl,
                 uv: Vec2::ZERO,
+                segment: 0.0,
             };
             for cos in [1.0f32, 0.8, 0.5, 0.2, 0.05, 1e-3] {
                 let (r, t) = f.reflect_transmit(&ctx, cos);
@@ -446,6 +449,7 @@ fn zero_thickness_film_is_bare_substrate() {
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
+        segment: 0.0,
     };
     counters::take();
     for cos in [1.0f32, 0.6, 0.1] {
@@ -463,6 +467,7 @@ fn finite_at_grazing_and_degenerate_inputs() {
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
+        segment: 0.0,
     };
     counters::take();
     let mut all = test_bsdfs();
@@ -519,6 +524,7 @@ fn dielectric_sampling() {
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
+        segment: 0.0,
     };
     counters::take();
     let wi = dir(30.0, 0.0);
@@ -544,6 +550,7 @@ fn diffuse_white_furnace_weights() {
     let ctx = ShadingCtx {
         wl: &wl,
         uv: Vec2::ZERO,
+        segment: 0.0,
     };
     counters::take();
     let mut s = Sampler::from_seed(2);
@@ -559,7 +566,11 @@ fn diffuse_white_furnace_weights() {
 // ---- Free-standing films (thinfilm_bubble) and multilayer stacks (thinfilm + layers) ----
 
 pub(super) fn ctx_of(wl: &SampledWavelengths) -> ShadingCtx<'_> {
-    ShadingCtx { wl, uv: Vec2::ZERO }
+    ShadingCtx {
+        wl,
+        uv: Vec2::ZERO,
+        segment: 0.0,
+    }
 }
 
 /// Lossless bubble: R + T = 1 at every wavelength, angle (to grazing) and thickness, from

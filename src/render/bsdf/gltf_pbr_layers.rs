@@ -1,0 +1,397 @@
+//! The glTF material at one shading point: textures looked up, the base colour upsampled,
+//! the Fresnel terms of its layers (exact dielectric, Gulbrandsen metal, Airy film), the
+//! microfacet refraction term and the normal-map frame.
+
+use super::super::fresnel::{fresnel_conductor, fresnel_dielectric};
+use super::super::microfacet::Ggx;
+use super::super::ShadingCtx;
+use super::{GltfMaterial, GltfPbr};
+use crate::optics::film_f32::ThinFilmX4;
+use crate::render::counters::{count, Counter};
+use crate::render::geometry::{Frame, SurfaceInteraction};
+use crate::render::texture::Spec;
+use crate::scene::BitmapTexture;
+use crate::spectrum::rgb2spec::{srgb_reflectance, RgbSigmoidPolynomial};
+use anyhow::bail;
+use glam::Vec3;
+use num_complex::Complex32;
+use std::sync::Arc;
+
+/// glTF `alphaMode`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AlphaMode {
+    Opaque,
+    /// Opaque where alpha ≥ `alphaCutoff`, absent elsewhere.
+    Mask(f32),
+    /// Coverage = alpha (stochastic opacity).
+    Blend,
+}
+
+/// `KHR_materials_iridescence`.
+#[derive(Debug, Clone)]
+pub struct Iridescence {
+    /// `iridescenceFactor` and `iridescenceTexture` (R).
+    pub factor: f32,
+    pub factor_texture: Option<Arc<BitmapTexture>>,
+    /// `iridescenceIor` (the film's index).
+    pub ior: f32,
+    /// `iridescenceThicknessMinimum`/`Maximum` (nm): the thickness texture's G channel
+    /// interpolates between them; without a texture the thickness is the maximum.
+    pub thickness_min_nm: f32,
+    pub thickness_max_nm: f32,
+    pub thickness_texture: Option<Arc<BitmapTexture>>,
+}
+
+/// `KHR_materials_volume` with a thickness > 0: the mesh bounds a refracting medium.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Volume {
+    /// `attenuationColor` (linear RGB): the transmittance after `attenuation_distance`.
+    pub attenuation_color: [f32; 3],
+    /// `attenuationDistance` in scene units (∞: no absorption).
+    pub attenuation_distance: f32,
+}
+
+fn check(ok: bool, key: &str, v: impl std::fmt::Debug, range: &str) -> anyhow::Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        bail!("{key} = {v:?} is invalid: must be {range}")
+    }
+}
+
+fn unit(v: f32) -> bool {
+    (0.0..=1.0).contains(&v)
+}
+
+/// Every factor finite and in the range the glTF schema gives it.
+pub(super) fn validate(m: &GltfMaterial) -> anyhow::Result<()> {
+    let range01 = "finite and in [0, 1]";
+    check(m.base_color.iter().all(|&c| unit(c)), "baseColorFactor", m.base_color, range01)?;
+    check(unit(m.metallic), "metallicFactor", m.metallic, range01)?;
+    check(unit(m.roughness), "roughnessFactor", m.roughness, range01)?;
+    check(m.ior.is_finite() && m.ior >= 1.0, "KHR_materials_ior.ior", m.ior, "finite and ≥ 1")?;
+    check(unit(m.specular), "KHR_materials_specular.specularFactor", m.specular, range01)?;
+    check(
+        m.specular_color.iter().all(|&c| c.is_finite() && c >= 0.0),
+        "KHR_materials_specular.specularColorFactor",
+        m.specular_color,
+        "finite and ≥ 0",
+    )?;
+    check(
+        unit(m.transmission),
+        "KHR_materials_transmission.transmissionFactor",
+        m.transmission,
+        range01,
+    )?;
+    if let AlphaMode::Mask(c) = m.alpha_mode {
+        check(c.is_finite() && c >= 0.0, "alphaCutoff", c, "finite and ≥ 0")?;
+    }
+    if let Some((_, s)) = &m.normal_texture {
+        check(s.is_finite(), "normalTexture.scale", s, "finite")?;
+    }
+    if let Some(v) = &m.volume {
+        check(
+            v.attenuation_color.iter().all(|&c| unit(c)),
+            "KHR_materials_volume.attenuationColor",
+            v.attenuation_color,
+            range01,
+        )?;
+        check(
+            v.attenuation_distance > 0.0,
+            "KHR_materials_volume.attenuationDistance",
+            v.attenuation_distance,
+            "> 0",
+        )?;
+    }
+    if let Some(i) = &m.iridescence {
+        let k = "KHR_materials_iridescence";
+        check(unit(i.factor), &format!("{k}.iridescenceFactor"), i.factor, range01)?;
+        check(i.ior.is_finite() && i.ior >= 1.0, &format!("{k}.iridescenceIor"), i.ior, "finite and ≥ 1")?;
+        for (key, v) in [
+            ("iridescenceThicknessMinimum", i.thickness_min_nm),
+            ("iridescenceThicknessMaximum", i.thickness_max_nm),
+        ] {
+            check(v.is_finite() && v >= 0.0, &format!("{k}.{key}"), v, "finite and ≥ 0 (nm)")?;
+        }
+    }
+    Ok(())
+}
+
+/// The complex index n + ik of a metal whose normal-incidence reflectance is `r` and whose
+/// edge tint is `g` (Gulbrandsen 2014, "Artist Friendly Metallic Fresnel", JCGT 3(4), eqs.
+/// 8–9): n = g (1−r)/(1+r) + (1−g) (1+√r)/(1−√r), k = √(((n+1)² r − (n−1)²)/(1−r)).
+/// r is kept below 1 (k would be infinite), g in [0, 1].
+pub fn gulbrandsen_index(r: f32, g: f32) -> Complex32 {
+    let r = r.clamp(0.0, 0.999);
+    let g = g.clamp(0.0, 1.0);
+    let sr = r.sqrt();
+    let n_min = (1.0 - r) / (1.0 + r);
+    let n_max = (1.0 + sr) / (1.0 - sr);
+    let n = g * n_min + (1.0 - g) * n_max;
+    let k2 = ((n + 1.0) * (n + 1.0) * r - (n - 1.0) * (n - 1.0)) / (1.0 - r);
+    Complex32::new(n, k2.max(0.0).sqrt())
+}
+
+/// A reflectance spectrum at the path's wavelengths.
+#[inline]
+fn spectrum(p: &RgbSigmoidPolynomial, ctx: &ShadingCtx) -> Spec {
+    Spec::from_array(ctx.wl.lambda.map(|l| p.eval(l)))
+}
+
+/// Linear RGB `factor` × texture (if any) at the shading point, upsampled.
+#[inline]
+fn rgb_spectrum(
+    factor: [f32; 3],
+    tex: &Option<Arc<BitmapTexture>>,
+    cached: &RgbSigmoidPolynomial,
+    ctx: &ShadingCtx,
+) -> Spec {
+    match tex {
+        None => spectrum(cached, ctx),
+        Some(t) => {
+            let v = t.eval(ctx.uv);
+            let rgb = [0, 1, 2].map(|c| factor[c] * v[c]);
+            if rgb[0] == rgb[1] && rgb[1] == rgb[2] {
+                Spec::splat(rgb[0].clamp(0.0, 1.0))
+            } else {
+                spectrum(&srgb_reflectance(rgb), ctx)
+            }
+        }
+    }
+}
+
+/// The first channel of an optional texture (1 without one).
+#[inline]
+fn channel(tex: &Option<Arc<BitmapTexture>>, ctx: &ShadingCtx, c: usize) -> f32 {
+    tex.as_ref().map_or(1.0, |t| t.eval(ctx.uv)[c])
+}
+
+/// The material's values at one shading point, seen from the side the light arrives on.
+pub(super) struct Point {
+    pub base: Spec,
+    pub coverage: f32,
+    pub metallic: f32,
+    /// None: smooth (mirror lobes).
+    pub ggx: Option<Ggx>,
+    pub specular: f32,
+    /// KHR_materials_specular colour (spectral), None when white.
+    pub specular_color: Option<Spec>,
+    pub transmission: f32,
+    /// η_t / η_i across the interface from this side.
+    pub eta: f32,
+    /// The ambient index on this side and the index beyond (glass interior: ior | 1).
+    pub ambient: f32,
+    pub beyond: f32,
+    /// Film factor and thickness (nm), if any.
+    pub film: Option<(f32, f32, f32)>,
+    /// The metal's complex index per wavelength (when metallic > 0).
+    pub metal: [Complex32; 4],
+    /// Beer–Lambert transmittance of the segment that arrived from inside a volume.
+    pub absorption: Spec,
+}
+
+impl Point {
+    pub fn at(pbr: &GltfPbr, ctx: &ShadingCtx, inside: bool) -> Point {
+        let m = &pbr.material;
+        let [r, g, b, a] = m.base_color;
+        let base = rgb_spectrum([r, g, b], &m.base_color_texture, &pbr.base_poly, ctx);
+        let alpha = a * channel(&m.alpha_texture, ctx, 0);
+        let coverage = match m.alpha_mode {
+            AlphaMode::Opaque => 1.0,
+            AlphaMode::Mask(cut) => {
+                if alpha >= cut {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            AlphaMode::Blend => alpha.clamp(0.0, 1.0),
+        };
+        let (roughness, metallic) = match &m.metallic_roughness_texture {
+            Some(t) => {
+                let v = t.eval(ctx.uv);
+                (m.roughness * v[1], m.metallic * v[2])
+            }
+            None => (m.roughness, m.metallic),
+        };
+        let ggx = (m.roughness > 0.0).then(|| {
+            let alpha = (roughness * roughness).clamp(1e-3, 1.0);
+            Ggx::new(alpha, alpha)
+        });
+        let specular = m.specular * m.specular_texture.as_ref().map_or(1.0, |t| t.eval(ctx.uv)[0]);
+        let specular_color = (m.specular_color != [1.0; 3] || m.specular_color_texture.is_some())
+            .then(|| {
+                let v = m.specular_color_texture.as_ref().map_or([1.0; 3], |t| t.eval(ctx.uv));
+                let rgb = [0, 1, 2].map(|c| m.specular_color[c] * v[c]);
+                // Not a reflectance: may exceed 1 (the product with F0 is clamped).
+                let mx = rgb[0].max(rgb[1]).max(rgb[2]).max(1e-6);
+                spectrum(&srgb_reflectance(rgb.map(|c| c / mx)), ctx) * mx
+            });
+        let transmission = m.transmission * channel(&m.transmission_texture, ctx, 0);
+        let refracting_inside = inside && m.volume.is_some();
+        let (ambient, beyond) = if refracting_inside {
+            (m.ior, 1.0)
+        } else {
+            (1.0, m.ior)
+        };
+        let film = m.iridescence.as_ref().and_then(|i| {
+            let f = i.factor * channel(&i.factor_texture, ctx, 0);
+            let d = match &i.thickness_texture {
+                Some(t) => {
+                    let v = t.eval(ctx.uv)[1];
+                    i.thickness_min_nm + v * (i.thickness_max_nm - i.thickness_min_nm)
+                }
+                None => i.thickness_max_nm,
+            };
+            let d = if d.is_finite() { d.max(0.0) } else { 0.0 };
+            (f > 0.0).then_some((f, d, i.ior))
+        });
+        let metal = if metallic > 0.0 {
+            let edge = rgb_spectrum(
+                m.specular_color.map(|c| (c * m.specular).min(1.0)),
+                &m.specular_color_texture,
+                &pbr.edge_poly,
+                ctx,
+            );
+            std::array::from_fn(|i| gulbrandsen_index(base[i], edge[i]))
+        } else {
+            [Complex32::new(1.0, 0.0); 4]
+        };
+        let absorption = match &m.volume {
+            Some(v) if inside && v.attenuation_distance.is_finite() => {
+                let c = spectrum(&srgb_reflectance(v.attenuation_color), ctx);
+                let d = ctx.segment.max(0.0) / v.attenuation_distance;
+                // T = c^(s/d): Beer–Lambert with σ = −ln(c)/d.
+                Spec::from_array(c.to_array().map(|c| if c > 0.0 { c.powf(d) } else { 0.0 }))
+            }
+            _ => Spec::ONE,
+        };
+        Point {
+            base,
+            coverage,
+            metallic,
+            ggx,
+            specular,
+            specular_color,
+            transmission,
+            eta: beyond / ambient,
+            ambient,
+            beyond,
+            film,
+            metal,
+            absorption,
+        }
+    }
+
+    /// The Airy reflectance of the film on `substrate` at cos θ (exact, s and p averaged).
+    #[inline]
+    fn film_r(&self, ctx: &ShadingCtx, d: f32, n: f32, substrate: [Complex32; 4], c: f32) -> Spec {
+        count(Counter::FilmEvals, 1);
+        let film = ThinFilmX4 {
+            ambient_ior: self.ambient,
+            film_ior: [Complex32::new(n, 0.0); 4],
+            thickness_nm: d,
+            substrate_ior: substrate,
+        };
+        let r = film.response(ctx.wl.lambda, c).r();
+        Spec::from_array(r.map(|v| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 }))
+    }
+
+    /// (dielectric F_d, metal F_m) at cos θ = `c` on the facet, the film blended in.
+    #[inline]
+    pub fn fresnel(&self, pbr: &GltfPbr, ctx: &ShadingCtx, c: f32) -> (Spec, Spec) {
+        let c = c.clamp(0.0, 1.0);
+        let mut f_d = Spec::splat(fresnel_dielectric(c, self.eta).0);
+        if let (Some(sc), false) = (self.specular_color, self.ambient > 1.0) {
+            // KHR_materials_specular scales F0 by the colour, not the grazing value:
+            // F = F_exact + (colour − 1)·F0·(1 − (1 − c)^5).
+            let ior = pbr.material.ior;
+            let f0 = ((ior - 1.0) / (ior + 1.0)).powi(2);
+            let w = 1.0 - (1.0 - c).powi(5);
+            f_d += (sc - Spec::ONE) * (f0 * w);
+        }
+        let mut f_m = Spec::ZERO;
+        if self.metallic > 0.0 {
+            f_m = Spec::from_array(std::array::from_fn(|i| {
+                fresnel_conductor(c, self.metal[i].re, self.metal[i].im)
+            }));
+        }
+        if let Some((factor, d, n)) = self.film {
+            if self.metallic < 1.0 {
+                let sub = [Complex32::new(self.beyond, 0.0); 4];
+                let r = self.film_r(ctx, d, n, sub, c);
+                f_d = f_d * (1.0 - factor) + r * factor;
+            }
+            if self.metallic > 0.0 {
+                let r = self.film_r(ctx, d, n, self.metal, c);
+                f_m = f_m * (1.0 - factor) + r * factor;
+            }
+        }
+        (
+            (f_d * self.specular).clamp(Spec::ZERO, Spec::ONE),
+            f_m,
+        )
+    }
+
+    /// The specular layer's Fresnel term: dielectric and metal mixed by `metallic`.
+    #[inline]
+    pub fn mix_metal(&self, f_d: Spec, f_m: Spec) -> Spec {
+        f_d * (1.0 - self.metallic) + f_m * self.metallic
+    }
+}
+
+/// GGX refraction from `wi` (z > 0) to `wo` (z < 0) across relative index `eta` (Walter et al.
+/// 2007, eqs. 16–17, 21; pbrt-v4 `DielectricBxDF`): the half vector m, f·|cos θo| without the
+/// (1 − F) factor, in radiance units (÷ η²), and the pdf of sampling `wo` from the visible
+/// normals of `wi` and refracting.
+#[inline]
+pub(super) fn refraction(ggx: Ggx, wi: Vec3, wo: Vec3, eta: f32) -> Option<(Vec3, f32, f32)> {
+    if wi.z <= 0.0 || wo.z >= 0.0 {
+        return None;
+    }
+    let mut m = (wi + wo * eta).normalize();
+    if m.z < 0.0 {
+        m = -m;
+    }
+    let (di, d_o) = (wi.dot(m), wo.dot(m));
+    if !(di > 0.0 && d_o < 0.0 && m.is_finite()) {
+        return None;
+    }
+    let denom = (d_o + di / eta).powi(2);
+    let d = ggx.d(m);
+    if d == 0.0 || denom <= 0.0 {
+        return None;
+    }
+    let value = d * ggx.g(wi, wo, m) * (di * d_o).abs() / (denom * wi.z) / (eta * eta);
+    let pdf = ggx.pdf_visible(wi, m) * d_o.abs() / denom;
+    (value.is_finite() && pdf.is_finite()).then_some((m, value, pdf))
+}
+
+/// The shading frame perturbed by a tangent-space normal map (glTF: RGB = (x, y, z)·½ + ½,
+/// x and y scaled by `scale`); tangent from ∂p/∂u, bitangent n × t. The unperturbed frame
+/// where the tangent or the result degenerates.
+pub(super) fn normal_mapped(si: &SurfaceInteraction, tex: &BitmapTexture, scale: f32) -> Frame {
+    let n = si.shading.n;
+    let t = si.dpdu - n * n.dot(si.dpdu);
+    if !(t.length_squared() > 1e-20 && t.is_finite()) {
+        return si.shading;
+    }
+    let t = t.normalize();
+    let b = n.cross(t);
+    let v = tex.eval(si.uv);
+    let ts = Vec3::new(
+        (2.0 * v[0] - 1.0) * scale,
+        (2.0 * v[1] - 1.0) * scale,
+        2.0 * v[2] - 1.0,
+    );
+    let nn = (t * ts.x + b * ts.y + n * ts.z).normalize();
+    if !nn.is_finite() || nn.dot(n) <= 0.0 {
+        return si.shading;
+    }
+    let s = (t - nn * nn.dot(t)).normalize();
+    Frame {
+        s,
+        t: nn.cross(s),
+        n: nn,
+    }
+}

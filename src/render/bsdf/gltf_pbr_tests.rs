@@ -1,0 +1,335 @@
+//! Tests of the glTF material: χ² of the sampled directions, eval/pdf/sample agreement, the
+//! layers' limits (no film = zero thickness = factor 0; a metal's F0 is its base colour),
+//! energy of lossless glass with and without a film, sidedness, absorption, validation.
+
+use super::*;
+use crate::render::bsdf::tests::{
+    assert_chi2, assert_eval_pdf_sample_agree, ctx_of, dir, wl,
+};
+use crate::render::bsdf::Bsdf;
+
+fn mat(f: impl FnOnce(&mut GltfMaterial)) -> Bsdf {
+    let mut m = GltfMaterial::default();
+    f(&mut m);
+    GltfPbr::new(m).unwrap().into()
+}
+
+fn film(ior: f32, d: f32, factor: f32) -> Option<Iridescence> {
+    Some(Iridescence {
+        factor,
+        factor_texture: None,
+        ior,
+        thickness_min_nm: 0.0,
+        thickness_max_nm: d,
+        thickness_texture: None,
+    })
+}
+
+fn volume() -> Option<Volume> {
+    Some(Volume {
+        attenuation_color: [1.0; 3],
+        attenuation_distance: f32::INFINITY,
+    })
+}
+
+fn cases() -> Vec<(&'static str, Bsdf)> {
+    vec![
+        (
+            "dielectric",
+            mat(|m| {
+                m.base_color = [0.4, 0.4, 0.4, 1.0];
+                m.metallic = 0.0;
+                m.roughness = 0.4;
+            }),
+        ),
+        (
+            "dielectric+film",
+            mat(|m| {
+                m.base_color = [0.4, 0.5, 0.6, 1.0];
+                m.metallic = 0.0;
+                m.roughness = 0.3;
+                m.ior = 2.0;
+                m.iridescence = film(1.33, 400.0, 1.0);
+            }),
+        ),
+        (
+            "metal+film",
+            mat(|m| {
+                m.base_color = [0.9, 0.6, 0.3, 1.0];
+                m.metallic = 0.7;
+                m.roughness = 0.5;
+                m.iridescence = film(1.33, 400.0, 0.6);
+            }),
+        ),
+        (
+            "rough glass+film",
+            mat(|m| {
+                m.metallic = 0.0;
+                m.roughness = 0.5;
+                m.transmission = 1.0;
+                m.volume = volume();
+                m.iridescence = film(1.8, 300.0, 1.0);
+            }),
+        ),
+        (
+            "thin-walled",
+            mat(|m| {
+                m.metallic = 0.0;
+                m.roughness = 0.5;
+                m.transmission = 0.6;
+            }),
+        ),
+        (
+            "blend",
+            mat(|m| {
+                m.base_color = [0.8, 0.2, 0.2, 0.5];
+                m.alpha_mode = AlphaMode::Blend;
+                m.metallic = 0.0;
+                m.roughness = 0.6;
+                m.double_sided = true;
+            }),
+        ),
+    ]
+}
+
+#[test]
+fn chi2_sampled_directions_match_pdf() {
+    let cases = cases();
+    let threshold = 1.0 - (1.0 - 0.01f64).powf(1.0 / (cases.len() * 3) as f64);
+    for (name, b) in &cases {
+        assert_chi2(name, b, threshold);
+    }
+}
+
+#[test]
+fn eval_pdf_sample_agree() {
+    for (name, b) in cases() {
+        assert_eval_pdf_sample_agree(name, &b);
+    }
+}
+
+#[test]
+fn gulbrandsen_index_reproduces_f0() {
+    for r in [0.02f32, 0.4, 0.9, 0.98] {
+        for g in [0.0f32, 0.5, 1.0] {
+            let z = gulbrandsen_index(r, g);
+            let (n, k) = (z.re, z.im);
+            let f0 = ((n - 1.0).powi(2) + k * k) / ((n + 1.0).powi(2) + k * k);
+            assert!((f0 - r).abs() < 1e-4, "r={r} g={g}: n={n} k={k} F0={f0}");
+            assert!((fresnel_conductor_f0(n, k) - r).abs() < 1e-4);
+        }
+    }
+    // White edge tint: a silver-like index (n small, k large).
+    let z = gulbrandsen_index(0.95, 1.0);
+    assert!(z.re < 0.1 && z.im > 3.0, "{z}");
+}
+
+fn fresnel_conductor_f0(n: f32, k: f32) -> f32 {
+    crate::render::bsdf::fresnel::fresnel_conductor(1.0, n, k)
+}
+
+/// The specular layer's Fresnel term (dielectric, metal) at cos θ.
+fn fresnel_of(b: &Bsdf, c: f32) -> (Spec, Spec) {
+    let Bsdf::GltfPbr(p) = b else { unreachable!() };
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let pt = Point::at(p, &ctx, false);
+    pt.fresnel(p, &ctx, c)
+}
+
+#[test]
+fn film_limits_are_the_bare_base() {
+    for metallic in [0.0, 1.0] {
+        let base = |f: Option<Iridescence>| {
+            mat(|m| {
+                m.base_color = [0.9, 0.5, 0.2, 1.0];
+                m.metallic = metallic;
+                m.roughness = 0.3;
+                m.ior = 1.7;
+                m.iridescence = f;
+            })
+        };
+        for c in [1.0, 0.7, 0.3, 0.05] {
+            let bare = fresnel_of(&base(None), c);
+            for f in [film(1.33, 0.0, 1.0), film(1.33, 400.0, 0.0)] {
+                let with = fresnel_of(&base(f), c);
+                assert!((with.0 - bare.0).abs().max_element() < 1e-4, "{with:?} {bare:?}");
+                assert!((with.1 - bare.1).abs().max_element() < 1e-4, "{with:?} {bare:?}");
+            }
+            // A real film changes the reflectance; half the factor is half the change.
+            let full = fresnel_of(&base(film(1.33, 400.0, 1.0)), c);
+            let half = fresnel_of(&base(film(1.33, 400.0, 0.5)), c);
+            let (a, b) = if metallic > 0.0 {
+                (full.1, bare.1)
+            } else {
+                (full.0, bare.0)
+            };
+            assert!((a - b).abs().max_element() > 0.01, "c={c}: {a} vs {b}");
+            let h = if metallic > 0.0 { half.1 } else { half.0 };
+            assert!(((h - b) * 2.0 - (a - b)).abs().max_element() < 1e-4);
+        }
+    }
+}
+
+#[test]
+fn a_metal_reflects_its_base_colour_at_normal_incidence() {
+    let b = mat(|m| {
+        m.base_color = [0.95, 0.64, 0.54, 1.0];
+        m.roughness = 0.2;
+    });
+    let Bsdf::GltfPbr(p) = &b else { unreachable!() };
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let base = Point::at(p, &ctx, false).base;
+    let (_, f_m) = fresnel_of(&b, 1.0);
+    assert!((f_m - base).abs().max_element() < 2e-3, "{f_m} vs {base}");
+    // Coloured: red reflects more than blue (lanes are 420…690 nm).
+    assert!(f_m.w > f_m.x + 0.2, "{f_m}");
+}
+
+/// Smooth lossless glass from outside: R + η²·T = 1 (T carries the 1/η² of radiance), with
+/// and without a film, at all angles.
+#[test]
+fn lossless_glass_with_and_without_film_conserves_energy() {
+    for f in [None, film(1.8, 350.0, 1.0), film(1.3, 120.0, 0.5)] {
+        let b = mat(|m| {
+            m.metallic = 0.0;
+            m.roughness = 0.0;
+            m.transmission = 1.0;
+            m.ior = 1.5;
+            m.volume = volume();
+            m.iridescence = f.clone();
+        });
+        assert!(b.is_fresnel_pair());
+        let wl = wl();
+        let ctx = ctx_of(&wl);
+        for theta in [0.0f32, 30.0, 60.0, 85.0] {
+            for wi in [dir(theta, 10.0), -dir(theta, 10.0)] {
+                let [r, t] = b.sample_split(&ctx, wi, 0.5, Vec2::splat(0.5));
+                let (r, t) = (r.unwrap(), t);
+                let eta = if wi.z > 0.0 { 1.5f32 } else { 1.0 / 1.5 };
+                let t = t.map_or(Spec::ZERO, |t| t.weight * (eta * eta));
+                let sum = r.weight + t;
+                assert!((sum - Spec::ONE).abs().max_element() < 1e-3, "{theta}° {wi}: {sum}");
+            }
+        }
+    }
+}
+
+/// Rough lossless glass: the directional albedo of the single-scattering GGX pair (the
+/// transmitted weights' 1/η² undone) is below 1 by the microfacet model's multiple-scattering
+/// loss only, a few per cent at roughness 0.3.
+#[test]
+fn rough_glass_albedo_is_nearly_one() {
+    let b = mat(|m| {
+        m.metallic = 0.0;
+        m.roughness = 0.3;
+        m.transmission = 1.0;
+        m.volume = volume();
+        m.iridescence = film(1.8, 300.0, 1.0);
+    });
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let mut s = crate::render::sampler::Sampler::from_seed(5);
+    let n = 100_000;
+    let mut sum = Spec::ZERO;
+    for _ in 0..n {
+        if let Some(smp) = b.sample(&ctx, dir(30.0, 0.0), s.next_1d(), s.next_2d(), Lobes::ALL) {
+            let undo = if smp.wo.z < 0.0 { 1.5f32 * 1.5 } else { 1.0 };
+            sum += smp.weight * undo;
+        }
+    }
+    let a = sum / n as f32;
+    assert!(a.min_element() > 0.93 && a.max_element() < 1.01, "{a}");
+}
+
+#[test]
+fn sides_and_opacity() {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    let (wi, wo) = (dir(30.0, 0.0), dir(40.0, 180.0));
+    let back = |v: Vec3| Vec3::new(v.x, v.y, -v.z);
+    let one = mat(|m| {
+        m.metallic = 0.0;
+        m.roughness = 0.5;
+    });
+    assert!(one.eval(&ctx, wi, wo).max_element() > 0.0);
+    assert_eq!(one.eval(&ctx, back(wi), back(wo)), Spec::ZERO);
+    let two = mat(|m| {
+        m.metallic = 0.0;
+        m.roughness = 0.5;
+        m.double_sided = true;
+    });
+    assert_eq!(two.eval(&ctx, back(wi), back(wo)), one.eval(&ctx, wi, wo));
+    // MASK: below the cutoff the surface is absent (a null lobe of weight 1).
+    let cut = mat(|m| {
+        m.base_color = [1.0, 1.0, 1.0, 0.3];
+        m.alpha_mode = AlphaMode::Mask(0.5);
+        m.metallic = 0.0;
+        m.roughness = 0.5;
+    });
+    let s = cut.sample(&ctx, wi, 0.5, Vec2::splat(0.5), Lobes::ALL).unwrap();
+    assert_eq!((s.wo, s.weight, s.lobe), (-wi, Spec::ONE, BsdfFlags::NULL));
+    assert_eq!(cut.eval(&ctx, wi, wo), Spec::ZERO);
+}
+
+#[test]
+fn volume_absorbs_along_the_inside_segment() {
+    let b = mat(|m| {
+        m.metallic = 0.0;
+        m.roughness = 0.0;
+        m.transmission = 1.0;
+        m.volume = Some(Volume {
+            attenuation_color: [0.5; 3],
+            attenuation_distance: 2.0,
+        });
+    });
+    let wl = wl();
+    let wi = -dir(0.0, 0.0);
+    let weight = |segment: f32| {
+        let ctx = ShadingCtx {
+            wl: &wl,
+            uv: Vec2::ZERO,
+            segment,
+        };
+        b.sample_split(&ctx, wi, 0.5, Vec2::splat(0.5))[1].unwrap().weight
+    };
+    // Twice the attenuation distance: 0.5² of what crossed no distance.
+    let ratio = weight(4.0) / weight(0.0);
+    assert!((ratio - Spec::splat(0.25)).abs().max_element() < 1e-4, "{ratio}");
+    // From outside nothing is absorbed.
+    let ctx = ShadingCtx {
+        wl: &wl,
+        uv: Vec2::ZERO,
+        segment: 4.0,
+    };
+    let out = b.sample_split(&ctx, -wi, 0.5, Vec2::splat(0.5))[1].unwrap().weight;
+    let ctx0 = ctx_of(&wl);
+    let out0 = b.sample_split(&ctx0, -wi, 0.5, Vec2::splat(0.5))[1].unwrap().weight;
+    assert_eq!(out, out0);
+}
+
+#[test]
+fn invalid_factors_are_refused_by_key() {
+    for (key, f) in [
+        ("metallicFactor", (|m: &mut GltfMaterial| m.metallic = f32::NAN) as fn(&mut GltfMaterial)),
+        ("roughnessFactor", |m| m.roughness = 1.5),
+        ("baseColorFactor", |m| m.base_color[1] = -0.1),
+        ("KHR_materials_ior.ior", |m| m.ior = 0.5),
+        ("transmissionFactor", |m| m.transmission = 2.0),
+        ("iridescenceThicknessMaximum", |m| {
+            m.iridescence = film(1.3, f32::INFINITY, 1.0)
+        }),
+        ("attenuationDistance", |m| {
+            m.volume = Some(Volume {
+                attenuation_color: [1.0; 3],
+                attenuation_distance: 0.0,
+            })
+        }),
+    ] {
+        let mut m = GltfMaterial::default();
+        f(&mut m);
+        let e = GltfPbr::new(m).unwrap_err().to_string();
+        assert!(e.contains(key), "{key}: {e}");
+    }
+}

@@ -1,0 +1,407 @@
+//! glTF materials → [`GltfPbr`] (`docs/gltf-materials.md`): the core metallic-roughness
+//! parameters and textures, `alphaMode`, `doubleSided`, `KHR_texture_transform` on every
+//! texture, and the extensions `KHR_materials_ior`, `_specular`, `_transmission`, `_volume`,
+//! `_iridescence` and `_emissive_strength` (the extensions the `gltf` crate does not model
+//! are read from the material's JSON). Colour textures (base colour, specular colour,
+//! emissive) are sRGB-decoded; data textures are linear. Every error names the file, the
+//! material and the key.
+
+use super::{BitmapTexture, SpectrumDesc, TextureFilter, WrapMode};
+use crate::render::bsdf::gltf_pbr::{AlphaMode, GltfMaterial, GltfPbr, Iridescence, Volume};
+use crate::render::bsdf::Bsdf;
+use anyhow::{bail, Context, Result};
+use glam::Mat3;
+use gltf::image::Format;
+use serde_json::Value;
+use std::sync::Arc;
+
+fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Channel count and bytes per channel of a decoded image.
+fn layout(f: Format) -> (usize, usize) {
+    match f {
+        Format::R8 => (1, 1),
+        Format::R8G8 => (2, 1),
+        Format::R8G8B8 => (3, 1),
+        Format::R8G8B8A8 => (4, 1),
+        Format::R16 => (1, 2),
+        Format::R16G16 => (2, 2),
+        Format::R16G16B16 => (3, 2),
+        Format::R16G16B16A16 => (4, 2),
+        Format::R32G32B32FLOAT => (3, 4),
+        Format::R32G32B32A32FLOAT => (4, 4),
+    }
+}
+
+/// The `KHR_texture_transform` of a textureInfo as Mitsuba's `to_uv` (the extension's
+/// `translation · rotation · scale`, GLSL column order), and its `texCoord` override.
+fn texture_transform(t: &Value, key: &str) -> Result<(Mat3, Option<u64>)> {
+    let num = |v: Option<&Value>, d: f32| -> Result<f32> {
+        match v {
+            None => Ok(d),
+            Some(x) => x
+                .as_f64()
+                .map(|x| x as f32)
+                .filter(|x| x.is_finite())
+                .with_context(|| format!("{key}.KHR_texture_transform: {x} is not a number")),
+        }
+    };
+    let pair = |name: &str, d: f32| -> Result<[f32; 2]> {
+        match t.get(name) {
+            None => Ok([d, d]),
+            Some(Value::Array(a)) if a.len() == 2 => Ok([num(a.first(), d)?, num(a.get(1), d)?]),
+            Some(x) => bail!("{key}.KHR_texture_transform.{name} = {x} must be [x, y]"),
+        }
+    };
+    let [ox, oy] = pair("offset", 0.0)?;
+    let [sx, sy] = pair("scale", 1.0)?;
+    let r = num(t.get("rotation"), 0.0)?;
+    let (s, c) = r.sin_cos();
+    let translation = Mat3::from_cols_array(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, ox, oy, 1.0]);
+    let rotation = Mat3::from_cols_array(&[c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0]);
+    let scale = Mat3::from_cols_array(&[sx, 0.0, 0.0, 0.0, sy, 0.0, 0.0, 0.0, 1.0]);
+    Ok((
+        translation * rotation * scale,
+        t.get("texCoord").and_then(Value::as_u64),
+    ))
+}
+
+/// A textureInfo: texture index, `texCoord`, and its `KHR_texture_transform` object.
+struct TexRef<'v> {
+    index: usize,
+    tex_coord: u64,
+    transform: Option<&'v Value>,
+    key: String,
+}
+
+/// The textureInfo of one of the `gltf` crate's typed texture references.
+fn typed_ref<'v>(
+    index: usize,
+    tex_coord: u32,
+    extensions: Option<&'v serde_json::Map<String, Value>>,
+    key: &str,
+) -> TexRef<'v> {
+    TexRef {
+        index,
+        tex_coord: tex_coord as u64,
+        transform: extensions.and_then(|e| e.get("KHR_texture_transform")),
+        key: key.to_string(),
+    }
+}
+
+/// Reads a textureInfo JSON object.
+fn tex_ref<'v>(v: &'v Value, key: String) -> Result<TexRef<'v>> {
+    let index = v
+        .get("index")
+        .and_then(Value::as_u64)
+        .with_context(|| format!("{key} has no texture index"))? as usize;
+    Ok(TexRef {
+        index,
+        tex_coord: v.get("texCoord").and_then(Value::as_u64).unwrap_or(0),
+        transform: v
+            .get("extensions")
+            .and_then(|e| e.get("KHR_texture_transform")),
+        key,
+    })
+}
+
+pub(super) struct MaterialReader<'a> {
+    pub doc: &'a gltf::Document,
+    pub images: &'a [gltf::image::Data],
+    /// "file: material NAME" for messages.
+    pub what: String,
+}
+
+impl MaterialReader<'_> {
+    /// Channels `channels` of texture `t` as a 1- or 3-channel bitmap (sRGB-decoded when
+    /// `srgb`); None when the image lacks the alpha channel asked for (alpha is then 1).
+    fn texture(
+        &self,
+        t: &TexRef,
+        channels: &[usize],
+        srgb: bool,
+    ) -> Result<Option<Arc<BitmapTexture>>> {
+        let key = format!("{}: {}", self.what, t.key);
+        let tex = self
+            .doc
+            .textures()
+            .nth(t.index)
+            .with_context(|| format!("{key}: texture {} does not exist", t.index))?;
+        let img = self
+            .images
+            .get(tex.source().index())
+            .with_context(|| format!("{key}: image {} was not loaded", tex.source().index()))?;
+        let (n, bytes) = layout(img.format);
+        if channels == [3] && n < 4 {
+            return Ok(None);
+        }
+        let count = img.width as usize * img.height as usize;
+        if img.pixels.len() < count * n * bytes {
+            bail!("{key}: image data is truncated");
+        }
+        let read = |i: usize, c: usize| -> f32 {
+            let o = (i * n + c.min(n - 1)) * bytes;
+            let p = &img.pixels;
+            let v = match bytes {
+                1 => p[o] as f32 / 255.0,
+                2 => u16::from_le_bytes([p[o], p[o + 1]]) as f32 / 65535.0,
+                _ => f32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]]),
+            };
+            if srgb && c < 3 {
+                srgb_to_linear(v)
+            } else {
+                v
+            }
+        };
+        let data = (0..count)
+            .flat_map(|i| channels.iter().map(move |&c| (i, c)))
+            .map(|(i, c)| read(i, c))
+            .collect();
+        let mut b = BitmapTexture::new(
+            img.width as usize,
+            img.height as usize,
+            channels.len(),
+            data,
+        )
+        .with_context(|| key.clone())?;
+        let sampler = tex.sampler();
+        b.wrap = match sampler.wrap_s() {
+            gltf::texture::WrappingMode::ClampToEdge => WrapMode::Clamp,
+            gltf::texture::WrappingMode::MirroredRepeat => WrapMode::Mirror,
+            gltf::texture::WrappingMode::Repeat => WrapMode::Repeat,
+        };
+        if let Some(gltf::texture::MagFilter::Nearest) = sampler.mag_filter() {
+            b.filter = TextureFilter::Nearest;
+        }
+        let mut tex_coord = t.tex_coord;
+        if let Some(tt) = t.transform {
+            let (m, tc) = texture_transform(tt, &key)?;
+            b.to_uv = m;
+            tex_coord = tc.unwrap_or(tex_coord);
+        }
+        if tex_coord != 0 {
+            eprintln!(
+                "warning: {key}: texCoord {tex_coord} is read as TEXCOORD_0 (only set 0 is loaded)"
+            );
+        }
+        Ok(Some(Arc::new(b)))
+    }
+
+    /// The texture at JSON `v` (if present), channels as [`Self::texture`].
+    fn optional(
+        &self,
+        v: Option<&Value>,
+        key: &str,
+        channels: &[usize],
+        srgb: bool,
+    ) -> Result<Option<Arc<BitmapTexture>>> {
+        match v {
+            None => Ok(None),
+            Some(v) => self.texture(&tex_ref(v, key.to_string())?, channels, srgb),
+        }
+    }
+
+    /// A number of extension object `ext` (default `d`); a non-number is an error.
+    fn num(&self, ext: &Value, ext_name: &str, key: &str, d: f32) -> Result<f32> {
+        match ext.get(key) {
+            None => Ok(d),
+            Some(v) => v
+                .as_f64()
+                .map(|x| x as f32)
+                .with_context(|| format!("{}: {ext_name}.{key} = {v} is not a number", self.what)),
+        }
+    }
+
+    /// A colour array of `len` numbers.
+    fn color<const N: usize>(
+        &self,
+        ext: &Value,
+        ext_name: &str,
+        key: &str,
+        d: [f32; N],
+    ) -> Result<[f32; N]> {
+        match ext.get(key) {
+            None => Ok(d),
+            Some(Value::Array(a)) if a.len() == N && a.iter().all(Value::is_number) => {
+                Ok(std::array::from_fn(|i| a[i].as_f64().unwrap_or(0.0) as f32))
+            }
+            Some(v) => bail!(
+                "{}: {ext_name}.{key} = {v} must be an array of {N} numbers",
+                self.what
+            ),
+        }
+    }
+
+    /// `KHR_materials_iridescence` of `m`.
+    fn iridescence(&self, m: &gltf::Material) -> Result<Option<Iridescence>> {
+        let k = "KHR_materials_iridescence";
+        let Some(v) = m.extension_value(k) else {
+            return Ok(None);
+        };
+        let ior = match v.get("iridescenceIor") {
+            Some(_) => self.num(v, k, "iridescenceIor", 1.3)?,
+            // A misspelling some exporters write.
+            None => self.num(v, k, "iridescenceIOR", 1.3)?,
+        };
+        Ok(Some(Iridescence {
+            factor: self.num(v, k, "iridescenceFactor", 0.0)?,
+            factor_texture: self.optional(
+                v.get("iridescenceTexture"),
+                &format!("{k}.iridescenceTexture"),
+                &[0],
+                false,
+            )?,
+            ior,
+            thickness_min_nm: self.num(v, k, "iridescenceThicknessMinimum", 100.0)?,
+            thickness_max_nm: self.num(v, k, "iridescenceThicknessMaximum", 400.0)?,
+            thickness_texture: self.optional(
+                v.get("iridescenceThicknessTexture"),
+                &format!("{k}.iridescenceThicknessTexture"),
+                &[0, 1, 2],
+                false,
+            )?,
+        }))
+    }
+
+    /// The material's core textures (base colour and alpha, metallic-roughness, normal).
+    fn core(&self, m: &gltf::Material, out: &mut GltfMaterial) -> Result<()> {
+        let pbr = m.pbr_metallic_roughness();
+        if let Some(i) = pbr.base_color_texture() {
+            let t = typed_ref(
+                i.texture().index(),
+                i.tex_coord(),
+                i.extensions(),
+                "baseColorTexture",
+            );
+            out.base_color_texture = self.texture(&t, &[0, 1, 2], true)?;
+            out.alpha_texture = self.texture(&t, &[3], false)?;
+        }
+        if let Some(i) = pbr.metallic_roughness_texture() {
+            let key = "metallicRoughnessTexture";
+            let t = typed_ref(i.texture().index(), i.tex_coord(), i.extensions(), key);
+            out.metallic_roughness_texture = self.texture(&t, &[0, 1, 2], false)?;
+        }
+        if let Some(n) = m.normal_texture() {
+            let t = typed_ref(
+                n.texture().index(),
+                n.tex_coord(),
+                n.extensions(),
+                "normalTexture",
+            );
+            if let Some(b) = self.texture(&t, &[0, 1, 2], false)? {
+                out.normal_texture = Some((b, n.scale()));
+            }
+        }
+        Ok(())
+    }
+
+    /// The extensions `_specular`, `_transmission`, `_volume`.
+    fn extensions(&self, m: &gltf::Material, out: &mut GltfMaterial) -> Result<()> {
+        let k = "KHR_materials_specular";
+        if let Some(v) = m.extension_value(k) {
+            out.has_specular_extension = true;
+            out.specular = self.num(v, k, "specularFactor", 1.0)?;
+            out.specular_texture = self.optional(
+                v.get("specularTexture"),
+                &format!("{k}.specularTexture"),
+                &[3],
+                false,
+            )?;
+            out.specular_color = self.color(v, k, "specularColorFactor", [1.0; 3])?;
+            out.specular_color_texture = self.optional(
+                v.get("specularColorTexture"),
+                &format!("{k}.specularColorTexture"),
+                &[0, 1, 2],
+                true,
+            )?;
+        }
+        if let Some(t) = m.transmission() {
+            out.transmission = t.transmission_factor();
+            if let Some(i) = t.transmission_texture() {
+                let key = "KHR_materials_transmission.transmissionTexture";
+                let r = typed_ref(i.texture().index(), i.tex_coord(), i.extensions(), key);
+                out.transmission_texture = self.texture(&r, &[0], false)?;
+            }
+        }
+        let k = "KHR_materials_volume";
+        if let Some(v) = m.extension_value(k) {
+            let thickness = self.num(v, k, "thicknessFactor", 0.0)?;
+            if !(thickness.is_finite() && thickness >= 0.0) {
+                bail!(
+                    "{}: {k}.thicknessFactor = {thickness} must be finite and ≥ 0",
+                    self.what
+                );
+            }
+            if thickness > 0.0 {
+                out.volume = Some(Volume {
+                    attenuation_color: self.color(v, k, "attenuationColor", [1.0; 3])?,
+                    attenuation_distance: self.num(v, k, "attenuationDistance", f32::INFINITY)?,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The BSDF and the emitted radiance (linear RGB, `emissiveFactor` ×
+    /// `emissiveStrength` × the emissive texture's mean) of material `m`.
+    pub fn read(&self, m: &gltf::Material) -> Result<(Bsdf, Option<SpectrumDesc>)> {
+        let pbr = m.pbr_metallic_roughness();
+        let mut out = GltfMaterial {
+            base_color: pbr.base_color_factor(),
+            metallic: pbr.metallic_factor(),
+            roughness: pbr.roughness_factor(),
+            ior: m.ior().unwrap_or(1.5),
+            double_sided: m.double_sided(),
+            alpha_mode: match m.alpha_mode() {
+                gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+                gltf::material::AlphaMode::Mask => AlphaMode::Mask(m.alpha_cutoff().unwrap_or(0.5)),
+                gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            },
+            ..GltfMaterial::default()
+        };
+        self.core(m, &mut out)?;
+        self.extensions(m, &mut out)?;
+        out.iridescence = self.iridescence(m)?;
+        let bsdf = GltfPbr::new(out).with_context(|| self.what.clone())?;
+        Ok((bsdf.into(), self.emission(m)?))
+    }
+
+    /// `emissiveFactor` × `KHR_materials_emissive_strength` × the emissive texture's mean
+    /// colour (area lights here have one radiance per shape).
+    fn emission(&self, m: &gltf::Material) -> Result<Option<SpectrumDesc>> {
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        if !(strength.is_finite() && strength >= 0.0) {
+            bail!("{}: KHR_materials_emissive_strength.emissiveStrength = {strength} must be finite and ≥ 0", self.what);
+        }
+        let mut e = m.emissive_factor().map(|c| c * strength);
+        if !e.iter().all(|c| c.is_finite() && *c >= 0.0) {
+            bail!(
+                "{}: emissiveFactor {:?} must be finite and ≥ 0",
+                self.what,
+                m.emissive_factor()
+            );
+        }
+        if let (Some(i), true) = (m.emissive_texture(), e.iter().any(|&c| c > 0.0)) {
+            let t = typed_ref(
+                i.texture().index(),
+                i.tex_coord(),
+                i.extensions(),
+                "emissiveTexture",
+            );
+            if let Some(b) = self.texture(&t, &[0, 1, 2], true)? {
+                let n = (b.width * b.height) as f32;
+                for (c, v) in e.iter_mut().enumerate() {
+                    *v *= b.data.iter().skip(c).step_by(3).sum::<f32>() / n;
+                }
+                eprintln!("warning: {}: emissiveTexture is applied as its mean colour (area lights have one radiance)", self.what);
+            }
+        }
+        Ok(e.iter().any(|&c| c > 0.0).then_some(SpectrumDesc::Rgb(e)))
+    }
+}

@@ -2,7 +2,6 @@
 
 use glam::{Vec2, Vec3};
 use std::path::Path;
-use thinfilm::optics::Ior;
 use thinfilm::render::bsdf::Bsdf;
 use thinfilm::scene::*;
 
@@ -73,21 +72,20 @@ fn gltf_iridescence_camera_and_transforms() {
     assert_eq!(m.uvs[2], Vec2::new(0.0, 1.0));
     assert!(m.normals.iter().all(|n| (*n - Vec3::Z).length() < 1e-6));
     match &s.bsdfs[s.shapes[0].bsdf] {
-        Bsdf::ThinFilm(f) => {
-            let (film_ior, substrate_ior) = (&f.film_ior, &f.substrate_ior);
-            let alpha = f.ggx.unwrap().alpha_u;
-            let TextureDesc::Bitmap(b) = f.thickness_nm.desc() else {
-                panic!("bitmap thickness expected")
-            };
-            assert_eq!(*film_ior, Ior::real(1.8));
-            assert_eq!(*substrate_ior, Ior::real(1.45f32 as f64));
-            assert!((alpha - 0.09).abs() < 1e-6);
-            assert_eq!(b.value_range, Some((200.0, 800.0)));
-            assert_eq!(b.channels, 1);
+        Bsdf::GltfPbr(p) => {
+            let m = &p.material;
+            let film = m.iridescence.as_ref().unwrap();
+            let b = film.thickness_texture.as_ref().unwrap();
+            assert_eq!((film.ior, film.factor), (1.8, 1.0));
+            assert_eq!((m.ior, m.roughness, m.metallic), (1.45, 0.3, 0.0));
+            assert_eq!(
+                (film.thickness_min_nm, film.thickness_max_nm),
+                (200.0, 800.0)
+            );
             assert_eq!(b.wrap, WrapMode::Clamp);
-            // G = 128/255 → 200 + 600·0.50196 nm.
-            let d = b.eval_scalar(Vec2::new(0.3, 0.7));
-            assert!((d - (200.0 + 600.0 * 128.0 / 255.0)).abs() < 1e-3, "{d}");
+            // G = 128/255 (the thickness lives in G; min + G·(max − min) nm).
+            let g = b.eval(Vec2::new(0.3, 0.7))[1];
+            assert!((g - 128.0 / 255.0).abs() < 1e-6, "{g}");
         }
         b => panic!("{b:?}"),
     }
@@ -109,14 +107,11 @@ fn gltf_metal_and_default_camera() {
     let path = write_gltf(dir.path(), false);
     let s = load(&path, &[]).unwrap();
     match &s.bsdfs[0] {
-        Bsdf::Conductor(cond) => {
-            let (eta, ggx) = (&cond.eta, cond.ggx.unwrap());
-            let (alpha_u, alpha_v) = (&ggx.alpha_u, &ggx.alpha_v);
-            // F0 of n = 1 + ik equals the base colour luminance 0.5.
-            let c = eta.at(550.0);
-            let f0 = ((c.re - 1.0).powi(2) + c.im.powi(2)) / ((c.re + 1.0).powi(2) + c.im.powi(2));
-            assert!((f0 - 0.5).abs() < 1e-6, "{f0}");
-            assert_eq!((*alpha_u, *alpha_v), (0.25, 0.25));
+        Bsdf::GltfPbr(p) => {
+            let m = &p.material;
+            assert_eq!(m.base_color, [0.5, 0.5, 0.5, 1.0]);
+            assert_eq!((m.metallic, m.roughness), (1.0, 0.5));
+            assert!(m.iridescence.is_none());
         }
         b => panic!("{b:?}"),
     }

@@ -119,9 +119,11 @@ fn gulbrandsen_index_reproduces_f0() {
             assert!((fresnel_conductor_f0(n, k) - r).abs() < 1e-4);
         }
     }
-    // White edge tint: a silver-like index (n small, k large).
+    // White edge tint: the smallest n, (1 − r)/(1 + r), all reflectance from k; no tint:
+    // a lossless index (k = 0) of the same F0.
     let z = gulbrandsen_index(0.95, 1.0);
-    assert!(z.re < 0.1 && z.im > 3.0, "{z}");
+    assert!((z.re - 0.05 / 1.95).abs() < 1e-6 && z.im > 0.9, "{z}");
+    assert_eq!(gulbrandsen_index(0.5, 0.0).im, 0.0);
 }
 
 fn fresnel_conductor_f0(n: f32, k: f32) -> f32 {

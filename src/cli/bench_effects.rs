@@ -126,6 +126,22 @@ fn variants() -> Vec<(String, &'static str, &'static str, String, String)> {
             SENSOR.into(),
             format!(r#"{SENSOR}<string name="polarizer" value="s"/>"#),
         ),
+        // glTF metallic-roughness against the plastic it generalises (gltf branch).
+        teapot(
+            "roughplastic α=0.25",
+            "none (diffuse under a GGX coating)",
+            r#"<bsdf type="roughplastic"><float name="alpha" value="0.25"/><rgb name="diffuse_reflectance" value="0.5, 0.5, 0.5"/></bsdf>"#.into(),
+        ),
+        teapot(
+            "glTF PBR dielectric α=0.25",
+            "glTF layers (exact Fresnel)",
+            r#"<bsdf type="gltf_pbr"><rgb name="base_color" value="0.5, 0.5, 0.5"/><float name="metallic" value="0"/><float name="roughness" value="0.5"/></bsdf>"#.into(),
+        ),
+        teapot(
+            "glTF PBR dielectric + iridescence",
+            "glTF layers + interference",
+            r#"<bsdf type="gltf_pbr"><rgb name="base_color" value="0.5, 0.5, 0.5"/><float name="metallic" value="0"/><float name="roughness" value="0.5"/><float name="iridescence" value="1"/></bsdf>"#.into(),
+        ),
         teapot(
             "rough thin film α=0.15",
             "interference + microfacet",

@@ -45,7 +45,7 @@ use crate::render::geometry::{
 };
 use crate::render::texture::Spec;
 use crate::scene::mitsuba::PluginParams;
-use crate::scene::BitmapTexture;
+use crate::scene::{BitmapTexture, SpectrumDesc, TextureDesc};
 use crate::spectrum::rgb2spec::{srgb_reflectance, RgbSigmoidPolynomial};
 use glam::{Vec2, Vec3};
 use layers::Point;
@@ -393,11 +393,48 @@ impl GltfPbr {
 }
 
 impl BsdfPlugin for GltfPbr {
-    /// Built from glTF files only (`scene::gltf_material`): no Mitsuba plugin name.
-    const PLUGINS: &'static [&'static str] = &[];
+    /// glTF materials come from `.gltf`/`.glb` files (`scene::gltf_material`); `gltf_pbr`
+    /// is the same model in a Mitsuba-syntax scene (thinfilm's own plugin, for comparisons
+    /// and benchmarks on Mitsuba scenes).
+    const PLUGINS: &'static [&'static str] = &["gltf_pbr"];
 
+    /// `base_color` (linear RGB or a number, default 1), `metallic` (1), `roughness` (1),
+    /// `ior` (1.5), `transmission` (0; with `volume` true (default) it refracts),
+    /// `iridescence` (film factor, 0), `iridescence_ior` (1.3), `iridescence_thickness`
+    /// (nm, 400), `double_sided` (false).
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
-        Err(p.error("glTF materials are read from .gltf/.glb files, not from Mitsuba XML"))
+        let base_color = match p.texture("base_color", 1.0)? {
+            TextureDesc::Value(SpectrumDesc::Constant(v)) => [v, v, v, 1.0],
+            TextureDesc::Value(SpectrumDesc::Rgb([r, g, b])) => [r, g, b, 1.0],
+            _ => return Err(p.error_at("base_color", "base_color must be an rgb or a number")),
+        };
+        let num = |p: &mut PluginParams, k: &str, d: f64| p.float(k, d).map(|v| v as f32);
+        let film_factor = num(p, "iridescence", 0.0)?;
+        let film_ior = num(p, "iridescence_ior", 1.3)?;
+        let film_d = num(p, "iridescence_thickness", 400.0)?;
+        let volume = p.bool("volume", true)?.then_some(Volume {
+            attenuation_color: [1.0; 3],
+            attenuation_distance: f32::INFINITY,
+        });
+        let m = GltfMaterial {
+            base_color,
+            metallic: num(p, "metallic", 1.0)?,
+            roughness: num(p, "roughness", 1.0)?,
+            ior: num(p, "ior", 1.5)?,
+            transmission: num(p, "transmission", 0.0)?,
+            volume,
+            iridescence: (film_factor > 0.0).then_some(Iridescence {
+                factor: film_factor,
+                factor_texture: None,
+                ior: film_ior,
+                thickness_min_nm: 0.0,
+                thickness_max_nm: film_d,
+                thickness_texture: None,
+            }),
+            double_sided: p.bool("double_sided", false)?,
+            ..GltfMaterial::default()
+        };
+        GltfPbr::new(m).map_err(|e| p.error(e))
     }
 }
 

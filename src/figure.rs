@@ -54,6 +54,7 @@ pub fn teapot_scene(settings: &RenderSettings) -> Scene {
         camera: Camera {
             to_world: look_at(Vec3::new(4.0, 5.5, 10.0), Vec3::new(0.2, 1.3, 0.0), Vec3::Y),
             fov_deg: 32.0,
+            projection: crate::scene::Projection::Perspective,
             fov_axis: FovAxis::X,
             near_clip: 0.01,
             far_clip: 1000.0,

@@ -179,6 +179,7 @@ fn room(extra: Vec<Shape>) -> Scene {
         camera: Camera {
             to_world: look_at(Vec3::ZERO, Vec3::new(0.0, 0.0, 1.0), Vec3::Y),
             fov_deg: 70.0,
+            projection: thinfilm::scene::Projection::Perspective,
             fov_axis: FovAxis::X,
             near_clip: 0.01,
             far_clip: 1000.0,

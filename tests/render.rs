@@ -15,6 +15,7 @@ fn camera(origin: Vec3, target: Vec3, fov: f32) -> Camera {
     Camera {
         to_world: look_at(origin, target, Vec3::Y),
         fov_deg: fov,
+        projection: thinfilm::scene::Projection::Perspective,
         fov_axis: FovAxis::X,
         near_clip: 0.01,
         far_clip: 1000.0,

@@ -451,12 +451,12 @@ fn accepted_and_refused_parameters() {
             "principal_point_offset_x",
         ),
         (
-            r#"<sensor type="thinlens"/>"#,
-            "unsupported sensor plugin \"thinlens\"",
+            r#"<sensor type="radiancemeter"/>"#,
+            "unsupported sensor plugin \"radiancemeter\"",
         ),
         (
-            r#"<emitter type="spot"/>"#,
-            "unsupported emitter plugin \"spot\"",
+            r#"<emitter type="sunsky"/>"#,
+            "unsupported emitter plugin \"sunsky\"",
         ),
         (
             r#"<sampler type="independent"><boolean name="jitter" value="true"/></sampler>"#,

@@ -30,6 +30,11 @@ pub fn non_negative(s: &str) -> Result<f64, String> {
     in_range(s, 0.0, f64::MAX)
 }
 
+/// A finite number, as f32 (angles).
+pub fn finite_f32(s: &str) -> Result<f32, String> {
+    in_range(s, f32::MIN as f64, f32::MAX as f64).map(|v| v as f32)
+}
+
 /// A finite number ≥ 0, as f32 (exposures).
 pub fn non_negative_f32(s: &str) -> Result<f32, String> {
     in_range(s, 0.0, f32::MAX as f64).map(|v| v as f32)

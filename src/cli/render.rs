@@ -62,6 +62,14 @@ pub struct Args {
     /// a material has no polarised form).
     #[arg(long)]
     pub force_polarization: bool,
+    /// Environment replacing the scene's own: a lat-long EXR/HDR file (Mitsuba `envmap`
+    /// layout), `constant:V` (D65 of luminance V) or `constant:R,G,B` (RGB illuminant).
+    #[arg(long, value_name = "FILE|constant:V|constant:R,G,B")]
+    pub environment: Option<thinfilm::scene::environment::EnvironmentSource>,
+    /// Turns the environment about the up (+Y) axis by DEG degrees, right-handed, as
+    /// Mitsuba's `<rotate y="1" angle="DEG"/>` on an `envmap`.
+    #[arg(long, value_name = "DEG", allow_hyphen_values = true, value_parser = super::args::finite_f32)]
+    pub environment_rotation: Option<f32>,
     /// Exposure multiplier for the PNG only (finite, ≥ 0).
     #[arg(long, allow_hyphen_values = true, default_value_t = 1.0, value_parser = super::args::non_negative_f32)]
     pub exposure: f32,
@@ -200,8 +208,13 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     if ext != "exr" {
         bail!("output {} must end in .exr", args.output.display());
     }
-    let scene = thinfilm::scene::load(&args.scene, &args.define)
+    let mut scene = thinfilm::scene::load(&args.scene, &args.define)
         .with_context(|| format!("loading scene {}", args.scene.display()))?;
+    thinfilm::scene::environment::apply(
+        &mut scene,
+        args.environment.as_ref(),
+        args.environment_rotation,
+    )?;
     let sample_range = match args.part {
         Some((k, n)) => Some(thinfilm::render::passes::part(
             args.spp.unwrap_or(scene.spp),

@@ -4,7 +4,7 @@
 //! [`BATCH`] samples of one pixel share their pixel, camera origin and scramble seeds, and
 //! their camera steps are the same arithmetic on different numbers: sample numbers
 //! ([`PixelSampler::camera_samples`]), hero wavelengths, film positions, ray directions
-//! ([`PerspectiveCamera::generate_rays`]) and the colour-matching rows of their wavelengths.
+//! ([`super::camera::PerspectiveCamera::generate_rays`]) and the colour-matching rows of their wavelengths.
 //! Written as loops over lanes, each step compiles to SIMD (16 lanes are one AVX-512 or two
 //! AVX2 registers). Every lane's values are bit-identical to those of the one-sample functions
 //! ([`super::camera_sample`]; test `render::tests::batched_samples_equal_single_samples`).
@@ -13,7 +13,7 @@
 //! by the environment lookups of every ray of the path (the D65 factor of RGB illuminants)
 //! and by the film (the sample's RGB).
 
-use super::camera::{PerspectiveCamera, Ray};
+use super::camera::{Camera, Ray};
 use super::primary::PixelRays;
 use super::sampler::{PixelSampler, Sampler};
 use super::texture::Spec;
@@ -26,6 +26,38 @@ const _: () = assert!(BATCH == super::accel::PACKET && BATCH == super::lights::L
 
 /// Lane values, one per sample of the batch.
 pub type Lanes = [f32; BATCH];
+
+/// Rays of a camera without a single pinhole, lane by lane, with their origins; a thin lens
+/// draws its lens sample from each sample's stream (two dimensions after the camera's).
+fn lens_rays(
+    camera: &Camera,
+    film_uv: &[Lanes; 2],
+    samplers: &mut [Sampler; BATCH],
+) -> (PixelRays, Option<[Lanes; 3]>) {
+    let mut rays = PixelRays {
+        origin: glam::Vec3::ZERO,
+        dir: [[0.0; BATCH]; 3],
+        tmin: [0.0; BATCH],
+        tmax: [0.0; BATCH],
+    };
+    let mut origins = [[0.0f32; BATCH]; 3];
+    for i in 0..BATCH {
+        let aperture = if camera.needs_aperture_sample() {
+            samplers[i].next_2d()
+        } else {
+            glam::Vec2::splat(0.5)
+        };
+        let uv = glam::Vec2::new(film_uv[0][i], film_uv[1][i]);
+        let r = camera.generate_ray_through(uv, aperture);
+        for (k, (dir, origin)) in rays.dir.iter_mut().zip(&mut origins).enumerate() {
+            dir[i] = r.dir[k];
+            origin[i] = r.origin[k];
+        }
+        rays.tmin[i] = r.tmin;
+        rays.tmax[i] = r.tmax;
+    }
+    (rays, Some(origins))
+}
 
 /// Camera samples `first .. first + n` of one pixel.
 pub struct CameraBatch {
@@ -40,6 +72,10 @@ pub struct CameraBatch {
     pub rows: [[Lanes; 4]; 4],
     /// The camera rays.
     pub rays: PixelRays,
+    /// Per-lane ray origins for cameras without a single pinhole (thin lens, orthographic;
+    /// hook of the `lights` branch): then `rays.origin` is unused and [`Self::ray`] reads
+    /// these.
+    pub origins: Option<[Lanes; 3]>,
     /// Each sample's stream, positioned after the camera dimensions.
     pub samplers: [Sampler; BATCH],
 }
@@ -48,7 +84,7 @@ impl CameraBatch {
     /// The camera samples `first .. first + n` (n ≤ [`BATCH`]) of pixel (`x`, `y`). Lanes
     /// from `n` on hold further samples of the pixel and are ignored.
     pub fn generate(
-        camera: &PerspectiveCamera,
+        camera: &Camera,
         pixel: &PixelSampler,
         [x, y]: [u32; 2],
         [width, height]: [u32; 2],
@@ -85,19 +121,30 @@ impl CameraBatch {
             film_uv[0][i] = pos[0][i] / size[0];
             film_uv[1][i] = pos[1][i] / size[1];
         }
-        let (dir, tmin, tmax) = camera.generate_rays(&film_uv);
+        let (rays, origins) = match camera.pinhole() {
+            Some(pinhole) => {
+                let (dir, tmin, tmax) = pinhole.generate_rays(&film_uv);
+                let origin = pinhole.origin();
+                (
+                    PixelRays {
+                        origin,
+                        dir,
+                        tmin,
+                        tmax,
+                    },
+                    None,
+                )
+            }
+            None => lens_rays(camera, &film_uv, &mut samplers),
+        };
         CameraBatch {
             n,
             pos,
             lambda,
             pdf,
             rows,
-            rays: PixelRays {
-                origin: camera.origin(),
-                dir,
-                tmin,
-                tmax,
-            },
+            rays,
+            origins,
             samplers,
         }
     }
@@ -105,7 +152,11 @@ impl CameraBatch {
     /// Lane `i`'s camera ray.
     #[inline]
     pub fn ray(&self, i: usize) -> Ray {
-        self.rays.ray(i)
+        let mut ray = self.rays.ray(i);
+        if let Some(o) = &self.origins {
+            ray.origin = glam::Vec3::new(o[0][i], o[1][i], o[2][i]);
+        }
+        ray
     }
 
     /// Lane `i`'s wavelengths.

@@ -1,9 +1,11 @@
-//! Mitsuba's `perspective` sensor: pinhole camera looking along local +Z with +Y up, local +X
-//! towards the left edge of the image (Mitsuba's `lookat` builds its frame as
-//! (left, up, dir)); `fov` measured along `fov_axis`.
+//! Mitsuba's sensors: `perspective` (a pinhole camera looking along local +Z with +Y up,
+//! local +X towards the left edge of the image — Mitsuba's `lookat` builds its frame as
+//! (left, up, dir) — `fov` measured along `fov_axis`), `thinlens` (the same frustum through
+//! a lens disc focused on a plane) and `orthographic` (parallel rays).
 
-use crate::scene::{Camera as CameraDesc, FovAxis};
-use glam::{DMat3, DVec2, DVec3, Vec2, Vec3};
+use super::geometry::square_to_uniform_disk_concentric;
+use crate::scene::{Camera as CameraDesc, FovAxis, Projection};
+use glam::{DMat3, DVec2, DVec3, Mat4, Vec2, Vec3};
 
 /// A ray with origin, unit direction and a valid interval.
 #[derive(Debug, Clone, Copy)]
@@ -12,6 +14,123 @@ pub struct Ray {
     pub dir: Vec3,
     pub tmin: f32,
     pub tmax: f32,
+}
+
+/// A prepared camera of any projection.
+#[derive(Debug, Clone)]
+pub enum Camera {
+    Pinhole(PerspectiveCamera),
+    /// Mitsuba `thinlens` (`thinlens.cpp` `sample_ray`): the pinhole's ray through film
+    /// position (lx, ly, 1) meets the focal plane at f·(lx, ly, 1); the ray starts at a point
+    /// `a` sampled uniformly (concentric map) on the lens disc of radius r in the local z = 0
+    /// plane and heads for that focal point. Clip distances are along the optical axis.
+    ThinLens {
+        pinhole: PerspectiveCamera,
+        aperture_radius: f32,
+        focus_distance: f32,
+    },
+    Orthographic(OrthographicCamera),
+}
+
+/// Mitsuba `orthographic`: rays along `to_world`·(0, 0, 1) from `to_world`·(x, y, near) with
+/// x = 1 − 2u ∈ [−1, 1] (u: film x, left to right) and y = (1 − 2v)/aspect, running
+/// far − near.
+#[derive(Debug, Clone)]
+pub struct OrthographicCamera {
+    to_world: Mat4,
+    dir: Vec3,
+    aspect: f32,
+    near_clip: f32,
+    far_clip: f32,
+}
+
+impl Camera {
+    pub fn new(desc: &CameraDesc, width: u32, height: u32) -> anyhow::Result<Self> {
+        Ok(match desc.projection {
+            Projection::Perspective => {
+                Camera::Pinhole(PerspectiveCamera::new(desc, width, height)?)
+            }
+            Projection::ThinLens {
+                aperture_radius,
+                focus_distance,
+            } => Camera::ThinLens {
+                pinhole: PerspectiveCamera::new(desc, width, height)?,
+                aperture_radius,
+                focus_distance,
+            },
+            Projection::Orthographic => {
+                let m = desc.to_world;
+                let dir = m.transform_vector3(Vec3::Z).normalize_or_zero();
+                let det = glam::Mat3::from_mat4(m).determinant();
+                if !(m.is_finite() && det.abs() > 1e-12 && dir != Vec3::ZERO) {
+                    anyhow::bail!("camera to_world transform is singular or not finite");
+                }
+                Camera::Orthographic(OrthographicCamera {
+                    to_world: m,
+                    dir,
+                    aspect: width as f32 / height as f32,
+                    near_clip: desc.near_clip.max(0.0),
+                    far_clip: desc.far_clip,
+                })
+            }
+        })
+    }
+
+    /// The pinhole camera, for the screen bins (which need rays from one point).
+    pub fn pinhole(&self) -> Option<&PerspectiveCamera> {
+        match self {
+            Camera::Pinhole(p) => Some(p),
+            _ => None,
+        }
+    }
+
+    /// Whether rays need a lens sample ([`Self::generate_ray_through`]).
+    pub fn needs_aperture_sample(&self) -> bool {
+        matches!(self, Camera::ThinLens { .. })
+    }
+
+    /// The ray through film position `film_uv` ∈ [0,1]² (x right, y down) and, for a thin
+    /// lens, the centre of the lens.
+    pub fn generate_ray(&self, film_uv: Vec2) -> Ray {
+        self.generate_ray_through(film_uv, Vec2::splat(0.5))
+    }
+
+    /// The ray through film position `film_uv` and lens sample `aperture` ∈ [0,1)² (ignored
+    /// without a lens).
+    pub fn generate_ray_through(&self, film_uv: Vec2, aperture: Vec2) -> Ray {
+        match self {
+            Camera::Pinhole(p) => p.generate_ray(film_uv),
+            Camera::ThinLens {
+                pinhole: c,
+                aperture_radius,
+                focus_distance,
+            } => {
+                let lx = (1.0 - 2.0 * film_uv.x) * c.tan_half_x;
+                let ly = (1.0 - 2.0 * film_uv.y) * c.tan_half_y;
+                let a = square_to_uniform_disk_concentric(aperture) * *aperture_radius;
+                let local = (Vec3::new(lx, ly, 1.0) * *focus_distance - a.extend(0.0)).normalize();
+                let world = c.axis_x * local.x + c.axis_y * local.y + c.axis_z * local.z;
+                let len = world.length();
+                Ray {
+                    origin: c.origin + c.axis_x * a.x + c.axis_y * a.y,
+                    dir: world / len,
+                    // Mitsuba: near/far over local d.z, in the units of `to_world * d`.
+                    tmin: c.near_clip * len / local.z,
+                    tmax: c.far_clip * len / local.z,
+                }
+            }
+            Camera::Orthographic(o) => {
+                let x = 1.0 - 2.0 * film_uv.x;
+                let y = (1.0 - 2.0 * film_uv.y) / o.aspect;
+                Ray {
+                    origin: o.to_world.transform_point3(Vec3::new(x, y, o.near_clip)),
+                    dir: o.dir,
+                    tmin: 0.0,
+                    tmax: o.far_clip - o.near_clip,
+                }
+            }
+        }
+    }
 }
 
 /// A prepared pinhole camera.
@@ -186,7 +305,6 @@ impl PerspectiveCamera {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Mat4;
 
     fn cam() -> PerspectiveCamera {
         let desc = CameraDesc {
@@ -195,6 +313,7 @@ mod tests {
             fov_axis: FovAxis::X,
             near_clip: 0.01,
             far_clip: 1000.0,
+            projection: Projection::Perspective,
         };
         PerspectiveCamera::new(&desc, 200, 100).unwrap()
     }
@@ -209,6 +328,59 @@ mod tests {
         assert!(left.dir.dot(c.axis_x) > 0.7);
         let top = c.generate_ray(Vec2::new(0.5, 0.0));
         assert!(top.dir.y > 0.4);
+    }
+
+    /// Every thin-lens ray through one film point meets the others on the focal plane; at
+    /// the lens centre it is the pinhole's ray.
+    #[test]
+    fn thin_lens_rays_converge_on_the_focal_plane() {
+        let desc = CameraDesc {
+            to_world: Mat4::from_translation(Vec3::new(0.0, 1.0, 0.0)),
+            fov_deg: 40.0,
+            fov_axis: FovAxis::X,
+            near_clip: 0.01,
+            far_clip: 100.0,
+            projection: Projection::ThinLens {
+                aperture_radius: 0.2,
+                focus_distance: 3.0,
+            },
+        };
+        let cam = Camera::new(&desc, 64, 48).unwrap();
+        let uv = Vec2::new(0.3, 0.7);
+        let pin = PerspectiveCamera::new(&desc, 64, 48)
+            .unwrap()
+            .generate_ray(uv);
+        let centre = cam.generate_ray(uv);
+        assert!((centre.dir - pin.dir).length() < 1e-6);
+        let focus = |r: Ray| r.origin + r.dir * ((3.0 - r.origin.z) / r.dir.z);
+        let want = focus(pin);
+        for a in [
+            Vec2::new(0.1, 0.9),
+            Vec2::new(0.8, 0.2),
+            Vec2::new(0.5, 0.0),
+        ] {
+            let r = cam.generate_ray_through(uv, a);
+            assert!(r.origin.distance(Vec3::new(0.0, 1.0, 0.0)) <= 0.2 + 1e-6);
+            assert!((focus(r) - want).length() < 1e-4, "{a}");
+        }
+    }
+
+    #[test]
+    fn orthographic_rays_are_parallel_and_span_the_scaled_square() {
+        let desc = CameraDesc {
+            to_world: Mat4::from_scale(Vec3::new(2.0, 2.0, 1.0)),
+            fov_deg: 90.0,
+            fov_axis: FovAxis::X,
+            near_clip: 0.5,
+            far_clip: 10.0,
+            projection: Projection::Orthographic,
+        };
+        let cam = Camera::new(&desc, 40, 20).unwrap();
+        let left = cam.generate_ray(Vec2::new(0.0, 0.5));
+        let top = cam.generate_ray(Vec2::new(0.5, 0.0));
+        assert_eq!(left.dir, Vec3::Z);
+        assert!((left.origin - Vec3::new(2.0, 0.0, 0.5)).length() < 1e-6);
+        assert!((top.origin - Vec3::new(0.0, 1.0, 0.5)).length() < 1e-6);
     }
 
     #[test]

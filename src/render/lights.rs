@@ -1,6 +1,7 @@
 //! Emitters: the lat-long environment map (Mitsuba orientation, texel lattice and RGB→spectrum
 //! conventions, importance-sampled by a 2-D piecewise-constant distribution), the constant
-//! environment, area lights on shapes and point lights.
+//! environment, area lights on shapes, and the delta lights: point, spot (Mitsuba's linear
+//! and glTF's smooth cone profiles) and directional.
 
 use super::accel::Accel;
 use super::camera::Ray;
@@ -10,7 +11,7 @@ use super::geometry::{
 };
 use super::texture::{Spec, Spectrum};
 use crate::image_io::RgbImage;
-use crate::scene::{EmitterDesc, Geometry, Scene};
+use crate::scene::{EmitterDesc, Geometry, Scene, SpotCone};
 use crate::spectrum::{RgbIlluminantSpectrum, SampledWavelengths};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::f32::consts::PI;
@@ -681,11 +682,80 @@ pub enum Light {
         position: Vec3,
         intensity: Spectrum,
     },
+    Spot(Box<SpotLight>),
+    /// Light travelling along `direction` (unit) with `irradiance` on a surface facing it.
+    Directional {
+        direction: Vec3,
+        irradiance: Spectrum,
+    },
     Area {
         shape: u32,
         radiance: Spectrum,
         geometry: AreaGeometry,
     },
+}
+
+/// A spot light ([`EmitterDesc::Spot`]) prepared for shading.
+#[derive(Debug, Clone)]
+pub struct SpotLight {
+    position: Vec3,
+    /// Inverse of the linear part of `to_world`: world direction → light-local direction
+    /// (Mitsuba applies the inverse transform before normalising, so a scaled `to_world`
+    /// reshapes the cone exactly as there).
+    to_local: Mat3,
+    intensity: Spectrum,
+    cone: SpotCone,
+    range: Option<f32>,
+}
+
+impl SpotLight {
+    fn new(to_world: Mat4, intensity: Spectrum, cone: SpotCone, range: Option<f32>) -> Self {
+        SpotLight {
+            position: to_world.transform_point3(Vec3::ZERO),
+            to_local: Mat3::from_mat4(to_world).inverse(),
+            intensity,
+            cone,
+            range,
+        }
+    }
+
+    /// Fraction of the axial intensity emitted along light-local direction `local`.
+    fn profile(&self, local: Vec3) -> f32 {
+        let cos_theta = local.normalize_or_zero().z;
+        match self.cone {
+            SpotCone::Linear { cutoff, beam_width } => {
+                // Mitsuba `spot.cpp` `falloff_curve`: linear in the angle between the beam
+                // width and the cutoff.
+                if cos_theta <= cutoff.cos() {
+                    0.0
+                } else if cos_theta >= beam_width.cos() {
+                    1.0
+                } else {
+                    ((cutoff - cos_theta.clamp(-1.0, 1.0).acos()) / (cutoff - beam_width))
+                        .clamp(0.0, 1.0)
+                }
+            }
+            SpotCone::Smooth {
+                cos_inner,
+                cos_outer,
+            } => {
+                // KHR_lights_punctual's reference falloff.
+                let scale = 1.0 / (cos_inner - cos_outer).max(1e-3);
+                let t = ((cos_theta - cos_outer) * scale).clamp(0.0, 1.0);
+                t * t
+            }
+            SpotCone::Omni => 1.0,
+        }
+    }
+}
+
+/// KHR_lights_punctual's recommended range window clamp(1 − (d/range)⁴, 0, 1), which brings
+/// the inverse-square falloff smoothly to zero at `range` (1 without a range).
+fn range_window(range: Option<f32>, dist: f32) -> f32 {
+    match range {
+        Some(r) => (1.0 - (dist / r).powi(4)).clamp(0.0, 1.0),
+        None => 1.0,
+    }
 }
 
 /// A light sample seen from a reference point.
@@ -826,7 +896,7 @@ impl Light {
         match self {
             Light::Env(e) => e.pdf_direction(dir),
             Light::Constant(_) => 1.0 / (4.0 * PI),
-            Light::Point { .. } => 0.0,
+            Light::Point { .. } | Light::Spot(_) | Light::Directional { .. } => 0.0,
             Light::Area { geometry, .. } => {
                 let pdf_area = match geometry {
                     AreaGeometry::Triangles { area, .. } => 1.0 / area,
@@ -899,6 +969,40 @@ impl Light {
                     delta: true,
                 })
             }
+            Light::Spot(spot) => {
+                let d = spot.position - p;
+                let dist2 = d.length_squared();
+                if dist2.is_nan() || dist2 <= 0.0 {
+                    return None;
+                }
+                let dist = dist2.sqrt();
+                let wi = d / dist;
+                let f = spot.profile(spot.to_local * -wi) * range_window(spot.range, dist);
+                if f.is_nan() || f <= 0.0 {
+                    return None;
+                }
+                Some(LightSample {
+                    wi,
+                    dist,
+                    p_light: spot.position,
+                    n_light: Vec3::ZERO,
+                    radiance: spot.intensity.eval(wl) * (f / dist2),
+                    pdf: 1.0,
+                    delta: true,
+                })
+            }
+            Light::Directional {
+                direction,
+                irradiance,
+            } => Some(LightSample {
+                wi: -*direction,
+                dist: f32::INFINITY,
+                p_light: Vec3::ZERO,
+                n_light: Vec3::ZERO,
+                radiance: irradiance.eval(wl),
+                pdf: 1.0,
+                delta: true,
+            }),
             Light::Area {
                 radiance, geometry, ..
             } => {
@@ -1049,6 +1153,38 @@ impl LightSet {
                     position: *position,
                     intensity: Spectrum::illuminant(intensity),
                 },
+                EmitterDesc::Spot {
+                    to_world,
+                    intensity,
+                    cone,
+                    range,
+                } => {
+                    let m = Mat3::from_mat4(*to_world);
+                    if !(to_world.is_finite() && m.determinant().abs() > 1e-12) {
+                        anyhow::bail!("emitter {i} (spot): to_world is singular or not finite");
+                    }
+                    Light::Spot(Box::new(SpotLight::new(
+                        *to_world,
+                        Spectrum::illuminant(intensity),
+                        *cone,
+                        *range,
+                    )))
+                }
+                EmitterDesc::Directional {
+                    direction,
+                    irradiance,
+                } => {
+                    let d = direction.normalize_or_zero();
+                    if d == Vec3::ZERO || !d.is_finite() {
+                        anyhow::bail!(
+                            "emitter {i} (directional): direction {direction} is not a direction"
+                        );
+                    }
+                    Light::Directional {
+                        direction: d,
+                        irradiance: Spectrum::illuminant(irradiance),
+                    }
+                }
             });
         }
         let mut shape_light = vec![None; scene.shapes.len()];

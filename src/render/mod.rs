@@ -162,7 +162,7 @@ pub struct PreparedScene {
     bsdfs: Vec<Bsdf>,
     /// BSDF index per shape.
     shape_bsdf: Vec<u32>,
-    camera: camera::PerspectiveCamera,
+    camera: camera::Camera,
     settings: IntegratorSettings,
     width: u32,
     height: u32,
@@ -273,7 +273,7 @@ impl PreparedScene {
         &self.settings
     }
 
-    pub fn camera(&self) -> &camera::PerspectiveCamera {
+    pub fn camera(&self) -> &camera::Camera {
         &self.camera
     }
 
@@ -380,9 +380,12 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
             sample_range.1 - sample_range.0
         );
     }
-    let camera = camera::PerspectiveCamera::new(&scene.camera, width, height)?;
+    let camera = camera::Camera::new(&scene.camera, width, height)?;
     let (accel, degenerate_triangles) = accel::Accel::build(scene)?;
-    let primary_bins = primary::PrimaryBins::build(&accel, &camera, width, height);
+    // Screen bins need camera rays from one pinhole (`lights` hook: not for lens cameras).
+    let primary_bins = camera
+        .pinhole()
+        .and_then(|c| primary::PrimaryBins::build(&accel, c, width, height));
     effects.decisions.push(effects::Decision {
         effect: effects::Effect::CameraRays,
         on: primary_bins.is_some(),
@@ -504,7 +507,14 @@ fn trace_batch<C: Carrier>(
         !scene.effects.dispersion,
     );
     let mut hits = [None; BATCH];
-    scene.intersect_camera_lanes(&cam.rays, x, y, &mut hits[..m]);
+    if cam.origins.is_some() {
+        // Rays from many points (thin lens, orthographic): one by one through the BVH.
+        for (i, h) in hits[..m].iter_mut().enumerate() {
+            *h = scene.intersect(&cam.ray(i), None);
+        }
+    } else {
+        scene.intersect_camera_lanes(&cam.rays, x, y, &mut hits[..m]);
+    }
     count(Counter::Rays, m as u64);
 
     // Rays that escape see the infinite lights (one batch of lookups, straight on the camera

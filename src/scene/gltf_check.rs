@@ -8,9 +8,11 @@
 //!   ≥ 1, not sparse), primitives (attribute and index accessors exist and have the types the
 //!   loader reads, one vertex count), images (exactly one source, decoded size within the
 //!   budget), textures, materials (every factor finite and in its range, texture indices
-//!   valid), cameras (a usable field of view and aspect ratio), nodes (indices valid, each
-//!   node at most one parent and no cycles — glTF nodes form disjoint trees — and finite
-//!   transforms).
+//!   valid), cameras (the projection object their `type` names present — the crate unwraps
+//!   it — with a usable field of view, aspect ratio, magnification and clip range),
+//!   `KHR_lights_punctual` (every light well formed, every node's light index valid), nodes
+//!   (indices valid, each node at most one parent and no cycles — glTF nodes form disjoint
+//!   trees — and finite transforms).
 //!
 //! Every error names the file and the JSON path of the culprit (`accessors[3]`).
 
@@ -151,6 +153,7 @@ fn check_document(root: &Root, has_blob: bool, file: &str) -> Result<()> {
     check_meshes(root, file)?;
     check_nodes(root, file)?;
     check_cameras(root, file)?;
+    check_lights(root, file)?;
     check_images_and_textures(root, file)?;
     for (i, m) in root.materials.iter().enumerate() {
         let value = serde_json::to_value(m)?;
@@ -395,8 +398,50 @@ fn check_nodes(root: &Root, file: &str) -> Result<()> {
     Ok(())
 }
 
+/// `KHR_lights_punctual`: the lights parse ([`super::gltf_lights::parse_lights`]) and every
+/// node's light index names one of them.
+fn check_lights(root: &Root, file: &str) -> Result<()> {
+    let ext = root
+        .extensions
+        .as_ref()
+        .and_then(|e| e.others.get("KHR_lights_punctual"));
+    let lights = super::gltf_lights::parse_lights(ext, file)?;
+    for (i, node) in root.nodes.iter().enumerate() {
+        let ext = node
+            .extensions
+            .as_ref()
+            .and_then(|e| e.others.get("KHR_lights_punctual"));
+        super::gltf_lights::node_light(ext, lights.len(), i).with_context(|| file.to_string())?;
+    }
+    Ok(())
+}
+
 fn check_cameras(root: &Root, file: &str) -> Result<()> {
+    use gltf::json::camera::Type;
     for (i, c) in root.cameras.iter().enumerate() {
+        // The crate's `Camera::projection` unwraps the object its type names.
+        let present = match c.type_ {
+            Checked::Valid(Type::Perspective) => c.perspective.is_some(),
+            Checked::Valid(Type::Orthographic) => c.orthographic.is_some(),
+            Checked::Invalid => false,
+        };
+        if !present {
+            bail!("{file}: cameras[{i}]: its type is missing, unknown or names a projection object the camera lacks");
+        }
+        if let Some(o) = &c.orthographic {
+            let at = format!("{file}: cameras[{i}].orthographic");
+            for (k, v) in [("xmag", o.xmag), ("ymag", o.ymag)] {
+                check_range(format!("{at}.{k}"), v as f64, 1e-12, f32::MAX as f64)?;
+            }
+            check_range(format!("{at}.znear"), o.znear as f64, 0.0, f32::MAX as f64)?;
+            if !(o.zfar > o.znear && o.zfar.is_finite()) {
+                bail!(
+                    "{at}.zfar {} must be finite and greater than znear {}",
+                    o.zfar,
+                    o.znear
+                );
+            }
+        }
         let Some(p) = &c.perspective else { continue };
         let at = format!("{file}: cameras[{i}].perspective");
         check_range(

@@ -6,32 +6,19 @@
 //!   transpose; computed smooth if absent), `TEXCOORD_0` (glTF's v runs down the image, the
 //!   same as Mitsuba's bitmap convention, so no flip). Point/line primitives are skipped
 //!   with a warning.
-//! - **Materials** (metallic-roughness), GGX α = roughness² (the glTF convention):
-//!   1. `KHR_materials_iridescence` with `iridescenceFactor` ≥ 0.5 → [`ThinFilmBsdf`]:
-//!      film index `iridescenceIor` (default 1.3), thickness `iridescenceThicknessMaximum`
-//!      (default 400 nm) or, with `iridescenceThicknessTexture`, its **G channel** v ∈ [0,1]
-//!      mapped through `value_range = (min, max)` (defaults 100, 400 nm); substrate index
-//!      from `KHR_materials_ior` (default 1.5), k = 0. The factor is treated as on/off (the
-//!      thin-film BSDF does not blend with the base layer); factors in (0, 0.5) are ignored
-//!      with a warning.
-//!   2. `KHR_materials_transmission` factor ≥ 0.5 → [`Dielectric`] (ior; rough transmission is refused).
-//!   3. metallic ≥ 0.5 → [`Conductor`] with a grey complex index that reproduces
-//!      the normal-incidence reflectance F0 = luminance(baseColor): n = 1, k = 2·√(F0/(1−F0))
-//!      (from R = ((n−1)² + k²)/((n+1)² + k²)). The hue of coloured metals is lost.
-//!   4. otherwise → [`Plastic`]: diffuse = baseColor (factor × sRGB-decoded
-//!      texture), int_ior = `KHR_materials_ior` (default 1.5), α = roughness².
-//!
-//!   Emissive factor × `KHR_materials_emissive_strength` > 0 → area emission (linear RGB).
-//! - **Camera**: the first perspective camera found on a node (glTF cameras look down −Z,
-//!   Mitsuba's down +Z: the camera frame is rotated 180° about Y); `yfov` → `fov_axis = y`;
-//!   `aspectRatio` sets the film width for a height of 512. Without one, a default camera
-//!   frames the bounding box.
-//! - **Lighting**: glTF has no environment; the studio environment is always added.
+//! - **Materials**: every material becomes the glTF metallic-roughness BSDF
+//!   ([`crate::render::bsdf::gltf_pbr`]) with its extensions, read by
+//!   [`super::gltf_material`] (`docs/gltf-materials.md`).
+//! - **Cameras and lights** ([`super::gltf_lights`]): the first camera found on a node
+//!   (perspective or orthographic); without one, the model is framed as `<model-viewer>`
+//!   frames it. `KHR_lights_punctual` lights on nodes, converted from photometric units.
+//!   The environment is the neutral studio ([`super::environment::neutral_studio`]) unless
+//!   `--environment` replaces it.
 
 use super::{
-    default_camera, default_environment, shapes_bounds, BitmapTexture, Camera, FilmSettings,
-    FovAxis, Geometry, IntegratorSettings, ReconstructionFilter, Scene, Shape, SpectrumDesc,
-    TextureDesc, TextureFilter, TriangleMesh, WrapMode, DEFAULT_RESOLUTION, DEFAULT_SPP,
+    gltf_lights, BitmapTexture, Camera, FilmSettings, Geometry, IntegratorSettings,
+    ReconstructionFilter, Scene, Shape, SpectrumDesc, TextureDesc, TextureFilter, TriangleMesh,
+    WrapMode, DEFAULT_RESOLUTION, DEFAULT_SPP,
 };
 use crate::optics::{Complex64, Ior};
 use crate::render::bsdf::Bsdf;
@@ -212,19 +199,6 @@ impl Loader<'_> {
     }
 }
 
-/// The camera of a glTF perspective camera node with world transform `world`.
-fn perspective_camera(world: Mat4, p: &gltf::camera::Perspective) -> Camera {
-    // glTF looks down −Z with +X right; Mitsuba looks down +Z with +X left.
-    let to_world = world * Mat4::from_rotation_y(std::f32::consts::PI);
-    let znear = p.znear().max(1e-6);
-    Camera {
-        to_world,
-        fov_deg: p.yfov().to_degrees(),
-        fov_axis: FovAxis::Y,
-        near_clip: znear,
-        far_clip: p.zfar().unwrap_or(1e4).max(znear * 2.0),
-    }
-}
 
 /// Loads a `.gltf` or `.glb` file (see the module docs for the mapping).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
@@ -246,6 +220,8 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         .or_else(|| doc.scenes().next())
         .with_context(|| format!("{file}: no scene"))?;
     let mut shapes = Vec::new();
+    let lights = gltf_lights::parse_lights(doc.extension_value("KHR_lights_punctual"), &file)?;
+    let mut emitters = vec![super::environment::neutral_studio()];
     let mut camera: Option<(Camera, Option<f32>)> = None;
     let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
     while let Some((node, parent)) = stack.pop() {
@@ -260,9 +236,13 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
             stack.push((c, world));
         }
         if let (None, Some(cam)) = (&camera, node.camera()) {
-            if let gltf::camera::Projection::Perspective(p) = cam.projection() {
-                camera = Some((perspective_camera(world, &p), p.aspect_ratio()));
-            }
+            camera = Some(gltf_lights::camera(world, &cam));
+        }
+        let light = node.extension_value("KHR_lights_punctual");
+        if let Some(i) = gltf_lights::node_light(light, lights.len(), node.index())
+            .with_context(|| file.clone())?
+        {
+            emitters.push(gltf_lights::emitter(&lights[i], world));
         }
         let Some(mesh) = node.mesh() else { continue };
         for prim in mesh.primitives() {
@@ -357,10 +337,21 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
                 },
             )
         }
-        None => (
-            default_camera(shapes_bounds(&shapes).unwrap()),
-            FilmSettings::default(),
-        ),
+        None => {
+            let film = FilmSettings::default();
+            let vertices: Vec<Vec3> = shapes
+                .iter()
+                .filter_map(|s| match &s.geometry {
+                    Geometry::Mesh(m) => Some(m.positions.iter().copied()),
+                    Geometry::Sphere { .. } => None,
+                })
+                .flatten()
+                .collect();
+            let aspect = film.width as f32 / film.height as f32;
+            let camera = gltf_lights::model_viewer_camera(&vertices, aspect)
+                .with_context(|| format!("{file}: the meshes have no finite vertices"))?;
+            (camera, film)
+        }
     };
     Ok(Scene {
         camera,
@@ -371,7 +362,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         sampler: super::SamplerKind::Sobol,
         shapes,
         bsdfs,
-        emitters: vec![default_environment()],
+        emitters,
         polarizer: None,
         source: Some(path.to_path_buf()),
     })

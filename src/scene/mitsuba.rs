@@ -24,8 +24,8 @@ pub use params::{parse_layers, PluginParams, RealSpectrum};
 
 use super::{
     look_at, shapes, BitmapTexture, Camera, EmitterDesc, FilmSettings, FovAxis, Geometry,
-    IntegratorSettings, Polarizer, ReconstructionFilter, SamplerKind, Scene, Shape, SpectrumDesc,
-    TextureDesc, TextureFilter, TriangleMesh, WrapMode,
+    IntegratorSettings, Polarizer, Projection, ReconstructionFilter, SamplerKind, Scene, Shape,
+    SpectrumDesc, SpotCone, TextureDesc, TextureFilter, TriangleMesh, WrapMode,
 };
 use crate::optics::Ior;
 use crate::render::bsdf::{self, Bsdf};
@@ -886,18 +886,29 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let Some((node, emitter_samples, bsdf_sampling)) = self.direct_strategies else {
             return Ok(());
         };
-        let has_point = self
-            .emitters
-            .iter()
-            .any(|e| matches!(e, EmitterDesc::Point { .. }));
+        let is_delta = |e: &EmitterDesc| {
+            matches!(
+                e,
+                EmitterDesc::Point { .. }
+                    | EmitterDesc::Spot { .. }
+                    | EmitterDesc::Directional { .. }
+            )
+        };
+        let has_point = self.emitters.iter().any(is_delta);
         if emitter_samples > 1 && has_point {
             eprintln!(
                 "note: {}: direct with emitter_samples = {emitter_samples}: point lights are {emitter_samples}× as bright, as Mitsuba renders them (its delta-light weight omits 1/emitter_samples)",
                 self.loc(node)
             );
             for e in &mut self.emitters {
-                if let EmitterDesc::Point { intensity, .. } = e {
-                    *intensity = scaled_spectrum(intensity, emitter_samples as f32);
+                match e {
+                    EmitterDesc::Point { intensity, .. } | EmitterDesc::Spot { intensity, .. } => {
+                        *intensity = scaled_spectrum(intensity, emitter_samples as f32)
+                    }
+                    EmitterDesc::Directional { irradiance, .. } => {
+                        *irradiance = scaled_spectrum(irradiance, emitter_samples as f32)
+                    }
+                    _ => {}
                 }
             }
         }
@@ -1578,7 +1589,84 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 }
                 .into()
             }
-            _ => return Err(self.unknown_plugin(p, &["area", "constant", "point", "envmap"])),
+            "spot" => self.spot_emitter(p)?.into(),
+            "directional" => {
+                let direction = match (p.take("direction"), p.take("to_world")) {
+                    (Some(_), Some(t)) => {
+                        return Err(self.err(
+                            t.node,
+                            "give either 'direction' or 'to_world' for a directional light, not both",
+                        ))
+                    }
+                    (
+                        Some(Prop {
+                            val: Val::Vector(v) | Val::Point(v),
+                            ..
+                        }),
+                        None,
+                    ) => v,
+                    (Some(q), None) => return Err(Props::type_err(self, &q, "a <vector>")),
+                    (
+                        None,
+                        Some(Prop {
+                            val: Val::Transform(m),
+                            ..
+                        }),
+                    ) => m.transform_vector3(Vec3::Z),
+                    (None, Some(q)) => return Err(Props::type_err(self, &q, "a <transform>")),
+                    (None, None) => Vec3::Z,
+                };
+                let direction = direction.try_normalize().ok_or_else(|| {
+                    self.err(p.node, "the light's direction is zero or not finite")
+                })?;
+                EmitterDesc::Directional {
+                    direction,
+                    irradiance: p.emission(self, "irradiance")?,
+                }
+                .into()
+            }
+            "projector" => {
+                return Err(self.err(
+                    p.node,
+                    "emitter \"projector\" is not supported (a textured spot light); use \"spot\" without a texture",
+                ))
+            }
+            _ => {
+                return Err(self.unknown_plugin(
+                    p,
+                    &["area", "constant", "point", "envmap", "spot", "directional"],
+                ))
+            }
+        })
+    }
+
+    /// Mitsuba's `spot`: `intensity` on the axis (local +Z of `to_world`), full out to
+    /// `beam_width`, falling linearly in angle to zero at `cutoff_angle` (degrees; defaults
+    /// 20 and ¾ of the cutoff).
+    fn spot_emitter(&mut self, p: &mut Props<'a, 'i>) -> Result<EmitterDesc> {
+        if let Some(q) = p.take("texture") {
+            return Err(self.err(
+                q.node,
+                "a spot light 'texture' (projected image) is not supported",
+            ));
+        }
+        let cutoff = p.float(self, "cutoff_angle", 20.0)?;
+        let beam = p.float(self, "beam_width", cutoff * 0.75)?;
+        if !(cutoff > 0.0 && cutoff <= 180.0 && beam >= 0.0 && beam <= cutoff) {
+            return Err(self.err(
+                p.node,
+                format!("spot needs 0 < cutoff_angle ≤ 180 and 0 ≤ beam_width ≤ cutoff_angle (got {cutoff}, {beam})"),
+            ));
+        }
+        let to_world = p.transform(self, "to_world")?;
+        Ok(EmitterDesc::Spot {
+            to_world,
+            intensity: p.emission(self, "intensity")?,
+            cone: SpotCone::Linear {
+                cutoff: (cutoff as f32).to_radians(),
+                beam_width: (beam as f32).to_radians(),
+            },
+            range: None,
         })
     }
 
@@ -1844,9 +1932,85 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     fn build_sensor(&mut self, p: &mut Props<'a, 'i>) -> Result<Sensor> {
-        if p.plugin != "perspective" {
-            return Err(self.unknown_plugin(p, &["perspective"]));
+        let (fov, fov_axis) = match p.plugin.as_str() {
+            "perspective" | "thinlens" => self.sensor_fov(p)?,
+            // The view's extent comes from to_world's scale.
+            "orthographic" => (90.0, FovAxis::X),
+            _ => return Err(self.unknown_plugin(p, &["perspective", "thinlens", "orthographic"])),
+        };
+        let near_clip = p.float(self, "near_clip", 0.01)? as f32;
+        let far_clip = p.float(self, "far_clip", 10000.0)? as f32;
+        if !(near_clip > 0.0 && far_clip > near_clip) {
+            return Err(self.err(p.node, "need 0 < near_clip < far_clip"));
         }
+        let projection = match p.plugin.as_str() {
+            "thinlens" => {
+                let aperture_radius = p
+                    .float_opt(self, "aperture_radius")?
+                    .ok_or_else(|| self.err(p.node, "thinlens needs 'aperture_radius'"))?
+                    as f32;
+                // Mitsuba's ProjectiveCamera: the focal plane defaults to the far clip.
+                let focus_distance = p.float(self, "focus_distance", far_clip as f64)? as f32;
+                if !(aperture_radius >= 0.0 && aperture_radius.is_finite() && focus_distance > 0.0)
+                {
+                    return Err(self.err(
+                        p.node,
+                        format!("thinlens needs aperture_radius ≥ 0 and focus_distance > 0 (got {aperture_radius}, {focus_distance})"),
+                    ));
+                }
+                Projection::ThinLens {
+                    aperture_radius,
+                    focus_distance,
+                }
+            }
+            "orthographic" => Projection::Orthographic,
+            _ => {
+                // A pinhole has no focal plane (Mitsuba's perspective reads and ignores it).
+                p.accept(&["focus_distance"], self, |v| {
+                    matches!(v, Val::Float(_) | Val::Int(_))
+                })?;
+                Projection::Perspective
+            }
+        };
+        // No motion blur without animated transforms: the shutter changes nothing.
+        p.accept(&["shutter_open", "shutter_close"], self, |v| {
+            matches!(v, Val::Float(_) | Val::Int(_))
+        })?;
+        for axis in ["principal_point_offset_x", "principal_point_offset_y"] {
+            if p.float(self, axis, 0.0)? != 0.0 {
+                return Err(self.err(p.node, format!("a non-zero {axis} is not supported")));
+            }
+        }
+        if let Some(q) = p.take("srf") {
+            return Err(self.err(
+                q.node,
+                "a sensor spectral response ('srf') is not supported",
+            ));
+        }
+        let to_world = p.transform(self, "to_world")?;
+        if p.plugin == "thinlens" {
+            let m = glam::Mat3::from_mat4(to_world);
+            if [m.x_axis, m.y_axis, m.z_axis]
+                .iter()
+                .any(|a| (a.length() - 1.0).abs() > 1e-3)
+            {
+                return Err(self.err(
+                    p.node,
+                    "thinlens: scale factors in to_world are not allowed (Mitsuba refuses them too)",
+                ));
+            }
+        }
+        self.finish_sensor(
+            p,
+            to_world,
+            (fov, fov_axis),
+            (near_clip, far_clip),
+            projection,
+        )
+    }
+
+    /// Mitsuba's `parse_fov` (sensor.cpp) for the perspective sensors.
+    fn sensor_fov(&mut self, p: &mut Props<'a, 'i>) -> Result<(f32, FovAxis)> {
         // Mitsuba's `parse_fov` (sensor.cpp): `fov` in degrees along `fov_axis`, or a
         // `focal_length` ("50mm" by default) of a 36 × 24 mm film, whose field of view is
         // measured along the film diagonal (2·atan(√(36² + 24²) / 2f)) whatever `fov_axis` says.
@@ -1901,30 +2065,18 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 ))
             }
         };
-        // A pinhole has no focal plane (Mitsuba's perspective reads and ignores it); no motion
-        // blur without animated transforms, so the shutter interval changes nothing either.
-        p.accept(
-            &["focus_distance", "shutter_open", "shutter_close"],
-            self,
-            |v| matches!(v, Val::Float(_) | Val::Int(_)),
-        )?;
-        for axis in ["principal_point_offset_x", "principal_point_offset_y"] {
-            if p.float(self, axis, 0.0)? != 0.0 {
-                return Err(self.err(p.node, format!("a non-zero {axis} is not supported")));
-            }
-        }
-        if let Some(q) = p.take("srf") {
-            return Err(self.err(
-                q.node,
-                "a sensor spectral response ('srf') is not supported",
-            ));
-        }
-        let near_clip = p.float(self, "near_clip", 0.01)? as f32;
-        let far_clip = p.float(self, "far_clip", 10000.0)? as f32;
-        if !(near_clip > 0.0 && far_clip > near_clip) {
-            return Err(self.err(p.node, "need 0 < near_clip < far_clip"));
-        }
-        let to_world = p.transform(self, "to_world")?;
+        Ok((fov, fov_axis))
+    }
+
+    /// The rest of a sensor: polariser, film and sampler.
+    fn finish_sensor(
+        &mut self,
+        p: &mut Props<'a, 'i>,
+        to_world: Mat4,
+        (fov, fov_axis): (f32, FovAxis),
+        (near_clip, far_clip): (f32, f32),
+        projection: Projection,
+    ) -> Result<Sensor> {
         // thinfilm extension: an ideal linear polariser in front of the sensor.
         let polarizer = match p.string(self, "polarizer")? {
             None => None,
@@ -1968,6 +2120,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 fov_axis,
                 near_clip,
                 far_clip,
+                projection,
             },
             film,
             spp,
@@ -2256,6 +2409,7 @@ fn mitsuba_default_camera(bounds: Option<(Vec3, Vec3)>) -> Camera {
         fov_axis: FovAxis::X,
         near_clip,
         far_clip,
+        projection: Projection::Perspective,
     }
 }
 

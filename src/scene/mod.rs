@@ -77,6 +77,26 @@ pub struct Camera {
     pub fov_axis: FovAxis,
     pub near_clip: f32,
     pub far_clip: f32,
+    /// How film positions become rays (the fov fields apply to the perspective kinds).
+    pub projection: Projection,
+}
+
+/// A camera's projection (Mitsuba's `perspective`, `thinlens` and `orthographic` sensors).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Projection {
+    /// A pinhole at the origin of `to_world`.
+    #[default]
+    Perspective,
+    /// A thin lens of radius `aperture_radius` in the local z = 0 plane, focused on the plane
+    /// local z = `focus_distance` (Mitsuba `thinlens`).
+    ThinLens {
+        aperture_radius: f32,
+        focus_distance: f32,
+    },
+    /// Parallel rays along local +Z from the local rectangle x ∈ [−1, 1],
+    /// y ∈ [−1/aspect, 1/aspect] at z = `near_clip` (Mitsuba `orthographic`; `to_world`'s
+    /// scale sets the extent).
+    Orthographic,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -245,9 +265,39 @@ pub enum EmitterDesc {
         position: Vec3,
         intensity: SpectrumDesc,
     },
+    /// A spot light at the origin of `to_world` shining along its local +Z; `intensity` is
+    /// the radiant intensity on the axis, scaled by the `cone` profile off it and, with a
+    /// `range`, by glTF's distance window.
+    Spot {
+        to_world: Mat4,
+        intensity: SpectrumDesc,
+        cone: SpotCone,
+        range: Option<f32>,
+    },
+    /// Light from infinitely far away travelling along `direction` (unit), delivering
+    /// `irradiance` to a surface facing it (Mitsuba `directional`).
+    Directional {
+        direction: Vec3,
+        irradiance: SpectrumDesc,
+    },
 }
 
+/// The angular profile of a [`EmitterDesc::Spot`] (θ: angle from the axis).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SpotCone {
+    /// Mitsuba's `spot`: 1 for θ ≤ `beam_width`, falling linearly in θ to 0 at
+    /// `cutoff` (radians, beam_width < cutoff).
+    Linear { cutoff: f32, beam_width: f32 },
+    /// glTF `KHR_lights_punctual`: t = clamp((cos θ − cos outer) / max(10⁻³, cos inner −
+    /// cos outer), 0, 1), profile t² (the extension's recommended smooth falloff).
+    Smooth { cos_inner: f32, cos_outer: f32 },
+    /// Every direction (a glTF point light given a `range`).
+    Omni,
+}
+
+pub mod environment;
 pub(crate) mod gltf_check;
+pub(crate) mod gltf_lights;
 mod gltf_material;
 pub mod gltf_scene;
 pub mod meshio;
@@ -366,6 +416,7 @@ pub fn default_camera(bounds: (Vec3, Vec3)) -> Camera {
         fov_axis: FovAxis::X,
         near_clip: (distance - radius).max(distance * 1e-3) * 0.5,
         far_clip: (distance + radius) * 2.0,
+        projection: Projection::Perspective,
     }
 }
 
@@ -457,11 +508,20 @@ impl Scene {
         if self.spp == 0 {
             bail!("sample_count must be ≥ 1");
         }
-        if !(self.camera.to_world.is_finite()
-            && self.camera.fov_deg > 0.0
-            && self.camera.fov_deg < 180.0)
+        let c = &self.camera;
+        let fov_ok = c.fov_deg > 0.0 && c.fov_deg < 180.0;
+        if !(c.to_world.is_finite() && (fov_ok || c.projection == Projection::Orthographic)) {
+            bail!("camera is degenerate (fov {}°)", c.fov_deg);
+        }
+        if let Projection::ThinLens {
+            aperture_radius,
+            focus_distance,
+        } = c.projection
         {
-            bail!("camera is degenerate (fov {}°)", self.camera.fov_deg);
+            let lens_ok = aperture_radius.is_finite() && aperture_radius >= 0.0;
+            if !(lens_ok && focus_distance.is_finite() && focus_distance > 0.0) {
+                bail!("thin lens needs aperture_radius ≥ 0 and focus_distance > 0, got {aperture_radius} and {focus_distance}");
+            }
         }
         for (i, s) in self.shapes.iter().enumerate() {
             let what = s.name.clone().unwrap_or_else(|| format!("shape {i}"));

@@ -119,6 +119,49 @@ pub fn studio_radiance(d: Vec3) -> [f32; 3] {
     c.to_array()
 }
 
+/// Size of the neutral studio environment (generated in memory; smooth, so 256×128 texels
+/// resolve it).
+pub const NEUTRAL_SIZE: (usize, usize) = (256, 128);
+
+/// Grey panels of the neutral studio: (azimuth°, elevation°, width°, height°, radiance).
+const NEUTRAL_PANELS: [(f32, f32, f32, f32, f32); 3] = [
+    (45.0, 35.0, 40.0, 30.0, 4.0),  // key, front right, seen from +Z
+    (300.0, 20.0, 30.0, 25.0, 2.0), // fill, left
+    (180.0, 60.0, 50.0, 20.0, 3.0), // rim, high behind
+];
+
+/// Radiance of the **neutral studio** (the default environment of glTF scenes): grey
+/// everywhere (R = G = B, so it tints nothing — a product-viewer room rather than a sky):
+/// 0.5 above the horizon, a floor of 0.25 below it (smoothstep over ±5° of elevation), and
+/// three soft-edged rectangular panels ([`NEUTRAL_PANELS`]) for highlights. A white diffuse
+/// surface facing up renders ≈ 0.75 under it.
+pub fn neutral_radiance(d: Vec3) -> f32 {
+    let d = d.normalize_or(Vec3::Y);
+    let elevation = d.y.clamp(-1.0, 1.0).asin().to_degrees();
+    let azimuth = d.x.atan2(-d.z).to_degrees().rem_euclid(360.0);
+    let mut v = 0.25 + 0.25 * smoothstep(-5.0, 5.0, elevation);
+    for (az, el, w, h, radiance) in NEUTRAL_PANELS {
+        let mut da = (azimuth - az).abs();
+        da = da.min(360.0 - da);
+        let de = (elevation - el).abs();
+        let wa = 1.0 - smoothstep(w / 2.0 - 2.0, w / 2.0 + 2.0, da);
+        let we = 1.0 - smoothstep(h / 2.0 - 2.0, h / 2.0 + 2.0, de);
+        v += radiance * wa * we;
+    }
+    v
+}
+
+/// The neutral studio at `width`×`height` texels (Mitsuba lat-long layout).
+pub fn neutral_environment(width: usize, height: usize) -> RgbImage {
+    let mut img = RgbImage::new(width, height);
+    for i in 0..height {
+        for j in 0..width {
+            img.pixels[i * width + j] = [neutral_radiance(texel_direction(j, i, width, height)); 3];
+        }
+    }
+    img
+}
+
 fn round_half(v: f32) -> f32 {
     half::f16::from_f32(v).to_f32()
 }
@@ -196,6 +239,28 @@ mod tests {
         let d = texel_direction(w / 4, h / 2, w, h);
         assert!(d.x > 0.99, "{d}");
         assert!((direction_from_angles(90.0, 0.0) - Vec3::X).length() < 1e-6);
+    }
+
+    /// Neutral: every texel grey; a white Lambertian facing up reflects E/π in [0.6, 0.9].
+    #[test]
+    fn neutral_studio_is_grey_and_moderately_bright() {
+        let (w, h) = NEUTRAL_SIZE;
+        let img = neutral_environment(w, h);
+        assert!(img
+            .pixels
+            .iter()
+            .all(|p| p[0] == p[1] && p[1] == p[2] && p[0] > 0.0));
+        let mut e = 0.0f64;
+        for i in 0..h {
+            for j in 0..w {
+                let d = texel_direction(j, i, w, h);
+                let theta = PI * i as f32 / (h - 1) as f32;
+                let dw = (2.0 * PI / w as f32) * (PI / (h - 1) as f32) * theta.sin();
+                e += (img.pixels[i * w + j][0] * d.y.max(0.0) * dw) as f64;
+            }
+        }
+        let white = e / std::f64::consts::PI;
+        assert!((0.6..0.9).contains(&white), "{white}");
     }
 
     #[test]

@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Mitsuba 3 references for thinfilm's emitters and sensors (tests/lights_reference.rs).
+
+Renders every scene `tests/references/lights/NAME.xml` (spot, directional, thinlens,
+orthographic, ...) with Mitsuba 3 into `tests/references/lights/NAME.exr` (float32 RGB, the
+scene's own 64×48 film with a box filter) and records spp, variant and Mitsuba version in
+`tests/references/lights/manifest.json`.
+
+Regenerate (from the repository root):
+
+    export DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
+    python3 tools/mitsuba/render_light_references.py --spp 4096
+
+Only some scenes:  --only spot --only thinlens
+"""
+
+import argparse
+import glob
+import json
+import os
+import time
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
+DIR = os.path.join(REPO, "tests", "references", "lights")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--spp", type=int, default=4096)
+    ap.add_argument("--variant", default="llvm_ad_spectral")
+    ap.add_argument("--only", action="append", default=[])
+    args = ap.parse_args()
+
+    import mitsuba as mi
+    import numpy as np
+
+    mi.set_variant(args.variant)
+    manifest_path = os.path.join(DIR, "manifest.json")
+    manifest = {}
+    if os.path.exists(manifest_path):
+        with open(manifest_path) as f:
+            manifest = json.load(f)
+    for xml in sorted(glob.glob(os.path.join(DIR, "*.xml"))):
+        name = os.path.splitext(os.path.basename(xml))[0]
+        if args.only and name not in args.only:
+            continue
+        scene = mi.load_file(xml)
+        t0 = time.perf_counter()
+        # Passes of at most 1024 spp (different seeds) bound the llvm variant's memory.
+        passes = max(1, -(-args.spp // 1024))
+        acc = None
+        for i in range(passes):
+            n = args.spp // passes + (1 if i < args.spp % passes else 0)
+            img = np.array(mi.render(scene, spp=n, seed=17 + i), dtype=np.float64) * n
+            acc = img if acc is None else acc + img
+        arr = (acc / args.spp).astype(np.float32)
+        out = os.path.join(DIR, name + ".exr")
+        mi.Bitmap(np.ascontiguousarray(arr), mi.Bitmap.PixelFormat.RGB).write(out + ".partial.exr")
+        os.replace(out + ".partial.exr", out)
+        secs = time.perf_counter() - t0
+        print(f"{name}: {arr.shape[1]}x{arr.shape[0]}, mean {arr.mean(axis=(0, 1))}, {secs:.1f} s")
+        manifest[name] = {
+            "spp": args.spp,
+            "variant": args.variant,
+            "mitsuba": mi.__version__,
+            "command": "python3 tools/mitsuba/render_light_references.py --spp %d" % args.spp,
+        }
+    with open(manifest_path, "w") as f:
+        json.dump(manifest, f, indent=2, sort_keys=True)
+        f.write("\n")
+
+
+if __name__ == "__main__":
+    main()

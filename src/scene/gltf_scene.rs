@@ -199,7 +199,6 @@ impl Loader<'_> {
     }
 }
 
-
 /// Loads a `.gltf` or `.glb` file (see the module docs for the mapping).
 pub fn load_gltf(path: &Path) -> Result<Scene> {
     if !path.is_file() {

@@ -6,22 +6,11 @@
 //!   transpose; computed smooth if absent), `TEXCOORD_0` (glTF's v runs down the image, the
 //!   same as Mitsuba's bitmap convention, so no flip). Point/line primitives are skipped
 //!   with a warning.
-//! - **Materials** (metallic-roughness), GGX α = roughness² (the glTF convention):
-//!   1. `KHR_materials_iridescence` with `iridescenceFactor` ≥ 0.5 → [`ThinFilmBsdf`]:
-//!      film index `iridescenceIor` (default 1.3), thickness `iridescenceThicknessMaximum`
-//!      (default 400 nm) or, with `iridescenceThicknessTexture`, its **G channel** v ∈ [0,1]
-//!      mapped through `value_range = (min, max)` (defaults 100, 400 nm); substrate index
-//!      from `KHR_materials_ior` (default 1.5), k = 0. The factor is treated as on/off (the
-//!      thin-film BSDF does not blend with the base layer); factors in (0, 0.5) are ignored
-//!      with a warning.
-//!   2. `KHR_materials_transmission` factor ≥ 0.5 → [`Dielectric`] (ior; rough transmission is refused).
-//!   3. metallic ≥ 0.5 → [`Conductor`] with a grey complex index that reproduces
-//!      the normal-incidence reflectance F0 = luminance(baseColor): n = 1, k = 2·√(F0/(1−F0))
-//!      (from R = ((n−1)² + k²)/((n+1)² + k²)). The hue of coloured metals is lost.
-//!   4. otherwise → [`Plastic`]: diffuse = baseColor (factor × sRGB-decoded
-//!      texture), int_ior = `KHR_materials_ior` (default 1.5), α = roughness².
-//!
-//!   Emissive factor × `KHR_materials_emissive_strength` > 0 → area emission (linear RGB).
+//! - **Materials**: every material becomes a [`GltfPbr`](crate::render::bsdf::gltf_pbr::GltfPbr),
+//!   the glTF 2.0 metallic-roughness BRDF with its extensions (ior, specular, transmission,
+//!   volume, iridescence, emissive strength, texture transform), built by
+//!   [`super::gltf_material`] (`docs/gltf-materials.md`); emissive factor × strength > 0 →
+//!   area emission (linear RGB).
 //! - **Camera**: the first perspective camera found on a node (glTF cameras look down −Z,
 //!   Mitsuba's down +Z: the camera frame is rotated 180° about Y); `yfov` → `fov_axis = y`;
 //!   `aspectRatio` sets the film width for a height of 512. Without one, a default camera

@@ -130,7 +130,7 @@ fn variants() -> Vec<(String, &'static str, &'static str, String, String)> {
         teapot(
             "roughplastic α=0.25",
             "none (diffuse under a GGX coating)",
-            r#"<bsdf type="roughplastic"><float name="alpha" value="0.25"/><rgb name="diffuse_reflectance" value="0.5, 0.5, 0.5"/></bsdf>"#.into(),
+            r#"<bsdf type="roughplastic"><string name="distribution" value="ggx"/><float name="alpha" value="0.25"/><rgb name="diffuse_reflectance" value="0.5, 0.5, 0.5"/></bsdf>"#.into(),
         ),
         teapot(
             "glTF PBR dielectric α=0.25",

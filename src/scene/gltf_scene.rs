@@ -6,9 +6,11 @@
 //!   transpose; computed smooth if absent), `TEXCOORD_0` (glTF's v runs down the image, the
 //!   same as Mitsuba's bitmap convention, so no flip). Point/line primitives are skipped
 //!   with a warning.
-//! - **Materials**: every material becomes the glTF metallic-roughness BSDF
-//!   ([`crate::render::bsdf::gltf_pbr`]) with its extensions, read by
-//!   [`super::gltf_material`] (`docs/gltf-materials.md`).
+//! - **Materials**: every material becomes a [`GltfPbr`](crate::render::bsdf::gltf_pbr::GltfPbr),
+//!   the glTF 2.0 metallic-roughness BRDF with its extensions (ior, specular, transmission,
+//!   volume, iridescence, emissive strength, texture transform), built by
+//!   [`super::gltf_material`] (`docs/gltf-materials.md`); emissive factor × strength > 0 →
+//!   area emission (linear RGB).
 //! - **Cameras and lights** ([`super::gltf_lights`]): the first camera found on a node
 //!   (perspective or orthographic); without one, the model is framed as `<model-viewer>`
 //!   frames it. `KHR_lights_punctual` lights on nodes, converted from photometric units.

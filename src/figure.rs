@@ -233,6 +233,26 @@ fn comparison_row(
     ))
 }
 
+/// The fitted map and the data it is drawn against (`what` in `dir`) must be one size.
+fn check_fit_size(
+    what: &str,
+    dir: &Path,
+    (width, height): (usize, usize),
+    fit_dir: &Path,
+    fitted: &FilmMaterial,
+) -> Result<()> {
+    if (width, height) != (fitted.width, fitted.height) {
+        bail!(
+            "{what} {} is {width}×{height} px but the fit in {} is {}×{} px",
+            dir.display(),
+            fit_dir.display(),
+            fitted.width,
+            fitted.height
+        );
+    }
+    Ok(())
+}
+
 /// `thinfilm figure FIT_DIR --ground-truth DIR`: ground truth | fitted | ΔE00 teapots, then
 /// the fitted thickness map and its error map (seed Fig. 5), with EXRs of each panel.
 pub fn fit_figure(
@@ -244,17 +264,13 @@ pub fn fit_figure(
 ) -> Result<FigureOutput> {
     let fitted = FilmMaterial::from_fit_dir(fit_dir)?;
     let gt = capture::load_ground_truth(ground_truth)?;
-    if gt.width != fitted.width || gt.height != fitted.height {
-        bail!(
-            "ground truth {} is {}×{} px but the fit in {} is {}×{} px",
-            ground_truth.display(),
-            gt.width,
-            gt.height,
-            fit_dir.display(),
-            fitted.width,
-            fitted.height
-        );
-    }
+    check_fit_size(
+        "ground truth",
+        ground_truth,
+        (gt.width, gt.height),
+        fit_dir,
+        &fitted,
+    )?;
     let truth = FilmMaterial::from_ground_truth(&gt);
     let base = base_scene(scene_path, settings)?;
     let gt_img = render_with_material(&base, &truth, settings)?;
@@ -350,17 +366,13 @@ pub fn capture_figure(
 ) -> Result<FigureOutput> {
     let fitted = FilmMaterial::from_fit_dir(fit_dir)?;
     let set = capture::load_capture_set(capture_dir)?;
-    if set.width != fitted.width || set.height != fitted.height {
-        bail!(
-            "capture {} is {}×{} px but the fit in {} is {}×{} px",
-            capture_dir.display(),
-            set.width,
-            set.height,
-            fit_dir.display(),
-            fitted.width,
-            fitted.height
-        );
-    }
+    check_fit_size(
+        "capture",
+        capture_dir,
+        (set.width, set.height),
+        fit_dir,
+        &fitted,
+    )?;
     let angle = set.angles.get(angle_index).with_context(|| {
         format!(
             "angle index {angle_index} out of range: the capture has {} angles",

@@ -233,17 +233,16 @@ fn comparison_row(
     ))
 }
 
-/// The fitted map and the data it is drawn against (`what` in `dir`) must be one size.
-fn check_fit_size(
-    what: &str,
-    dir: &Path,
-    (width, height): (usize, usize),
-    fit_dir: &Path,
+/// The fitted map (from `fit_dir`) and the data in `dir` it is drawn against must be one size.
+fn same_size(
     fitted: &FilmMaterial,
+    fit_dir: &Path,
+    (w, h): (usize, usize),
+    dir: &Path,
 ) -> Result<()> {
-    if (width, height) != (fitted.width, fitted.height) {
+    if (w, h) != (fitted.width, fitted.height) {
         bail!(
-            "{what} {} is {width}×{height} px but the fit in {} is {}×{} px",
+            "{} is {w}×{h} px but the fit in {} is {}×{} px",
             dir.display(),
             fit_dir.display(),
             fitted.width,
@@ -264,13 +263,7 @@ pub fn fit_figure(
 ) -> Result<FigureOutput> {
     let fitted = FilmMaterial::from_fit_dir(fit_dir)?;
     let gt = capture::load_ground_truth(ground_truth)?;
-    check_fit_size(
-        "ground truth",
-        ground_truth,
-        (gt.width, gt.height),
-        fit_dir,
-        &fitted,
-    )?;
+    same_size(&fitted, fit_dir, (gt.width, gt.height), ground_truth)?;
     let truth = FilmMaterial::from_ground_truth(&gt);
     let base = base_scene(scene_path, settings)?;
     let gt_img = render_with_material(&base, &truth, settings)?;
@@ -319,18 +312,12 @@ pub fn fit_figure(
         12,
     );
     let figure = stack_rows(&[row1, row2]);
-    figure.save_png(out_png)?;
-
-    let stem = out_png.with_extension("");
-    let gt_exr = PathBuf::from(format!("{}_ground_truth.exr", stem.display()));
-    let fit_exr = PathBuf::from(format!("{}_fitted.exr", stem.display()));
-    image_io::write_exr_rgb(&gt_exr, &gt_img)?;
-    image_io::write_exr_rgb(&fit_exr, &fit_img)?;
-    Ok(FigureOutput {
-        png: out_png.to_path_buf(),
-        exrs: vec![gt_exr, fit_exr],
-        delta_e00_mean: de_mean,
-    })
+    save_figure(
+        &figure,
+        out_png,
+        [("ground_truth", &gt_img), ("fitted", &fit_img)],
+        de_mean,
+    )
 }
 
 /// Linear sRGB colour (D65) of each pixel's reflectance spectrum at angle `angle_index`,
@@ -366,13 +353,7 @@ pub fn capture_figure(
 ) -> Result<FigureOutput> {
     let fitted = FilmMaterial::from_fit_dir(fit_dir)?;
     let set = capture::load_capture_set(capture_dir)?;
-    check_fit_size(
-        "capture",
-        capture_dir,
-        (set.width, set.height),
-        fit_dir,
-        &fitted,
-    )?;
+    same_size(&fitted, fit_dir, (set.width, set.height), capture_dir)?;
     let angle = set.angles.get(angle_index).with_context(|| {
         format!(
             "angle index {angle_index} out of range: the capture has {} angles",
@@ -444,16 +425,33 @@ pub fn capture_figure(
         format!("fitted model: {}", fitted.label()),
     )?;
     let row = upscale_small(row, 2);
-    row.save_png(out_png)?;
+    save_figure(
+        &row,
+        out_png,
+        [("captured", &measured), ("fitted", &model)],
+        de_mean,
+    )
+}
+
+/// Saves `figure` as `out_png` and each panel's image beside it as `STEM_NAME.exr`.
+fn save_figure(
+    figure: &Canvas,
+    out_png: &Path,
+    panels: [(&str, &RgbImage); 2],
+    delta_e00_mean: f64,
+) -> Result<FigureOutput> {
+    figure.save_png(out_png)?;
     let stem = out_png.with_extension("");
-    let a = PathBuf::from(format!("{}_captured.exr", stem.display()));
-    let b = PathBuf::from(format!("{}_fitted.exr", stem.display()));
-    image_io::write_exr_rgb(&a, &measured)?;
-    image_io::write_exr_rgb(&b, &model)?;
+    let mut exrs = Vec::new();
+    for (name, img) in panels {
+        let path = PathBuf::from(format!("{}_{name}.exr", stem.display()));
+        image_io::write_exr_rgb(&path, img)?;
+        exrs.push(path);
+    }
     Ok(FigureOutput {
         png: out_png.to_path_buf(),
-        exrs: vec![a, b],
-        delta_e00_mean: de_mean,
+        exrs,
+        delta_e00_mean,
     })
 }
 

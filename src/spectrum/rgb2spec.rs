@@ -32,7 +32,7 @@
 
 use std::sync::OnceLock;
 
-use super::sampled::{SampledSpectrum, SampledWavelengths};
+use super::sampled::{SampledWavelengths, Spec};
 
 /// Σ ȳ·D65 / Σ ȳ over the 1 nm tables: D65 divided by this has luminance 1 under the film's
 /// 1/[`super::CIE_Y_INTEGRAL`] normalisation (see the module docs).
@@ -70,8 +70,8 @@ impl RgbSigmoidPolynomial {
     }
 
     /// Evaluate at the four path wavelengths.
-    pub fn sample(&self, wavelengths: &SampledWavelengths) -> SampledSpectrum {
-        SampledSpectrum(wavelengths.lambda.map(|l| self.eval(l)))
+    pub fn sample(&self, wavelengths: &SampledWavelengths) -> Spec {
+        Spec::from_array(wavelengths.lambda.map(|l| self.eval(l)))
     }
 }
 
@@ -257,7 +257,7 @@ impl<const ILLUMINANT: bool> RgbScaledSpectrum<ILLUMINANT> {
     }
 
     /// Evaluate at the four path wavelengths.
-    pub fn sample(&self, wavelengths: &SampledWavelengths) -> SampledSpectrum {
-        SampledSpectrum(wavelengths.lambda.map(|l| self.eval(l)))
+    pub fn sample(&self, wavelengths: &SampledWavelengths) -> Spec {
+        Spec::from_array(wavelengths.lambda.map(|l| self.eval(l)))
     }
 }

@@ -1,6 +1,6 @@
 //! Fuzz targets: one per input format thinfilm reads, each running the loader the command
 //! line uses on arbitrary bytes. Shared by the in-process fuzz test (`tests/fuzz.rs`, run by
-//! `cargo test`) and the AFL targets (`fuzz/src/bin/*.rs`, see `fuzz/README.md`).
+//! `cargo test`) and the AFL++ harness (`fuzz/src/main.rs`, see `fuzz/README.md`).
 //!
 //! A loader may refuse its input with an error — that is the expected outcome for garbage.
 //! What counts as a finding: a panic, an error that reports a contained panic

@@ -234,6 +234,25 @@ fn comparison_row(
     ))
 }
 
+/// The fitted map (from `fit_dir`) and the data in `dir` it is drawn against must be one size.
+fn same_size(
+    fitted: &FilmMaterial,
+    fit_dir: &Path,
+    (w, h): (usize, usize),
+    dir: &Path,
+) -> Result<()> {
+    if (w, h) != (fitted.width, fitted.height) {
+        bail!(
+            "{} is {w}×{h} px but the fit in {} is {}×{} px",
+            dir.display(),
+            fit_dir.display(),
+            fitted.width,
+            fitted.height
+        );
+    }
+    Ok(())
+}
+
 /// `thinfilm figure FIT_DIR --ground-truth DIR`: ground truth | fitted | ΔE00 teapots, then
 /// the fitted thickness map and its error map (seed Fig. 5), with EXRs of each panel.
 pub fn fit_figure(
@@ -245,17 +264,7 @@ pub fn fit_figure(
 ) -> Result<FigureOutput> {
     let fitted = FilmMaterial::from_fit_dir(fit_dir)?;
     let gt = capture::load_ground_truth(ground_truth)?;
-    if gt.width != fitted.width || gt.height != fitted.height {
-        bail!(
-            "ground truth {} is {}×{} px but the fit in {} is {}×{} px",
-            ground_truth.display(),
-            gt.width,
-            gt.height,
-            fit_dir.display(),
-            fitted.width,
-            fitted.height
-        );
-    }
+    same_size(&fitted, fit_dir, (gt.width, gt.height), ground_truth)?;
     let truth = FilmMaterial::from_ground_truth(&gt);
     let base = base_scene(scene_path, settings)?;
     let gt_img = render_with_material(&base, &truth, settings)?;
@@ -304,18 +313,12 @@ pub fn fit_figure(
         12,
     );
     let figure = stack_rows(&[row1, row2]);
-    figure.save_png(out_png)?;
-
-    let stem = out_png.with_extension("");
-    let gt_exr = PathBuf::from(format!("{}_ground_truth.exr", stem.display()));
-    let fit_exr = PathBuf::from(format!("{}_fitted.exr", stem.display()));
-    image_io::write_exr_rgb(&gt_exr, &gt_img)?;
-    image_io::write_exr_rgb(&fit_exr, &fit_img)?;
-    Ok(FigureOutput {
-        png: out_png.to_path_buf(),
-        exrs: vec![gt_exr, fit_exr],
-        delta_e00_mean: de_mean,
-    })
+    save_figure(
+        &figure,
+        out_png,
+        [("ground_truth", &gt_img), ("fitted", &fit_img)],
+        de_mean,
+    )
 }
 
 /// Linear sRGB colour (D65) of each pixel's reflectance spectrum at angle `angle_index`,
@@ -351,17 +354,7 @@ pub fn capture_figure(
 ) -> Result<FigureOutput> {
     let fitted = FilmMaterial::from_fit_dir(fit_dir)?;
     let set = capture::load_capture_set(capture_dir)?;
-    if set.width != fitted.width || set.height != fitted.height {
-        bail!(
-            "capture {} is {}×{} px but the fit in {} is {}×{} px",
-            capture_dir.display(),
-            set.width,
-            set.height,
-            fit_dir.display(),
-            fitted.width,
-            fitted.height
-        );
-    }
+    same_size(&fitted, fit_dir, (set.width, set.height), capture_dir)?;
     let angle = set.angles.get(angle_index).with_context(|| {
         format!(
             "angle index {angle_index} out of range: the capture has {} angles",
@@ -433,16 +426,33 @@ pub fn capture_figure(
         format!("fitted model: {}", fitted.label()),
     )?;
     let row = upscale_small(row, 2);
-    row.save_png(out_png)?;
+    save_figure(
+        &row,
+        out_png,
+        [("captured", &measured), ("fitted", &model)],
+        de_mean,
+    )
+}
+
+/// Saves `figure` as `out_png` and each panel's image beside it as `STEM_NAME.exr`.
+fn save_figure(
+    figure: &Canvas,
+    out_png: &Path,
+    panels: [(&str, &RgbImage); 2],
+    delta_e00_mean: f64,
+) -> Result<FigureOutput> {
+    figure.save_png(out_png)?;
     let stem = out_png.with_extension("");
-    let a = PathBuf::from(format!("{}_captured.exr", stem.display()));
-    let b = PathBuf::from(format!("{}_fitted.exr", stem.display()));
-    image_io::write_exr_rgb(&a, &measured)?;
-    image_io::write_exr_rgb(&b, &model)?;
+    let mut exrs = Vec::new();
+    for (name, img) in panels {
+        let path = PathBuf::from(format!("{}_{name}.exr", stem.display()));
+        image_io::write_exr_rgb(&path, img)?;
+        exrs.push(path);
+    }
     Ok(FigureOutput {
         png: out_png.to_path_buf(),
-        exrs: vec![a, b],
-        delta_e00_mean: de_mean,
+        exrs,
+        delta_e00_mean,
     })
 }
 

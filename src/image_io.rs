@@ -482,3 +482,42 @@ pub fn write_png_tonemapped(path: &Path, image: &RgbImage, exposure: f32) -> Res
     }
     write_png_rgb8(path, image.width, image.height, bytes)
 }
+
+/// DejaVu Sans, compiled in (once) so figures and plots never depend on system fonts.
+pub static FONT_BYTES: &[u8] = include_bytes!(concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/assets/fonts/DejaVuSans.ttf"
+));
+
+/// Registers [`FONT_BYTES`] as plotters' "sans-serif" face (once per process).
+pub fn register_plot_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // Cannot fail for the bundled font; if it did, text drawing would report it.
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            plotters::style::FontStyle::Normal,
+            FONT_BYTES,
+        );
+    });
+}
+
+/// Matplotlib's viridis at `t` in [0, 1] (clamped) as sRGB8: linear between the colour map
+/// sampled at t = 0, 1/8, …, 1 (matplotlib `_viridis_data`).
+pub fn viridis(t: f64) -> [u8; 3] {
+    const STOPS: [[f64; 3]; 9] = [
+        [68.0, 1.0, 84.0],
+        [71.0, 44.0, 122.0],
+        [59.0, 81.0, 139.0],
+        [44.0, 113.0, 142.0],
+        [33.0, 144.0, 141.0],
+        [39.0, 173.0, 129.0],
+        [92.0, 200.0, 99.0],
+        [170.0, 220.0, 50.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let s = t.clamp(0.0, 1.0) * 8.0;
+    let i = (s.floor() as usize).min(7);
+    let f = s - i as f64;
+    std::array::from_fn(|c| (STOPS[i][c] * (1.0 - f) + STOPS[i + 1][c] * f + 0.5) as u8)
+}

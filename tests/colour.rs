@@ -6,9 +6,9 @@ use std::path::PathBuf;
 
 use thinfilm::optics::{Complex64, ThinFilm};
 use thinfilm::spectrum::{
-    delta_e2000, delta_e76, emission_xyz, linear_srgb_to_xyz, reflectance_xyz_d65,
-    srgb_reflectance, tabulated_reflectance_xyz_d65, visible_wavelengths_pdf, xyz_to_lab,
-    xyz_to_linear_srgb, RgbIlluminantSpectrum, RgbUnboundedSpectrum, SampledSpectrum,
+    delta_e2000, delta_e76, emission_xyz, linear_srgb_to_xyz, reflectance_xyz_d65, spectrum_at,
+    spectrum_to_xyz, srgb_reflectance, tabulated_reflectance_xyz_d65, visible_wavelengths_pdf,
+    xyz_to_lab, xyz_to_linear_srgb, RgbIlluminantSpectrum, RgbUnboundedSpectrum,
     SampledWavelengths, D65_WHITE_XYZ, LAMBDA_MAX_NM, LAMBDA_MIN_NM,
 };
 
@@ -275,7 +275,7 @@ fn rgb_illuminant_white_renders_white() {
     let mut acc = [0.0f64; 3];
     for i in 0..n {
         let w = SampledWavelengths::sample_visible((i as f32 + 0.5) / n as f32);
-        let xyz = SampledSpectrum::from_wavelengths(&w, |l| white.eval(l)).to_xyz(&w);
+        let xyz = spectrum_to_xyz(spectrum_at(&w, |l| white.eval(l)), &w);
         for c in 0..3 {
             acc[c] += xyz[c] as f64 / n as f64;
         }
@@ -334,8 +334,8 @@ fn hero_wavelength_monte_carlo_xyz_of_d65_converges() {
     let mut acc = [0.0f64; 3];
     for _ in 0..n {
         let w = SampledWavelengths::sample_visible(rng.next_f32());
-        let l = SampledSpectrum::from_wavelengths(&w, |l| thinfilm::spectrum::d65(l as f64) as f32);
-        let xyz = l.to_xyz(&w);
+        let l = spectrum_at(&w, |l| thinfilm::spectrum::d65(l as f64) as f32);
+        let xyz = spectrum_to_xyz(l, &w);
         for c in 0..3 {
             acc[c] += xyz[c] as f64;
         }

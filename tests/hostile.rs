@@ -146,8 +146,14 @@ fn hostile_inputs_are_refused_cleanly() {
     let work = tempfile::tempdir().unwrap();
     let corpus = work.path().join("corpus");
     copy_dir(&root.join("corpus"), &corpus);
+    // Extended to the declared length keeping what the file starts with (a valid header
+    // followed by a hole), as `truncate -s` in tools/hostile/run.sh.
     for (path, bytes) in &sparse {
-        std::fs::File::create(corpus.join(path))
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(corpus.join(path))
             .unwrap()
             .set_len(*bytes)
             .unwrap();

@@ -57,19 +57,7 @@ struct Row {
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("size '{s}' must look like 128x96"))?;
-    let w: usize = w
-        .trim()
-        .parse()
-        .with_context(|| format!("bad width in '{s}'"))?;
-    let h: usize = h
-        .trim()
-        .parse()
-        .with_context(|| format!("bad height in '{s}'"))?;
-    anyhow::ensure!(w > 0 && h > 0, "size '{s}' must be positive");
-    Ok((w, h))
+    crate::cli::args::size(s).map_err(anyhow::Error::msg)
 }
 
 /// Seed conditions for sample 1–3 with the given size and band spacing.
@@ -325,11 +313,7 @@ fn sweep(args: &Args, md: &mut String) -> Result<()> {
 
 fn plot_points(path: &std::path::Path, pts: &[(Method, f64, f64, f64)]) -> Result<()> {
     use plotters::prelude::*;
-    let _ = plotters::style::register_font(
-        "sans-serif",
-        plotters::style::FontStyle::Normal,
-        include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
-    );
+    thinfilm::image_io::register_plot_font();
     let (iw, ih) = (900u32, 600u32);
     let mut buf = vec![255u8; (iw * ih * 3) as usize];
     let finite: Vec<&(Method, f64, f64, f64)> = pts

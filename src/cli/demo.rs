@@ -12,10 +12,10 @@ pub struct Args {
     #[arg(long, default_value = "128x96", value_parser = super::args::size)]
     size: (usize, usize),
     /// Teapot render resolution (square), pixels.
-    #[arg(long, default_value_t = 192)]
+    #[arg(long, default_value_t = 192, value_parser = clap::value_parser!(u32).range(1..=65536))]
     resolution: u32,
     /// Samples per pixel of the teapot renders.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=1 << 20))]
     spp: u32,
     /// Additive reflectance noise σ of the simulated captures.
     #[arg(long, allow_hyphen_values = true, default_value_t = 0.004, value_parser = super::args::non_negative)]

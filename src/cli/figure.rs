@@ -33,10 +33,10 @@ pub struct Args {
     #[arg(long, short, default_value = "figure.png")]
     out: PathBuf,
     /// Render resolution (square), pixels.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
     resolution: u32,
     /// Samples per pixel.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=1 << 20))]
     spp: u32,
     /// Sampler seed (shared by both renders).
     #[arg(long, default_value_t = 0)]

@@ -75,24 +75,9 @@ pub struct Args {
     pub exposure: f32,
 }
 
+/// `WxH`, each side 1 to 65536 (so it fits `u32`).
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("'{s}' is not WxH (e.g. 256x256)"))?;
-    let w: u32 = w
-        .trim()
-        .parse()
-        .map_err(|_| format!("bad width in '{s}'"))?;
-    let h: u32 = h
-        .trim()
-        .parse()
-        .map_err(|_| format!("bad height in '{s}'"))?;
-    if w == 0 || h == 0 || w > 65536 || h > 65536 {
-        return Err(format!(
-            "resolution '{s}' must be between 1x1 and 65536x65536"
-        ));
-    }
-    Ok((w, h))
+    super::args::size(s).map(|(w, h)| (w as u32, h as u32))
 }
 
 fn parse_max_depth(s: &str) -> Result<i32, String> {
@@ -287,7 +272,7 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     }
     if s.degenerate_triangles > 0 {
         report.log(format_args!(
-            "note: {} degenerate triangles were skipped",
+            "note: {} degenerate or repeated triangles were skipped",
             s.degenerate_triangles
         ));
     }

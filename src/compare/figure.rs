@@ -13,11 +13,7 @@ use anyhow::{bail, Result};
 use std::path::Path;
 use std::sync::OnceLock;
 
-/// DejaVu Sans, compiled in so figures never depend on system fonts.
-pub static FONT_BYTES: &[u8] = include_bytes!(concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/assets/fonts/DejaVuSans.ttf"
-));
+use crate::image_io::FONT_BYTES;
 
 fn font() -> &'static FontRef<'static> {
     static FONT: OnceLock<FontRef<'static>> = OnceLock::new();
@@ -205,24 +201,7 @@ impl Colormap {
                 let v = (t * 255.0 + 0.5) as u8;
                 [v, v, v]
             }
-            Colormap::Viridis => {
-                // viridis sampled at t = 0, 1/8, …, 1 (matplotlib _viridis_data).
-                const STOPS: [[f64; 3]; 9] = [
-                    [68.0, 1.0, 84.0],
-                    [71.0, 44.0, 122.0],
-                    [59.0, 81.0, 139.0],
-                    [44.0, 113.0, 142.0],
-                    [33.0, 144.0, 141.0],
-                    [39.0, 173.0, 129.0],
-                    [92.0, 200.0, 99.0],
-                    [170.0, 220.0, 50.0],
-                    [253.0, 231.0, 37.0],
-                ];
-                let s = t * 8.0;
-                let i = (s.floor() as usize).min(7);
-                let f = s - i as f64;
-                std::array::from_fn(|c| (STOPS[i][c] * (1.0 - f) + STOPS[i + 1][c] * f + 0.5) as u8)
-            }
+            Colormap::Viridis => crate::image_io::viridis(t),
         }
     }
 }

@@ -1,7 +1,6 @@
 //! Error-against-time plots (log–log) with plotters, and the equal-error time ratio between
 //! two convergence curves.
 
-use super::figure::FONT_BYTES;
 use crate::image_io::write_png_rgb8;
 use anyhow::{anyhow, bail, Result};
 use plotters::prelude::*;
@@ -15,14 +14,6 @@ pub struct Series {
     /// Drawn as the other renderer: thin, cross-marked, second legend entry.
     pub secondary: bool,
     pub points: Vec<(f64, f64)>,
-}
-
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // Cannot fail for the bundled font; if it did, text drawing would report it.
-        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT_BYTES);
-    });
 }
 
 /// Time needed to reach `error` on the curve `points` (seconds, error), interpolating
@@ -82,7 +73,7 @@ pub fn plot_error_vs_time(
     path: &Path,
     panel_px: (u32, u32),
 ) -> Result<()> {
-    register_font();
+    crate::image_io::register_plot_font();
     let positive = |&(t, e): &(f64, f64)| t > 0.0 && e > 0.0 && t.is_finite() && e.is_finite();
     let (mut t0, mut t1, mut e0, mut e1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(t, e) in series

@@ -250,40 +250,6 @@ pub fn fitted_material(set: &CaptureSet, fit: &Fit) -> FilmMaterial {
     }
 }
 
-/// Viridis (polynomial fit by Matt Zucker, CC0), t in [0, 1] → sRGB8.
-pub fn viridis(t: f64) -> [u8; 3] {
-    let t = t.clamp(0.0, 1.0);
-    const C: [[f64; 3]; 7] = [
-        [0.277_727_327, 0.005_407_345, 0.334_099_805],
-        [0.105_093_043, 1.404_613_53, 1.384_590_163],
-        [-0.330_861_829, 0.214_847_559, 0.095_095_163],
-        [-4.634_230_499, -5.799_100_973, -19.332_440_96],
-        [6.228_269_936, 14.179_933_37, 56.690_552_6],
-        [4.776_384_998, -13.745_145_38, -65.353_032_63],
-        [-5.435_455_856, 4.645_852_612, 26.312_435_25],
-    ];
-    let mut out = [0u8; 3];
-    for (c, o) in out.iter_mut().enumerate() {
-        let mut v = C[6][c];
-        for k in (0..6).rev() {
-            v = C[k][c] + t * v;
-        }
-        *o = (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    }
-    out
-}
-
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            plotters::style::FontStyle::Normal,
-            include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
-        );
-    });
-}
-
 /// Colour-mapped image of `values` (NaN → grey) with a labelled colour bar (Fig. 5 style).
 pub fn write_colormap_png(
     path: &Path,
@@ -293,7 +259,7 @@ pub fn write_colormap_png(
     label: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
-    register_font();
+    crate::image_io::register_plot_font();
     let mut finite: Vec<f64> = values
         .iter()
         .filter(|v| v.is_finite())
@@ -323,7 +289,7 @@ pub fn write_colormap_png(
             for x in 0..width {
                 let v = values[y * width + x];
                 let c = if v.is_finite() {
-                    let [r, g, b] = viridis((v as f64 - lo) / (hi - lo));
+                    let [r, g, b] = crate::image_io::viridis((v as f64 - lo) / (hi - lo));
                     RGBColor(r, g, b)
                 } else {
                     RGBColor(128, 128, 128)
@@ -346,7 +312,7 @@ pub fn write_colormap_png(
         let (bx, by, bh) = (mw as i32 + 30, 40i32, mh.max(200) as i32 - 10);
         for i in 0..bh {
             let t = 1.0 - i as f64 / (bh - 1).max(1) as f64;
-            let [r, g, b] = viridis(t);
+            let [r, g, b] = crate::image_io::viridis(t);
             root.draw(&Rectangle::new(
                 [(bx, by + i), (bx + 20, by + i + 1)],
                 RGBColor(r, g, b).filled(),

@@ -74,37 +74,28 @@ struct GeneralLane {
     well_conditioned: bool,
 }
 
-/// Forward-branch square root of `z = (n cosθ)²` (Im ≥ 0, or Re > 0 when lossless), f64.
-#[inline]
-fn forward_sqrt64(z: Complex64) -> Complex64 {
-    let nc = z.sqrt();
-    let forward = if nc.im.abs() > 100.0 * f64::EPSILON * nc.norm() {
-        nc.im > 0.0
-    } else {
-        nc.re > 0.0
+/// `forward_sqrt64` / `forward_sqrt32`: the forward-branch square root of `z = (n cosθ)²`
+/// (Im ≥ 0, or Re > 0 when lossless), the branch test at the type's own resolution.
+macro_rules! forward_sqrt {
+    ($name:ident, $complex:ty, $real:ty) => {
+        #[inline]
+        fn $name(z: $complex) -> $complex {
+            let nc = z.sqrt();
+            let forward = if nc.im.abs() > 100.0 * <$real>::EPSILON * nc.norm() {
+                nc.im > 0.0
+            } else {
+                nc.re > 0.0
+            };
+            if forward {
+                nc
+            } else {
+                -nc
+            }
+        }
     };
-    if forward {
-        nc
-    } else {
-        -nc
-    }
 }
-
-/// Same in f32 (branch test at f32 resolution).
-#[inline]
-fn forward_sqrt32(z: Complex32) -> Complex32 {
-    let nc = z.sqrt();
-    let forward = if nc.im.abs() > 100.0 * f32::EPSILON * nc.norm() {
-        nc.im > 0.0
-    } else {
-        nc.re > 0.0
-    };
-    if forward {
-        nc
-    } else {
-        -nc
-    }
-}
+forward_sqrt!(forward_sqrt64, Complex64, f64);
+forward_sqrt!(forward_sqrt32, Complex32, f32);
 
 /// Largest denominator condition number for which the f32 path stays within 1e-5
 /// (f32 rounding ≈ 1e-7 per operation times this factor, with margin).

@@ -60,14 +60,15 @@ pub struct Accel {
 }
 
 impl Accel {
-    /// Builds the BVH. Degenerate or non-finite triangles are dropped (they cannot be hit);
-    /// the count is returned so the caller can report it.
+    /// Builds the BVH. Degenerate, non-finite and repeated triangles are dropped (they cannot
+    /// be hit, or add nothing to their twin); the count is returned so the caller can report it.
     pub fn build(scene: &Scene) -> anyhow::Result<(Self, usize)> {
         let mut tris = Vec::new();
         let mut tri_ref = Vec::new();
         let mut spheres = Vec::new();
         let mut meshes = Vec::with_capacity(scene.shapes.len());
         let mut dropped = 0usize;
+        let mut repeats = RepeatFilter::default();
         for (si, shape) in scene.shapes.iter().enumerate() {
             match &shape.geometry {
                 Geometry::Mesh(m) => {
@@ -99,6 +100,7 @@ impl Accel {
                         if !(a.is_finite() && b.is_finite() && c.is_finite())
                             || area2 <= 0.0
                             || !area2.is_finite()
+                            || repeats.seen_before([a, b, c], &tris)
                         {
                             dropped += 1;
                             continue;
@@ -423,6 +425,40 @@ impl Accel {
     /// A shape's mesh, if it is one.
     pub fn mesh(&self, shape: u32) -> Option<&TriangleMesh> {
         self.meshes.get(shape as usize).and_then(|m| m.as_ref())
+    }
+}
+
+/// Exact repeats of a triangle already kept (a polygon fan over three vertices, a glTF
+/// primitive listed 20 000 times, an instance placed twice at one spot). A copy adds nothing
+/// a ray could see, and PLOC pairs identical boxes one merge per pass: 20 000 copies took
+/// 15 s of CPU to build (quadratic). They are dropped like degenerate triangles.
+#[derive(Default)]
+struct RepeatFilter(std::collections::HashMap<u64, u32>);
+
+impl RepeatFilter {
+    /// Whether `v` (in any vertex order) equals a triangle of `kept`; otherwise records that
+    /// it is about to be pushed as `kept[kept.len()]`.
+    fn seen_before(&mut self, v: [Vec3; 3], kept: &[Triangle]) -> bool {
+        let key = |v: [Vec3; 3]| {
+            let mut k = v.map(|p| p.to_array().map(f32::to_bits));
+            k.sort_unstable();
+            k
+        };
+        let k = key(v);
+        // FNV-1a over the 36 bytes: a map key only; equal keys are compared in full.
+        let hash = k.iter().flatten().fold(0xcbf2_9ce4_8422_2325u64, |h, &w| {
+            (h ^ w as u64).wrapping_mul(0x0100_0000_01b3)
+        });
+        match self.0.entry(hash) {
+            std::collections::hash_map::Entry::Occupied(e) => {
+                let t = &kept[*e.get() as usize];
+                key([t.v0.into(), t.v1.into(), t.v2.into()]) == k
+            }
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(kept.len() as u32);
+                false
+            }
+        }
     }
 }
 

@@ -204,7 +204,7 @@ impl CameraBatch {
     /// Linear sRGB of every lane's spectral radiance (`l[k][lane]`, wavelength pdfs
     /// `pdf[k][lane]`: the batch's, or fewer after a dispersive refraction), `[channel][lane]`:
     /// Σ_k rgb̄(λ_k)·L_k/p_k over the wavelengths with p_k > 0, per lane the operations of
-    /// [`crate::spectrum::SampledSpectrum::to_linear_srgb`], so the same values bit for bit
+    /// [`crate::spectrum::spectrum_to_linear_srgb`], so the same values bit for bit
     /// (a skipped wavelength adds +0 to a sum that starts at +0).
     #[inline]
     pub fn to_rgb_lanes(&self, l: &[Lanes; 4], pdf: &[Lanes; 4]) -> [Lanes; 3] {

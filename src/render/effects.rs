@@ -110,6 +110,23 @@ impl Effects {
         self.decisions.push(Decision { effect, on, reason });
         on
     }
+
+    /// [`Self::decide`] for an effect that is on when `causes` (the BSDFs that bring it) is
+    /// not empty: `off` says why it is off, `on(causes)` what it does.
+    fn decide_by(
+        &mut self,
+        effect: Effect,
+        causes: &[String],
+        off: &str,
+        on: impl FnOnce(&[String]) -> String,
+    ) -> bool {
+        let reason = if causes.is_empty() {
+            off.to_string()
+        } else {
+            on(causes)
+        };
+        self.decide(effect, !causes.is_empty(), reason)
+    }
 }
 
 impl fmt::Display for Effects {
@@ -194,42 +211,35 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
     let bubbles = described(&all, |b| {
         b.flags().contains(BsdfFlags::INTERFERENCE) && b.flags().intersects(BsdfFlags::TRANSMISSION)
     });
-    e.bubble = e.decide(
+    e.bubble = e.decide_by(
         Effect::FreeStandingFilm,
-        !bubbles.is_empty(),
-        if bubbles.is_empty() {
-            "no thinfilm_bubble in use".into()
-        } else {
-            format!(
-                "coherent Airy reflection and transmission (R + T = 1 when lossless) for {}",
-                bubbles.join("; ")
-            )
+        &bubbles,
+        "no thinfilm_bubble in use",
+        |b| {
+            let b = b.join("; ");
+            format!("coherent Airy reflection and transmission (R + T = 1 when lossless) for {b}")
         },
     );
     let stacks = described(&all, has(BsdfFlags::MULTILAYER));
-    e.stack = e.decide(
+    e.stack = e.decide_by(
         Effect::MultilayerStack,
-        !stacks.is_empty(),
-        if stacks.is_empty() {
-            "no thinfilm with layers in use".into()
-        } else {
+        &stacks,
+        "no thinfilm with layers in use",
+        |s| {
             format!(
                 "transfer-matrix reflectance per wavelength for {}",
-                stacks.join("; ")
+                s.join("; ")
             )
         },
     );
     let dispersive = described(&all, has(BsdfFlags::DISPERSIVE));
-    e.dispersion = e.decide(
+    e.dispersion = e.decide_by(
         Effect::Dispersion,
-        !dispersive.is_empty(),
-        if dispersive.is_empty() {
-            "no refracting interface with a wavelength-dependent index (all 4 wavelengths share each path)".into()
-        } else {
-            format!(
-                "wavelength-dependent refraction at {}; secondary wavelengths terminate there",
-                dispersive.join(", ")
-            )
+        &dispersive,
+        "no refracting interface with a wavelength-dependent index (all 4 wavelengths share each path)",
+        |d| {
+            let d = d.join(", ");
+            format!("wavelength-dependent refraction at {d}; secondary wavelengths terminate there")
         },
     );
     let pairs = described(&all, |b| {
@@ -251,14 +261,11 @@ pub fn analyze(scene: &Scene) -> anyhow::Result<Effects> {
         },
     );
     let rough = described(&all, has(BsdfFlags::GLOSSY));
-    e.rough = e.decide(
+    e.rough = e.decide_by(
         Effect::MicrofacetSampling,
-        !rough.is_empty(),
-        if rough.is_empty() {
-            "all BSDFs smooth or diffuse".into()
-        } else {
-            rough.join(", ")
-        },
+        &rough,
+        "all BSDFs smooth or diffuse",
+        |r| r.join(", "),
     );
     let why = polarization_causes(scene, &all);
     if !why.is_empty() {

@@ -160,23 +160,6 @@ pub fn rotate_stokes_basis(forward: Vec3, current: Vec3, target: Vec3) -> Muelle
     rotator_cs(c, s)
 }
 
-/// `m` (from `in_current` to `out_current`) re-expressed from `in_target` to `out_target`:
-/// R_out · M · R_inᵀ (Mitsuba `rotate_mueller_basis`).
-#[allow(clippy::too_many_arguments)]
-pub fn rotate_mueller_basis(
-    m: &Mueller,
-    in_forward: Vec3,
-    in_current: Vec3,
-    in_target: Vec3,
-    out_forward: Vec3,
-    out_current: Vec3,
-    out_target: Vec3,
-) -> Mueller {
-    let r_in = rotate_stokes_basis(in_forward, in_current, in_target);
-    let r_out = rotate_stokes_basis(out_forward, out_current, out_target);
-    r_out.mul(m).mul(&r_in.transpose())
-}
-
 /// Covector update `row · R(forward, current → target)`: the row is then expressed against
 /// Stokes vectors given in `current` (used by the integrator; cheaper than building R).
 #[inline]

@@ -11,7 +11,7 @@ use glam::{Mat3, Vec2, Vec3, Vec4};
 use std::sync::Arc;
 
 /// A spectrum at the four path wavelengths (one lane per wavelength).
-pub type Spec = Vec4;
+pub use crate::spectrum::Spec;
 
 /// Wavelengths of a path as a `Vec4` (nm).
 #[inline]

@@ -608,7 +608,12 @@ fn read_uri(uri: &str, base: &Path, what: &str, file: &str) -> Result<Vec<u8>> {
                         path.display()
                     )
                 })?;
-            check_alloc(format!("{file}: {what} file '{uri}'"), meta.len())?;
+            // Read whole, then copied out into vertex and index arrays: twice its size (a
+            // 2 GiB buffer passed a check of its size alone and aborted in the allocator).
+            check_alloc(
+                format!("{file}: {what} file '{uri}' ({} bytes)", meta.len()),
+                meta.len().saturating_mul(2),
+            )?;
         }
     }
     gltf::buffer::Data::from_source(gltf::buffer::Source::Uri(uri), Some(base))

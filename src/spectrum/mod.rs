@@ -20,7 +20,8 @@ pub use rgb2spec::{
     RgbUnboundedSpectrum, RGB_ILLUMINANT_D65_NORM,
 };
 pub use sampled::{
-    visible_wavelengths_pdf, SampledSpectrum, SampledWavelengths, N_SPECTRUM_SAMPLES,
+    spectrum_at, spectrum_to_linear_srgb, spectrum_to_xyz, visible_wavelengths_pdf,
+    SampledWavelengths, Spec, N_SPECTRUM_SAMPLES,
 };
 
 mod tables {

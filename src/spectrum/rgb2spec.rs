@@ -32,7 +32,7 @@
 
 use std::sync::OnceLock;
 
-use super::sampled::{SampledSpectrum, SampledWavelengths};
+use super::sampled::{SampledWavelengths, Spec};
 
 /// Σ ȳ·D65 / Σ ȳ over the 1 nm tables: D65 divided by this has luminance 1 under the film's
 /// 1/[`super::CIE_Y_INTEGRAL`] normalisation (see the module docs).
@@ -70,8 +70,8 @@ impl RgbSigmoidPolynomial {
     }
 
     /// Evaluate at the four path wavelengths.
-    pub fn sample(&self, wavelengths: &SampledWavelengths) -> SampledSpectrum {
-        SampledSpectrum(wavelengths.lambda.map(|l| self.eval(l)))
+    pub fn sample(&self, wavelengths: &SampledWavelengths) -> Spec {
+        Spec::from_array(wavelengths.lambda.map(|l| self.eval(l)))
     }
 }
 
@@ -222,57 +222,42 @@ fn scaled_poly(rgb: [f32; 3]) -> (f32, RgbSigmoidPolynomial) {
     (scale, srgb_reflectance(rgb.map(|v| v / scale)))
 }
 
-/// An RGB emitter's spectrum as Mitsuba's `srgb_d65`: scale = 2·max, polynomial of rgb/scale,
-/// times D65 normalised so that RGB (1,1,1) renders as (1,1,1).
-/// Negative, NaN and infinite components are treated as 0.
+/// An RGB quantity as a spectrum: scale = 2·max, the sigmoid polynomial of rgb/scale, and —
+/// for an emitter (`ILLUMINANT`) — times D65 normalised so that RGB (1,1,1) renders as
+/// (1,1,1). Negative, NaN and infinite components are treated as 0.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RgbIlluminantSpectrum {
+pub struct RgbScaledSpectrum<const ILLUMINANT: bool> {
     pub scale: f32,
     pub poly: RgbSigmoidPolynomial,
 }
 
-impl RgbIlluminantSpectrum {
+/// An RGB emitter's spectrum as Mitsuba's `srgb_d65`.
+pub type RgbIlluminantSpectrum = RgbScaledSpectrum<true>;
+
+/// A non-negative RGB quantity that may exceed 1 (e.g. texture values > 1), no illuminant
+/// (pbrt-v4's `RGBUnboundedSpectrum`).
+pub type RgbUnboundedSpectrum = RgbScaledSpectrum<false>;
+
+impl<const ILLUMINANT: bool> RgbScaledSpectrum<ILLUMINANT> {
     pub fn new(rgb: [f32; 3]) -> Self {
         let (scale, poly) = scaled_poly(rgb);
-        RgbIlluminantSpectrum { scale, poly }
+        Self { scale, poly }
     }
 
     pub fn eval(&self, lambda_nm: f32) -> f32 {
         if self.scale == 0.0 {
             return 0.0;
         }
-        let d65 = (super::d65(lambda_nm as f64) / RGB_ILLUMINANT_D65_NORM) as f32;
-        self.scale * self.poly.eval(lambda_nm) * d65
+        let v = self.scale * self.poly.eval(lambda_nm);
+        if ILLUMINANT {
+            v * (super::d65(lambda_nm as f64) / RGB_ILLUMINANT_D65_NORM) as f32
+        } else {
+            v
+        }
     }
 
     /// Evaluate at the four path wavelengths.
-    pub fn sample(&self, wavelengths: &SampledWavelengths) -> SampledSpectrum {
-        SampledSpectrum(wavelengths.lambda.map(|l| self.eval(l)))
-    }
-}
-
-/// A non-negative RGB quantity that may exceed 1 (e.g. texture values > 1): scale = 2·max,
-/// polynomial of rgb/scale, no illuminant (pbrt-v4's `RGBUnboundedSpectrum`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RgbUnboundedSpectrum {
-    pub scale: f32,
-    pub poly: RgbSigmoidPolynomial,
-}
-
-impl RgbUnboundedSpectrum {
-    pub fn new(rgb: [f32; 3]) -> Self {
-        let (scale, poly) = scaled_poly(rgb);
-        RgbUnboundedSpectrum { scale, poly }
-    }
-
-    pub fn eval(&self, lambda_nm: f32) -> f32 {
-        if self.scale == 0.0 {
-            return 0.0;
-        }
-        self.scale * self.poly.eval(lambda_nm)
-    }
-
-    pub fn sample(&self, wavelengths: &SampledWavelengths) -> SampledSpectrum {
-        SampledSpectrum(wavelengths.lambda.map(|l| self.eval(l)))
+    pub fn sample(&self, wavelengths: &SampledWavelengths) -> Spec {
+        Spec::from_array(wavelengths.lambda.map(|l| self.eval(l)))
     }
 }

@@ -1,14 +1,10 @@
-//! Hero-wavelength sampling (4 wavelengths per path) and 4-sample spectra.
+//! Hero-wavelength sampling (4 wavelengths per path) and 4-sample spectra ([`Spec`]).
 //!
 //! Wavelengths are importance-sampled over 360–830 nm with the pdf of pbrt-v4 / Mitsuba 3
 //! (`SampleVisibleWavelengths`, Radziszewski et al. 2009):
 //! p(λ) = 0.0039398042 / cosh²(0.0072 (λ − 538)), inverted in closed form as
 //! λ = 538 − atanh(0.85691062 − 1.82750197 u) / 0.0072. One random number drives all four
 //! wavelengths, rotated by k/4 (Wilkie et al. 2014, "Hero wavelength spectral sampling").
-
-use std::ops::{
-    Add, AddAssign, Div, DivAssign, Index, IndexMut, Mul, MulAssign, Neg, Sub, SubAssign,
-};
 
 use super::{CIE_Y_INTEGRAL, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 
@@ -79,7 +75,7 @@ pub fn cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
 }
 
 /// (r̄, ḡ, b̄, D65/[`super::RGB_ILLUMINANT_D65_NORM`]) at `lambda_nm`: the film's linear-sRGB
-/// matching functions (as in [`SampledSpectrum::to_linear_srgb`]) and the D65 factor of
+/// matching functions (as in [`spectrum_to_linear_srgb`]) and the D65 factor of
 /// [`cmf_d65_f32`], bit for bit, from one interpolated row.
 #[inline]
 pub fn rgb_cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
@@ -203,204 +199,53 @@ pub fn visible_wavelengths_pdf(lambda_nm: f32) -> f32 {
     VISIBLE_PDF_NORM / (c * c)
 }
 
-/// A spectral quantity at the four path wavelengths.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SampledSpectrum(pub [f32; N_SPECTRUM_SAMPLES]);
+/// A spectral quantity at the four path wavelengths, one SIMD lane each: the one spectrum
+/// type of the crate (the renderer's `render::texture::Spec` is this type); arithmetic,
+/// `max_element`, `is_finite`, … come from glam.
+pub type Spec = glam::Vec4;
 
-impl SampledSpectrum {
-    pub const ZERO: SampledSpectrum = SampledSpectrum([0.0; N_SPECTRUM_SAMPLES]);
-    pub const ONE: SampledSpectrum = SampledSpectrum([1.0; N_SPECTRUM_SAMPLES]);
+const _: () = assert!(
+    N_SPECTRUM_SAMPLES == 4,
+    "Spec has one lane per path wavelength"
+);
 
-    pub const fn splat(v: f32) -> Self {
-        SampledSpectrum([v; N_SPECTRUM_SAMPLES])
-    }
-
-    pub fn from_fn(f: impl FnMut(usize) -> f32) -> Self {
-        SampledSpectrum(std::array::from_fn(f))
-    }
-
-    /// Evaluate `f(λ)` at each path wavelength.
-    pub fn from_wavelengths(w: &SampledWavelengths, mut f: impl FnMut(f32) -> f32) -> Self {
-        SampledSpectrum(w.lambda.map(&mut f))
-    }
-
-    pub fn map(self, f: impl FnMut(f32) -> f32) -> Self {
-        SampledSpectrum(self.0.map(f))
-    }
-
-    pub fn max_component(&self) -> f32 {
-        self.0.iter().copied().fold(f32::NEG_INFINITY, f32::max)
-    }
-
-    pub fn min_component(&self) -> f32 {
-        self.0.iter().copied().fold(f32::INFINITY, f32::min)
-    }
-
-    pub fn average(&self) -> f32 {
-        self.0.iter().sum::<f32>() / N_SPECTRUM_SAMPLES as f32
-    }
-
-    /// True when every sample is exactly zero.
-    pub fn is_black(&self) -> bool {
-        self.0.iter().all(|&v| v == 0.0)
-    }
-
-    pub fn has_nan(&self) -> bool {
-        self.0.iter().any(|v| v.is_nan())
-    }
-
-    pub fn is_finite(&self) -> bool {
-        self.0.iter().all(|v| v.is_finite())
-    }
-
-    pub fn exp(self) -> Self {
-        self.map(f32::exp)
-    }
-
-    pub fn sqrt(self) -> Self {
-        self.map(f32::sqrt)
-    }
-
-    /// √max(v, 0): no NaN from tiny negative round-off.
-    pub fn safe_sqrt(self) -> Self {
-        self.map(|v| v.max(0.0).sqrt())
-    }
-
-    pub fn powf(self, e: f32) -> Self {
-        self.map(|v| v.powf(e))
-    }
-
-    pub fn abs(self) -> Self {
-        self.map(f32::abs)
-    }
-
-    pub fn clamp(self, lo: f32, hi: f32) -> Self {
-        self.map(|v| v.clamp(lo, hi))
-    }
-
-    /// Element-wise a/b with 0 where b == 0 (pbrt's SafeDiv).
-    pub fn safe_div(self, rhs: SampledSpectrum) -> Self {
-        SampledSpectrum(std::array::from_fn(|i| {
-            if rhs.0[i] != 0.0 {
-                self.0[i] / rhs.0[i]
-            } else {
-                0.0
-            }
-        }))
-    }
-
-    /// Monte-Carlo estimate of CIE XYZ: mean over the 4 samples of cmf(λ)·L(λ)/pdf(λ),
-    /// divided by [`super::CIE_Y_INTEGRAL`] (zero-pdf samples contribute 0).
-    pub fn to_xyz(&self, wavelengths: &SampledWavelengths) -> [f32; 3] {
-        let mut xyz = [0.0f32; 3];
-        for k in 0..N_SPECTRUM_SAMPLES {
-            let pdf = wavelengths.pdf[k];
-            if pdf == 0.0 {
-                continue;
-            }
-            let cmf = cmf_d65_f32(wavelengths.lambda[k]);
-            let w = self.0[k] / pdf;
-            for c in 0..3 {
-                xyz[c] += cmf[c] * w;
-            }
-        }
-        let norm = 1.0 / (N_SPECTRUM_SAMPLES as f64 * CIE_Y_INTEGRAL) as f32;
-        xyz.map(|v| v * norm)
-    }
-
-    /// Monte-Carlo estimate of linear sRGB (XYZ → Rec.709, D65), as the film records it.
-    /// Uses the per-nm sRGB matching functions (the XYZ→sRGB matrix folded into the table),
-    /// equal to `xyz_to_linear_srgb(to_xyz)` up to f32 rounding.
-    pub fn to_linear_srgb(&self, wavelengths: &SampledWavelengths) -> [f32; 3] {
-        let mut rgb = glam::Vec4::ZERO;
-        for k in 0..N_SPECTRUM_SAMPLES {
-            let pdf = wavelengths.pdf[k];
-            if pdf == 0.0 {
-                continue;
-            }
-            rgb += lerp_table(&RGB_CMF_F32, wavelengths.lambda[k]) * (self.0[k] / pdf);
-        }
-        [rgb.x, rgb.y, rgb.z]
-    }
+/// `f(λ)` at each path wavelength.
+pub fn spectrum_at(w: &SampledWavelengths, f: impl FnMut(f32) -> f32) -> Spec {
+    Spec::from_array(w.lambda.map(f))
 }
 
-impl Index<usize> for SampledSpectrum {
-    type Output = f32;
-    fn index(&self, i: usize) -> &f32 {
-        &self.0[i]
+/// Monte-Carlo estimate of CIE XYZ of `s`: mean over the 4 samples of cmf(λ)·L(λ)/pdf(λ),
+/// divided by [`super::CIE_Y_INTEGRAL`] (zero-pdf samples contribute 0).
+pub fn spectrum_to_xyz(s: Spec, wavelengths: &SampledWavelengths) -> [f32; 3] {
+    let mut xyz = [0.0f32; 3];
+    for k in 0..N_SPECTRUM_SAMPLES {
+        let pdf = wavelengths.pdf[k];
+        if pdf == 0.0 {
+            continue;
+        }
+        let cmf = cmf_d65_f32(wavelengths.lambda[k]);
+        let w = s[k] / pdf;
+        for c in 0..3 {
+            xyz[c] += cmf[c] * w;
+        }
     }
+    let norm = 1.0 / (N_SPECTRUM_SAMPLES as f64 * CIE_Y_INTEGRAL) as f32;
+    xyz.map(|v| v * norm)
 }
 
-impl IndexMut<usize> for SampledSpectrum {
-    fn index_mut(&mut self, i: usize) -> &mut f32 {
-        &mut self.0[i]
+/// Monte-Carlo estimate of linear sRGB (XYZ → Rec.709, D65) of `s`, as the film records it.
+/// Uses the per-nm sRGB matching functions (the XYZ→sRGB matrix folded into the table),
+/// equal to `xyz_to_linear_srgb(spectrum_to_xyz)` up to f32 rounding.
+pub fn spectrum_to_linear_srgb(s: Spec, wavelengths: &SampledWavelengths) -> [f32; 3] {
+    let mut rgb = glam::Vec4::ZERO;
+    for k in 0..N_SPECTRUM_SAMPLES {
+        let pdf = wavelengths.pdf[k];
+        if pdf == 0.0 {
+            continue;
+        }
+        rgb += lerp_table(&RGB_CMF_F32, wavelengths.lambda[k]) * (s[k] / pdf);
     }
-}
-
-impl From<f32> for SampledSpectrum {
-    fn from(v: f32) -> Self {
-        SampledSpectrum::splat(v)
-    }
-}
-
-macro_rules! elementwise_op {
-    ($tr:ident, $f:ident, $tra:ident, $fa:ident, $op:tt) => {
-        impl $tr for SampledSpectrum {
-            type Output = SampledSpectrum;
-            #[inline]
-            fn $f(self, rhs: SampledSpectrum) -> SampledSpectrum {
-                SampledSpectrum(std::array::from_fn(|i| self.0[i] $op rhs.0[i]))
-            }
-        }
-        impl $tr<f32> for SampledSpectrum {
-            type Output = SampledSpectrum;
-            #[inline]
-            fn $f(self, rhs: f32) -> SampledSpectrum {
-                SampledSpectrum(self.0.map(|v| v $op rhs))
-            }
-        }
-        impl $tr<SampledSpectrum> for f32 {
-            type Output = SampledSpectrum;
-            #[inline]
-            fn $f(self, rhs: SampledSpectrum) -> SampledSpectrum {
-                SampledSpectrum(rhs.0.map(|v| self $op v))
-            }
-        }
-        impl $tra for SampledSpectrum {
-            #[inline]
-            fn $fa(&mut self, rhs: SampledSpectrum) {
-                for i in 0..N_SPECTRUM_SAMPLES {
-                    self.0[i] = self.0[i] $op rhs.0[i];
-                }
-            }
-        }
-        impl $tra<f32> for SampledSpectrum {
-            #[inline]
-            fn $fa(&mut self, rhs: f32) {
-                for v in &mut self.0 {
-                    *v = *v $op rhs;
-                }
-            }
-        }
-    };
-}
-
-elementwise_op!(Add, add, AddAssign, add_assign, +);
-elementwise_op!(Sub, sub, SubAssign, sub_assign, -);
-elementwise_op!(Mul, mul, MulAssign, mul_assign, *);
-elementwise_op!(Div, div, DivAssign, div_assign, /);
-
-impl Neg for SampledSpectrum {
-    type Output = SampledSpectrum;
-    fn neg(self) -> SampledSpectrum {
-        self.map(|v| -v)
-    }
-}
-
-impl std::iter::Sum for SampledSpectrum {
-    fn sum<I: Iterator<Item = SampledSpectrum>>(iter: I) -> Self {
-        iter.fold(SampledSpectrum::ZERO, |a, b| a + b)
-    }
+    [rgb.x, rgb.y, rgb.z]
 }
 
 #[cfg(test)]
@@ -442,9 +287,9 @@ mod tests {
     fn rgb_table_matches_xyz_then_matrix() {
         for i in 0..2000 {
             let w = SampledWavelengths::sample_visible(i as f32 / 2000.0);
-            let l = SampledSpectrum([0.3, 1.7, 0.02, 5.0]);
-            let want = super::super::xyz_to_linear_srgb(l.to_xyz(&w).map(f64::from));
-            let got = l.to_linear_srgb(&w);
+            let l = Spec::new(0.3, 1.7, 0.02, 5.0);
+            let want = super::super::xyz_to_linear_srgb(spectrum_to_xyz(l, &w).map(f64::from));
+            let got = spectrum_to_linear_srgb(l, &w);
             // f32 accumulation: error relative to the sample's overall magnitude (channels
             // can cancel to near zero).
             let scale: f64 = want.iter().map(|v| v.abs()).sum();
@@ -459,8 +304,8 @@ mod tests {
         // Terminated secondaries (pdf 0) contribute nothing in both forms.
         let mut w = SampledWavelengths::sample_visible(0.3);
         w.pdf[1] = 0.0;
-        let l = SampledSpectrum([0.0, 1e30, 0.0, 0.0]);
-        assert_eq!(l.to_linear_srgb(&w), [0.0; 3]);
+        let l = Spec::new(0.0, 1e30, 0.0, 0.0);
+        assert_eq!(spectrum_to_linear_srgb(l, &w), [0.0; 3]);
     }
 
     #[test]
@@ -518,38 +363,10 @@ mod tests {
         w.terminate_secondary();
         assert_eq!(w.pdf[0], p0 / 4.0);
         // The 4-sample average of L/pdf equals L0/p0 alone.
-        let l = SampledSpectrum([2.0, 5.0, 7.0, 9.0]);
-        let xyz = l.to_xyz(&w);
+        let l = Spec::new(2.0, 5.0, 7.0, 9.0);
+        let xyz = spectrum_to_xyz(l, &w);
         let cmf = super::super::cie_xyz_cmf(w.lambda[0] as f64);
         let expect = cmf[1] as f32 * 2.0 / p0 / CIE_Y_INTEGRAL as f32;
         assert!((xyz[1] - expect).abs() <= 1e-5 * expect.abs().max(1e-6));
-    }
-
-    #[test]
-    fn arithmetic() {
-        let a = SampledSpectrum([1.0, 2.0, 3.0, 4.0]);
-        let b = SampledSpectrum::splat(2.0);
-        assert_eq!((a + b).0, [3.0, 4.0, 5.0, 6.0]);
-        assert_eq!((a - b).0, [-1.0, 0.0, 1.0, 2.0]);
-        assert_eq!((a * b).0, [2.0, 4.0, 6.0, 8.0]);
-        assert_eq!((a / 2.0).0, [0.5, 1.0, 1.5, 2.0]);
-        assert_eq!((2.0 * a).0, [2.0, 4.0, 6.0, 8.0]);
-        let mut c = a;
-        c *= b;
-        c += 1.0;
-        c /= SampledSpectrum::splat(3.0);
-        assert_eq!(c.0, [1.0, 5.0 / 3.0, 7.0 / 3.0, 3.0]);
-        assert_eq!(a.max_component(), 4.0);
-        assert_eq!(a.min_component(), 1.0);
-        assert_eq!(a.average(), 2.5);
-        assert!(SampledSpectrum::ZERO.is_black());
-        assert!(!a.is_black());
-        assert_eq!(
-            a.safe_div(SampledSpectrum([0.0, 1.0, 0.0, 2.0])).0,
-            [0.0, 2.0, 0.0, 2.0]
-        );
-        assert!(SampledSpectrum::splat(-1.0).sqrt().has_nan());
-        assert!(!SampledSpectrum::splat(-1.0).safe_sqrt().has_nan());
-        assert_eq!(SampledSpectrum::ZERO.exp().0, [1.0; 4]);
     }
 }

@@ -1142,6 +1142,373 @@ for cid, pieces, expect, extra in [
 case("merge_output_is_input", "fail:also an input", f"merge {M}a.exr {M}b.exr -o {M}a.exr")
 case("merge_output_png", "fail:merged.png", f"merge {M}a.exr {M}b.exr -o {{O}}/merged.png")
 
+# ------------------------------------------------------------- more classes (second sweep)
+# Zero-length, truncated and huge-declared (sparse) files of every format, lying counts,
+# odd-but-legal variants, and the inputs of `figure`, `estimate --spectra` and `merge`.
+
+GIB3 = 3 * 2**30
+
+
+def sparse_file(rel, data, size=GIB3):
+    """A file that starts with `data` and declares `size` bytes (a hole, not disk space)."""
+    write(rel, data)
+    sparse.append((rel, size))
+    return rel
+
+
+# ENVI: zero-length binary, zero-length header, huge sparse header and cube, CRLF, BOM.
+envi_case("binary_empty", envi_header(), "fail:c.img", binary=b"")
+envi_case("header_zero_length", "", "fail:c.hdr")
+envi_case("header_crlf", envi_header().replace("\n", "\r\n"), "ok")
+envi_case("header_bom", "\ufeff" + envi_header(), "ok")
+envi_case("header_truncated_mid_key", envi_header()[:40], "fail:c.hdr")
+envi_case("header_truncated_in_list", envi_header()[:-30], "fail:c.hdr")
+envi_case("bil_truncated", envi_header(interleave="bil"), "fail:c.img|truncated", binary=cube_bytes()[:-4])
+envi_case("bip_ok", envi_header(interleave="bip"), "ok")
+envi_case("data_type_u16_short", envi_header(data_type=12), "ok", binary=cube_bytes()[: W * H * B * 2])
+envi_case("data_type_f64_short", envi_header(data_type=5), "fail:c.img|truncated")
+envi_case("bands_string_list", envi_header(wavelength="{a, b, c, d, e, f, g, h}"), "fail:c.hdr|wavelength")
+envi_case("wavelength_1e400", envi_header(wavelength="{" + ", ".join(["1e400"] * B) + "}"), "fail:c.hdr|wavelength")
+envi_case("key_repeated_10k", envi_header() + "description = x\n" * 10000, "ok")
+d = "envi/header_sparse"
+sparse_file(f"{d}/c.hdr", envi_header())
+write(f"{d}/c.img", cube_bytes())
+write(f"{d}/capture.json", capture_json([(20, "c.hdr")]))
+case("envi_header_sparse", "fail:c.hdr", f"estimate {{C}}/{d} --out {{O}}/fit --film-ior 1.4 --quiet")
+d = "envi/cube_sparse"
+write(f"{d}/c.hdr", envi_header(samples=2**15, lines=2**15, bands=B))
+sparse_file(f"{d}/c.img", b"", 2**15 * 2**15 * B * 4)
+write(f"{d}/capture.json", capture_json([(20, "c.hdr")]))
+case("envi_cube_sparse_huge", "fail:c.hdr", f"estimate {{C}}/{d} --out {{O}}/fit --film-ior 1.4 --quiet")
+
+# capture.json: huge sparse, NUL bytes, a number with 100 000 digits, BOM, cube path tricks.
+d = "capture/sparse"
+sparse_file(f"{d}/capture.json", capture_json(OK_ANGLES))
+case("capture_sparse", "fail:capture.json", f"estimate {{C}}/{d} --out {{O}}/fit --quiet")
+capture_case("nul_bytes", capture_json(OK_ANGLES).replace('"s"', '"s\\u0000"'), "fail:capture.json|polarization")
+capture_case("long_number", capture_json(OK_ANGLES).replace('"ambient_ior": 1.0', '"ambient_ior": 1' + "0" * 100000),
+             "fail:capture.json")
+capture_case("bom", "\ufeff" + capture_json(OK_ANGLES), "fail:capture.json")
+capture_case("cube_absolute_dev", capture_json([(20, "/dev/zero")]), "fail:/dev/zero")
+capture_case("cube_self", capture_json([(20, "capture.json")]), "fail:capture.json")
+capture_case("angles_object", capture_json(OK_ANGLES).replace('"angles": [', '"angles": {"a": [').replace("]\n}", "]}\n}"),
+             "fail:capture.json")
+
+# Point spectra (`estimate --spectra`): the 2-column text files.
+SPEC_OK = "".join(f"{400 + 5 * i} {0.1 + 0.05 * ((i * 7) % 5)}\n" for i in range(60))
+SPECTRA = {
+    "ok.csv": SPEC_OK,
+    "empty.csv": "",
+    "one_column.csv": "".join(f"{400 + 5 * i}\n" for i in range(60)),
+    "text.csv": "wavelength,intensity\nfoo,bar\n",
+    "nan.csv": SPEC_OK.replace("400 ", "nan "),
+    "inf_value.csv": SPEC_OK.replace("\n", " \n").replace(" 0.1 ", " inf ", 1),
+    "descending.csv": "".join(reversed(SPEC_OK.splitlines(True))),
+    "duplicate.csv": SPEC_OK + SPEC_OK.splitlines(True)[-1],
+    "binary.csv": bytes(range(256)) * 8,
+    "truncated.csv": SPEC_OK[: len(SPEC_OK) // 2] + "5",
+    "single_line.csv": "500 0.3\n",
+    "huge_wavelength.csv": SPEC_OK.replace("400 ", "1e300 "),
+    "many_columns.csv": SPEC_OK.replace("\n", " 1 2 3\n"),
+    "long_line.csv": "400 " + "9" * 1000000 + "\n" + SPEC_OK,
+    "semicolons.csv": SPEC_OK.replace(" ", ";"),
+}
+for name, text in SPECTRA.items():
+    write(f"spectra/{name}", text)
+sparse_file("spectra/sparse.csv", SPEC_OK)
+for name in list(SPECTRA) + ["sparse.csv"]:
+    stem = name.split(".")[0]
+    # Extra columns and ';' separators are read as the 2-column format; a non-finite
+    # intensity is masked like a NaN pixel of a cube.
+    expect = "ok" if name in ("ok.csv", "many_columns.csv", "semicolons.csv", "inf_value.csv") else f"fail:{name}"
+    case(f"spectra_{stem}", expect,
+         f"estimate --spectra {{C}}/spectra/{name} {{C}}/spectra/ok.csv --film-ior 1.33 --out {{O}}/fit --quiet")
+case("spectra_dark_empty", "fail:empty.csv",
+     "estimate --spectra {C}/spectra/ok.csv --dark {C}/spectra/empty.csv --film-ior 1.33 --out {O}/fit --quiet")
+case("spectra_dark_other_grid", "fail:single_line.csv",
+     "estimate --spectra {C}/spectra/ok.csv --dark {C}/spectra/single_line.csv --film-ior 1.33 --out {O}/fit --quiet")
+case("spectra_directory", "fail:spectra",
+     "estimate --spectra {C}/spectra --film-ior 1.33 --out {O}/fit --quiet")
+
+# Mitsuba XML: zero-length and sparse scene and include, deep nesting inside an include,
+# entity tricks, an include of a binary mesh, single-object include roots (legal).
+xml_case("sparse_scene", xml_scene(SPHERE), "fail:sparse_scene.xml")
+sparse.append(("xml/sparse_scene.xml", GIB3))
+xml_case("truncated_mid_tag", xml_scene(SPHERE)[:-20], "fail:truncated_mid_tag.xml")
+xml_case("nul_byte", xml_scene(SPHERE).replace("<shape", "<sh\0ape"), "fail:nul_byte.xml")
+xml_case("external_entity", '<?xml version="1.0"?><!DOCTYPE s [<!ENTITY x SYSTEM "/etc/passwd">]>'
+         + xml_scene(SPHERE).replace("</scene>", "&x;</scene>"), "fail:external_entity.xml")
+xml_case("attr_huge", xml_scene(SPHERE.replace('value="1"', 'value="' + "1" * 2000000 + '"')), "fail:attr_huge.xml|radius")
+xml_case("many_shapes", xml_scene(SPHERE * 20000), "ok")
+xml_case("transform_chain", xml_scene('<shape type="sphere"><transform name="to_world">'
+                                      + '<scale value="10"/>' * 400 + "</transform></shape>"), "fail:transform_chain.xml")
+xml_case("lookat_degenerate", xml_scene(SPHERE, SENSOR.replace('origin="0,0,5"', 'origin="0,0,0"')),
+         "fail:lookat_degenerate.xml|lookat")
+xml_case("film_width_4g", xml_scene(SPHERE, SENSOR.replace('name="width" value="8"', 'name="width" value="4000000000"')),
+         "fail:film_width_4g.xml|width")
+xml_case("ply_shape_is_obj", xml_scene('<shape type="ply"><string name="filename" value="../obj/ok.obj"/></shape>'),
+         "fail:ok.obj")
+xml_case("obj_shape_is_glb", xml_scene('<shape type="obj"><string name="filename" value="../gltf/ok.glb"/></shape>'),
+         "fail:ok.glb")
+
+include_case("empty_file", {"main.xml": xml_scene(SPHERE + INC.format("e.xml")), "e.xml": ""}, "fail:e.xml")
+include_case("sparse_file", {"main.xml": xml_scene(SPHERE + INC.format("big.xml")),
+                             "big.xml": "<scene version='3.0.0'>" + SPHERE + "</scene>"}, "fail:big.xml")
+sparse.append(("include/sparse_file/big.xml", GIB3))
+include_case("deep_nesting_inside", {"main.xml": xml_scene(SPHERE + INC.format("n.xml")),
+                                     "n.xml": "<scene version='3.0.0'>" + "<shape type='sphere'>" * 5000
+                                     + "</shape>" * 5000 + "</scene>"}, "fail:n.xml")
+include_case("object_root_ref", {"main.xml": xml_scene(INC.format("m.xml") + '<shape type="sphere"><ref id="m"/></shape>'),
+                                 "m.xml": '<bsdf version="3.0.0" type="conductor" id="m"/>'}, "ok")
+include_case("object_root_nested", {"main.xml": xml_scene('<shape type="sphere">' + INC.format("sub/m.xml") + "</shape>"),
+                                    "sub/m.xml": '<bsdf version="3.0.0" type="twosided">' + INC.format("inner.xml") + "</bsdf>",
+                                    "sub/inner.xml": '<bsdf version="3.0.0" type="diffuse"/>'}, "ok")
+include_case("object_root_v1", {"main.xml": xml_scene(INC.format("s.xml")),
+                                "s.xml": '<shape version="0.6.0" type="sphere"><bsdf type="diffuse">'
+                                '<rgb name="reflectance" value="0.5"/></bsdf></shape>'}, "ok")
+include_case("object_root_no_version", {"main.xml": xml_scene(SPHERE + INC.format("m.xml")),
+                                        "m.xml": '<bsdf type="diffuse"/>'}, "fail:m.xml|version")
+include_case("scene_root_no_version", {"main.xml": xml_scene(SPHERE + INC.format("s.xml")),
+                                       "s.xml": "<scene>" + SPHERE + "</scene>"}, "fail:s.xml|version")
+include_case("property_root", {"main.xml": xml_scene('<shape type="sphere">' + INC.format("p.xml") + "</shape>"),
+                               "p.xml": '<float version="3.0.0" name="radius" value="2"/>'}, "fail:p.xml|version")
+include_case("dot_path_cycle", {"main.xml": xml_scene(SPHERE + INC.format("./sub/../main.xml"))}, "fail:cycle")
+include_case("a_mesh", {"main.xml": xml_scene(SPHERE + INC.format("m.ply")),
+                        "m.ply": ply_ascii(3, 1, TRI_V, TRI_F)}, "fail:m.ply|malformed")
+
+# PLY: lying counts in binary and ASCII, big-endian, odd property types, overflowing lists.
+PLY_BIN_HEAD = ("ply\nformat binary_{end}_endian 1.0\nelement vertex {nv}\nproperty {t} x\nproperty {t} y\n"
+                "property {t} z\nelement face {nf}\nproperty list {ct} {it} vertex_indices\nend_header\n")
+
+
+def ply_bin(nv=3, nf=1, end="little", t="float", ct="uchar", it="int", verts=None, faces=None):
+    e = "<" if end == "little" else ">"
+    fc = {"float": "f", "double": "d", "uchar": "B", "int": "i", "uint": "I", "short": "h", "char": "b"}
+    if verts is None:
+        verts = struct.pack(e + "9" + fc[t], 0, 0, 0, 1, 0, 0, 0, 1, 0)
+    if faces is None:
+        faces = struct.pack(e + fc[ct], 3) + struct.pack(e + "3" + fc[it], 0, 1, 2)
+    return PLY_BIN_HEAD.format(end=end, nv=nv, t=t, nf=nf, ct=ct, it=it).encode() + verts + faces
+
+
+mesh_case("bin_ok", "ply", ply_bin(), "ok")
+mesh_case("bin_big_endian", "ply", ply_bin(end="big"), "ok")
+mesh_case("bin_double", "ply", ply_bin(t="double"), "ok")
+mesh_case("bin_fewer_vertices_than_said", "ply", ply_bin(nv=5), "fail:bin_fewer_vertices_than_said.ply")
+mesh_case("bin_more_faces_than_said", "ply", ply_bin(nf=1000), "fail:bin_more_faces_than_said.ply")
+mesh_case("bin_face_count_u32_max", "ply", ply_bin(nf=2**32 - 1), "fail:bin_face_count_u32_max.ply")
+mesh_case("bin_list_count_255", "ply", ply_bin(faces=struct.pack("<B", 255) + struct.pack("<3i", 0, 1, 2)),
+          "fail:bin_list_count_255.ply")
+mesh_case("bin_index_negative", "ply", ply_bin(faces=struct.pack("<B", 3) + struct.pack("<3i", 0, 1, -2147483648)),
+          "fail:bin_index_negative.ply")
+mesh_case("bin_index_uint_max", "ply", ply_bin(it="uint", faces=struct.pack("<B", 3) + struct.pack("<3I", 0, 1, 2**32 - 1)),
+          "fail:bin_index_uint_max.ply")
+mesh_case("bin_short_coords", "ply", ply_bin(t="short", verts=struct.pack("<9h", 0, 0, 0, 1, 0, 0, 0, 1, 0)), "ok")
+mesh_case("bin_vertex_count_negative", "ply", ply_bin(nv=-1), "fail:bin_vertex_count_negative.ply")
+mesh_case("zero_vertices_faces", "ply", ply_ascii(0, 1, [], TRI_F), "fail:zero_vertices_faces.ply")
+mesh_case("header_only", "ply", ply_ascii(3, 1, [], []), "fail:header_only.ply")
+mesh_case("header_huge_comment", "ply", ply_ascii(3, 1, TRI_V, TRI_F).replace(
+    "format ascii 1.0\n", "format ascii 1.0\ncomment " + "x" * 5000000 + "\n"), "ok")
+mesh_case("header_10k_properties", "ply", ply_ascii(3, 1, TRI_V, TRI_F).replace(
+    "property float z\n", "property float z\n" + "".join(f"property float p{i}\n" for i in range(10000))),
+    "fail:header_10k_properties.ply")
+mesh_case("ascii_lying_faces", "ply", ply_ascii(3, 5, TRI_V, TRI_F), "fail:ascii_lying_faces.ply")
+sparse_file("ply/sparse.ply", ply_bin(nv=2**28, nf=1, verts=b"", faces=b""))
+case("ply_sparse", "fail:sparse.ply", "render {C}/ply/sparse.ply -o {O}/out.exr --spp 1 --resolution 8x8")
+mesh_case("truncated_header", "ply", "ply\nformat ascii 1.0\nelement vert", "fail:truncated_header.ply")
+
+# OBJ: more bad indices and lines.
+V3 = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+for cid, text, expect in [
+    ("relative_ok", V3 + "f -3 -2 -1\n", "ok"),
+    ("index_i64_min", V3 + "f 1 2 -9223372036854775808\n", "fail:index_i64_min.obj"),
+    ("index_slashes_only", V3 + "f / / /\n", "fail:index_slashes_only.obj"),
+    ("index_empty_fields", V3 + "f 1// 2// 3//\n", "ok"),
+    ("face_two_vertices", V3 + "f 1 2\n", "fail:face_two_vertices.obj"),
+    ("face_text", V3 + "f a b c\n", "fail:face_text.obj"),
+    ("vertex_one_coordinate", "v 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "fail:vertex_one_coordinate.obj"),
+    ("vt_nan", V3 + "vt nan 0\nf 1/1 2/1 3/1\n", "fail:vt_nan.obj"),
+    ("vn_zero", V3 + "vn 0 0 0\nf 1//1 2//1 3//1\n", "ok"),
+    ("long_line", V3 + "# " + "x" * 5000000 + "\nf 1 2 3\n", "ok"),
+    ("nul_bytes", V3.replace("v 1", "v \0 1") + "f 1 2 3\n", "fail:nul_bytes.obj"),
+    ("crlf", (V3 + "f 1 2 3\n").replace("\n", "\r\n"), "ok"),
+    ("usemtl_no_lib", "usemtl red\n" + V3 + "f 1 2 3\n", "ok"),
+    ("only_groups", "o a\ng b\ns 1\n", "fail:only_groups.obj"),
+]:
+    mesh_case(cid, "obj", text, expect)
+write("obj/bad_mtl.mtl", "newmtl m\nKd nan banana\nNs 1e400\nmap_Kd /dev/zero\n")
+mesh_case("mtl_garbage", "obj", "mtllib bad_mtl.mtl\nusemtl m\n" + V3 + "f 1 2 3\n", "ok")
+sparse_file("obj/sparse.obj", V3 + "f 1 2 3\n")
+case("obj_sparse", "fail:sparse.obj", "render {C}/obj/sparse.obj -o {O}/out.exr --spp 1 --resolution 8x8")
+
+# glTF / GLB: more accessor, view and URI cases.
+g = gltf_doc()
+mod(g, ["accessors", 0, "byteOffset"], 2**63)
+gltf_case("accessor_offset_i64", g, "fail:accessor_offset_i64.gltf")
+g = gltf_doc()
+mod(g, ["accessors", 1, "count"], 2**53)
+gltf_case("indices_count_2_53", g, "fail:indices_count_2_53.gltf")
+g = gltf_doc()
+mod(g, ["accessors", 0, "count"], 0)
+gltf_case("position_count_zero", g, "fail:position_count_zero.gltf")
+g = gltf_doc()
+mod(g, ["bufferViews", 0, "byteStride"], 2**31)
+gltf_case("stride_2_31", g, "fail:stride_2_31.gltf")
+g = gltf_doc()
+g["buffers"] = [{"byteLength": len(BUF), "uri": "data:application/octet-stream;base64," + "A" * 5}]
+gltf_case("data_uri_bad_length", g, "fail:data_uri_bad_length.gltf")
+g = gltf_doc()
+g["buffers"] = [{"byteLength": len(BUF), "uri": "data:application/octet-stream," + "x" * 64}]
+gltf_case("data_uri_not_base64", g, "fail:data_uri_not_base64.gltf")
+g = gltf_doc()
+g["buffers"] = [{"byteLength": 2**40, "uri": data_uri(BUF)}]
+gltf_case("data_uri_declares_1tb", g, "fail:data_uri_declares_1tb.gltf")
+g = gltf_doc()
+g["buffers"] = [{"byteLength": len(BUF), "uri": "../../../../../../dev/zero"}]
+gltf_case("buffer_dev_zero", g, "fail:buffer_dev_zero.gltf")
+g = gltf_doc()
+g["buffers"] = [{"byteLength": 2**31, "uri": "sparse.bin"}]
+sparse_file("gltf/sparse.bin", BUF, 2**31)
+gltf_case("buffer_sparse_2gb", g, "fail:buffer_sparse_2gb.gltf")
+g = gltf_doc()
+g["nodes"] = [{"mesh": 0, "children": [1]}, {"children": [2]}, {"children": [0]}]
+gltf_case("cycle_three", g, "fail:cycle_three.gltf")
+g = gltf_doc()
+g["nodes"] = [{"mesh": 0, "children": list(range(1, 5001))}] + [{"mesh": 0} for _ in range(5000)]
+gltf_case("wide_tree", g, "ok")
+g = gltf_doc()
+g["nodes"] = [{"mesh": 0, "children": [i + 1]} if i < 3000 else {"mesh": 0} for i in range(3001)]
+gltf_case("deep_chain", g, "ok")
+g = gltf_doc()
+g["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+g["extensionsUsed"] = ["KHR_draco_mesh_compression"]
+gltf_case("extension_required_unknown", g, "fail:extension_required_unknown.gltf|KHR_draco_mesh_compression")
+g = gltf_doc()
+g["nodes"] = [{"mesh": 0, "scale": [1e30, 1e30, 1e30], "translation": [1e38, 0, 0]}]
+gltf_case("node_far_away", g, "fail:node_far_away.gltf")
+g = gltf_doc()
+g["nodes"] = [{"mesh": 0, "rotation": [0, 0, 0, 0]}]
+gltf_case("rotation_zero_quat", g, "ok")  # all vertices at the origin: nothing to hit
+g = gltf_doc()
+g["meshes"] = [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "targets": [{"POSITION": 7}]}]}]
+gltf_case("morph_target_out_of_range", g, "fail:morph_target_out_of_range.gltf")
+g = gltf_doc()
+g["meshes"] = [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}] * 20000}]
+gltf_case("many_primitives", g, "ok")
+g = gltf_doc()
+g["images"] = [{"uri": data_uri(b"\x89PNG\r\n\x1a\n" + bytes(64))}]
+g["textures"] = [{"source": 0}]
+g["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+g["meshes"][0]["primitives"][0]["material"] = 0
+gltf_case("image_data_uri_garbage", g, "fail:image_data_uri_garbage.gltf")
+g = gltf_doc()
+g["images"] = [{"uri": data_uri(png_bytes(1, 1, raw=b"\0" * (20000 * 3 + 1) * 200, declared=(20000, 20000)))}]
+g["textures"] = [{"source": 0}]
+g["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+g["meshes"][0]["primitives"][0]["material"] = 0
+gltf_case("image_data_uri_bomb", g, "fail:image_data_uri_bomb.gltf")
+g = gltf_doc()
+g["samplers"] = [{"wrapS": 1}]
+g["textures"] = [{"source": 0, "sampler": 9}]
+gltf_case("sampler_out_of_range", g, "fail:sampler_out_of_range.gltf")
+g = gltf_doc()
+g["accessors"][0]["sparse"] = {"count": 2**31, "indices": {"bufferView": 1, "componentType": 5123},
+                               "values": {"bufferView": 0}}
+gltf_case("sparse_count_huge", g, "fail:sparse_count_huge.gltf")
+gltf_case("zero_length", None, "fail:zero_length.gltf", raw="")
+gltf_case("truncated", None, "fail:truncated.gltf", raw=json.dumps(gltf_doc())[:100])
+gltf_case("json_nul", None, "fail:json_nul.gltf", raw=json.dumps(gltf_doc()).replace('"2.0"', '"2.0\0"'))
+sparse_file("gltf/sparse.gltf", json.dumps(gltf_doc()))
+case("gltf_sparse", "fail:sparse.gltf", "render {C}/gltf/sparse.gltf -o {O}/out.exr --spp 1 --resolution 8x8")
+for cid, data, expect in [
+    ("zero_length", b"", "fail:zero_length.glb"),
+    ("header_only", b"glTF" + struct.pack("<II", 2, 12), "fail:header_only.glb"),
+    ("version_1", b"glTF" + struct.pack("<II", 1, 20) + bytes(8), "fail:version_1.glb"),
+    ("json_chunk_odd", glb(json.dumps(glb_doc), BUF, json_len=7), "fail:json_chunk_odd.glb"),
+    ("bin_short_for_views", glb(json.dumps(glb_doc), BUF[:12]), "fail:bin_short_for_views.glb"),
+    ("total_len_small", glb(json.dumps(glb_doc), BUF, total_len=20), "fail:total_len_small.glb"),
+    ("json_garbage", glb("{ not json", BUF), "fail:json_garbage.glb"),
+]:
+    rel = write(f"gltf/{cid}.glb", data)
+    case(f"glb_{cid}", expect, f"render {{C}}/{rel} -o {{O}}/out.exr --spp 1 --resolution 8x8")
+sparse_file("gltf/sparse.glb", glb(json.dumps(glb_doc), BUF, total_len=GIB3))
+case("glb_sparse", "fail:sparse.glb", "render {C}/gltf/sparse.glb -o {O}/out.exr --spp 1 --resolution 8x8")
+
+# Textures: zero-length and sparse files of each image format, truncated HDR.
+TEX = {
+    "zero.png": b"",
+    "zero.jpg": b"",
+    "zero.hdr": b"",
+    "zero.exr": b"",
+    "png_16bit.png": b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", struct.pack(">IIBBBBB", 2, 2, 16, 2, 0, 0, 0))
+    + png_chunk(b"IDAT", zlib.compress(b"".join(b"\0" + b"\x80\x00" * 6 for _ in range(2)))) + png_chunk(b"IEND", b""),
+    "png_idat_short.png": png_bytes(4, 4, raw=b"\0" * 5),
+    "png_crc_bad.png": png_bytes(4, 4)[:-5] + b"\x00" + png_bytes(4, 4)[-4:],
+    "hdr_truncated.hdr": b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 64 +X 64\n" + b"\x02\x02\x00\x40" + b"\x80" * 10,
+    "hdr_no_size.hdr": b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n",
+    "hdr_negative.hdr": b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y -5 +X 4\n" + b"\0" * 64,
+    "hdr_rle_overrun.hdr": b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 16\n" + b"\x02\x02\x00\x10"
+    + (b"\xff\x80") * 64,
+    "jpeg_sof_zero.jpg": jpeg_sof(0, 0),
+}
+for name, data in TEX.items():
+    write(f"tex/{name}", data)
+sparse_file("tex/sparse.png", png_bytes(4, 4))
+sparse_file("tex/sparse.exr", exr_bytes(4, 2))
+sparse_file("tex/sparse.hdr", b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 4\n")
+for name in list(TEX) + ["sparse.png", "sparse.exr", "sparse.hdr"]:
+    stem = name.replace(".", "_")
+    # Decoders read what the header declares: a valid image followed by a hole loads, and
+    # the PNG decoder does not check CRCs.
+    ok_tex = name in ("png_16bit.png", "png_crc_bad.png", "sparse.png", "sparse.exr", "sparse.hdr")
+    rel = write(f"xml/tex_{stem}.xml", xml_scene(
+        '<shape type="sphere"><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+        f'<string name="filename" value="../tex/{name}"/></texture></bsdf></shape>'))
+    case(f"tex_bitmap_{stem}", "ok" if ok_tex else f"fail:{name}", f"render {{C}}/{rel} -o {{O}}/out.exr")
+    if name.endswith((".exr", ".hdr")):
+        rel = write(f"xml/env_{stem}.xml", xml_scene(
+            SPHERE + f'<emitter type="envmap"><string name="filename" value="../tex/{name}"/></emitter>'))
+        case(f"tex_envmap_{stem}", "ok" if ok_tex else f"fail:{name}", f"render {{C}}/{rel} -o {{O}}/out.exr")
+
+# `figure FITDIR`: the fit folder's fit.json and thickness map.
+FIG = "figure {{C}}/fit/{d} --capture {{C}}/capture_ok --resolution 8 --spp 1 --out {{O}}/fig.png"
+for d, files, expect in [
+    ("empty_dir", {"x.txt": "x"}, "fail:fit.json"),
+    ("fit_empty", {"fit.json": ""}, "fail:fit.json"),
+    ("fit_not_json", {"fit.json": "{ nope"}, "fail:fit.json"),
+    ("fit_wrong_format", {"fit.json": json.dumps({"format": "thinfilm-fit/99"})}, "fail:fit.json"),
+    ("fit_array", {"fit.json": "[]"}, "fail:fit.json"),
+    ("fit_deep", {"fit.json": "[" * 50000 + "]" * 50000}, "fail:fit.json"),
+    ("fit_binary", {"fit.json": bytes(range(256))}, "fail:fit.json"),
+]:
+    for name, text in files.items():
+        write(f"fit/{d}/{name}", text)
+    case(f"figure_{d}", expect, FIG.format(d=d))
+write("fit/fit_sparse/fit.json", "{}")
+sparse.append(("fit/fit_sparse/fit.json", GIB3))
+case("figure_fit_sparse", "fail:fit.json", FIG.format(d="fit_sparse"))
+case("figure_fit_dir_missing", "fail:nope", FIG.format(d="nope"))
+case("figure_resolution_huge", "fail:--resolution",
+     "figure --samples --resolution 4000000000 --out {O}/fig.png")
+case("figure_spp_zero", "fail:--spp", "figure --samples --spp 0 --resolution 8 --out {O}/fig.png")
+
+# `merge`: zero-length and sparse pieces, a PNG given as a piece, one piece twice.
+write("merge_extra/zero.exr", b"")
+sparse_file("merge_extra/sparse.exr", exr_bytes(4, 2))
+write("merge_extra/a_png.exr", png_bytes(4, 4))
+for cid, pieces, expect in [
+    ("zero_length", "{C}/merge_extra/zero.exr {C}/merge_extra/zero.exr", "fail:zero.exr"),
+    ("sparse_piece", "{C}/merge_extra/sparse.exr {C}/merge_extra/sparse.exr", "fail:sparse.exr"),
+    ("png_as_exr", "{C}/merge_extra/a_png.exr {C}/merge_extra/a_png.exr", "fail:a_png.exr"),
+    ("one_piece", "{C}/merge_extra/zero.exr", "fail:"),
+]:
+    case(f"merge_{cid}", expect, f"merge {pieces} -o {{O}}/merged.exr")
+
+# `compare`: sparse and zero-length images.
+case("compare_sparse", "ok", "compare {C}/tex/sparse.exr {C}/exr/ok.exr")
+case("compare_png_zero", "fail:zero.png", "compare {C}/tex/zero.png {C}/exr/ok.exr")
+
+
 # -------------------------------------------------------------------------------- manifest
 
 with open(os.path.join(OUT, "cases.txt"), "w") as f:

@@ -108,6 +108,32 @@ impl BubbleBsdf {
 
     /// The lobes of [`BsdfModel::sample`] for film values (R, T) already evaluated.
     #[inline]
+    /// The head of `sample` for a model with one delta reflection and one delta transmission
+    /// lobe (this one and `coateddielectric`): `Err(answer)` when `wi` is grazing or not
+    /// finite, or when `lobes` asks for at most one lobe (that lobe at probability 1, from
+    /// `lobes_of`); `Ok((r, t))` when the caller chooses between both.
+    pub(super) fn delta_pair_head(
+        wi: Vec3,
+        lobes: Lobes,
+        reflect_transmit: impl FnOnce(f32) -> (Spec, Spec),
+        lobes_of: impl FnOnce(Spec, Spec) -> [Option<BsdfSample>; 2],
+    ) -> Result<(Spec, Spec), Option<BsdfSample>> {
+        if wi.z == 0.0 || !wi.is_finite() {
+            return Err(None);
+        }
+        let (r, t) = reflect_transmit(wi.z);
+        let [reflected, transmitted] = match (lobes.reflection(), lobes.transmission()) {
+            (true, true) => return Ok((r, t)),
+            (false, false) => return Err(None),
+            _ => lobes_of(r, t),
+        };
+        Err(if lobes.reflection() {
+            reflected
+        } else {
+            transmitted
+        })
+    }
+
     fn lobes_of(wi: Vec3, r: Spec, t: Spec) -> [Option<BsdfSample>; 2] {
         let delta = |wo, v, lobe| BsdfSample::delta(wo, v, 1.0, lobe);
         [
@@ -159,17 +185,12 @@ impl BsdfModel for BubbleBsdf {
         _u2: Vec2,
         lobes: Lobes,
     ) -> Option<BsdfSample> {
-        if wi.z == 0.0 || !wi.is_finite() {
-            return None;
-        }
-        let (r, t) = self.reflect_transmit(ctx, wi.z);
-        let [reflected, transmitted] = Self::lobes_of(wi, r, t);
-        match (lobes.reflection(), lobes.transmission()) {
-            (true, true) => {}
-            (true, false) => return reflected,
-            (false, true) => return transmitted,
-            (false, false) => return None,
-        }
+        let head = Self::delta_pair_head(wi, lobes, |cos| self.reflect_transmit(ctx, cos), |r, t| {
+            Self::lobes_of(wi, r, t)
+        });
+        let Ok((r, t)) = head else {
+            return head.err().flatten();
+        };
         let p_r = Self::reflect_probability(ctx, r, t, Self::MIN_LOBE_PROBABILITY);
         let s = if u1 < p_r {
             BsdfSample::delta(
@@ -194,11 +215,8 @@ impl BsdfModel for BubbleBsdf {
         _u1: f32,
         _u2: Vec2,
     ) -> [Option<BsdfSample>; 2] {
-        if wi.z == 0.0 || !wi.is_finite() {
-            return [None, None];
-        }
-        let (r, t) = self.reflect_transmit(ctx, wi.z);
-        Self::lobes_of(wi, r, t)
+        let rt = (wi.z != 0.0 && wi.is_finite()).then(|| self.reflect_transmit(ctx, wi.z));
+        rt.map_or([None, None], |(r, t)| Self::lobes_of(wi, r, t))
     }
 
     fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {

@@ -178,16 +178,16 @@ impl BsdfModel for CoatedDielectric {
         _u2: Vec2,
         lobes: Lobes,
     ) -> Option<BsdfSample> {
-        if wi.z == 0.0 || !wi.is_finite() {
-            return None;
-        }
-        let (r, t) = self.reflect_transmit(ctx, wi.z);
-        match (lobes.reflection(), lobes.transmission()) {
-            (true, true) => {}
-            (true, false) => return self.lobes_of(ctx, wi, r, t)[0],
-            (false, true) => return self.lobes_of(ctx, wi, r, t)[1],
-            (false, false) => return None,
-        }
+        let pair = BubbleBsdf::delta_pair_head(
+            wi,
+            lobes,
+            |cos| self.reflect_transmit(ctx, cos),
+            |r, t| self.lobes_of(ctx, wi, r, t),
+        );
+        let (r, t) = match pair {
+            Ok(both) => both,
+            Err(one) => return one,
+        };
         let p_r = BubbleBsdf::reflect_probability(ctx, r, t, 0.0);
         if u1 < p_r {
             return Some(BsdfSample::delta(
@@ -210,11 +210,8 @@ impl BsdfModel for CoatedDielectric {
         _u1: f32,
         _u2: Vec2,
     ) -> [Option<BsdfSample>; 2] {
-        if wi.z == 0.0 || !wi.is_finite() {
-            return [None, None];
-        }
-        let (r, t) = self.reflect_transmit(ctx, wi.z);
-        self.lobes_of(ctx, wi, r, t)
+        let rt = (wi.z != 0.0 && wi.is_finite()).then(|| self.reflect_transmit(ctx, wi.z));
+        rt.map_or([None, None], |(r, t)| self.lobes_of(ctx, wi, r, t))
     }
 
     fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {

@@ -381,7 +381,8 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         );
     }
     let camera = camera::PerspectiveCamera::new(&scene.camera, width, height)?;
-    let (accel, degenerate_triangles) = accel::Accel::build(scene)?;
+    let samples = width as u64 * height as u64 * (sample_range.1 - sample_range.0) as u64;
+    let (accel, degenerate_triangles) = accel::Accel::build(scene, samples)?;
     let primary_bins = primary::PrimaryBins::build(&accel, &camera, width, height);
     effects.decisions.push(effects::Decision {
         effect: effects::Effect::CameraRays,

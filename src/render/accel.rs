@@ -44,9 +44,8 @@ pub enum Prim {
 /// The acceleration structure and the geometry it needs to build interactions.
 pub struct Accel {
     bvh: Option<CwBvh>,
-    /// Triangles in BVH order (index = BVH primitive id).
-    tris: Vec<Triangle>,
-    /// The same triangles with edges and normal precomputed for the hot intersection loop
+    /// Triangles in BVH order (index = BVH primitive id), with edges and normal precomputed
+    /// for the hot intersection loop
     /// (obvhs `RtTriangle`: the same Möller–Trumbore arithmetic as `Triangle::intersect`, so
     /// hits are bit-identical, minus two subtractions and a cross product per test).
     rt_tris: Vec<RtTriangle>,
@@ -62,9 +61,19 @@ pub struct Accel {
 impl Accel {
     /// Builds the BVH. Degenerate, non-finite and repeated triangles are dropped (they cannot
     /// be hit, or add nothing to their twin); the count is returned so the caller can report it.
-    pub fn build(scene: &Scene) -> anyhow::Result<(Self, usize)> {
-        let mut tris = Vec::new();
-        let mut tri_ref = Vec::new();
+    /// `samples` (pixels × samples per pixel to render) picks the build's effort, see
+    /// [`build_params`].
+    pub fn build(scene: &Scene, samples: u64) -> anyhow::Result<(Self, usize)> {
+        // Exact capacities: for millions of triangles a doubling Vec's spare half was
+        // ~100 MB of the peak.
+        let n_tris: usize = (scene.shapes.iter())
+            .map(|s| match &s.geometry {
+                Geometry::Mesh(m) => m.indices.len(),
+                Geometry::Sphere { .. } => 0,
+            })
+            .sum();
+        let mut tris = Vec::with_capacity(n_tris);
+        let mut tri_ref = Vec::with_capacity(n_tris);
         let mut spheres = Vec::new();
         let mut meshes = Vec::with_capacity(scene.shapes.len());
         let mut dropped = 0usize;
@@ -136,24 +145,23 @@ impl Accel {
                 }
             }
         }
+        let mut rt_tris = Vec::new();
         let bvh = if tris.is_empty() {
             None
         } else {
             let mut core_time = std::time::Duration::default();
             let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
                 &tris,
-                // slow_build (pre-split, wider PLOC search, more reinsertion): ~+50 ms setup on
-                // the 36k-triangle teapot for ~20 % faster traversal (the largest render cost);
-                // the teapot images came out bit-identical to medium_build's.
-                obvhs::BvhBuildParams::slow_build(),
+                build_params(samples, tris.len()),
                 &mut core_time,
             );
             // Reorder once so leaf primitive ids index the triangle arrays directly.
-            tris = bvh
+            rt_tris = bvh
                 .primitive_indices
                 .iter()
-                .map(|&i| tris[i as usize])
+                .map(|&i| RtTriangle::from(&tris[i as usize]))
                 .collect();
+            drop(tris);
             tri_ref = bvh
                 .primitive_indices
                 .iter()
@@ -161,11 +169,9 @@ impl Accel {
                 .collect();
             Some(bvh)
         };
-        let rt_tris = tris.iter().map(RtTriangle::from).collect();
         Ok((
             Accel {
                 bvh,
-                tris,
                 rt_tris,
                 tri_ref,
                 spheres,
@@ -177,7 +183,7 @@ impl Accel {
     }
 
     pub fn triangle_count(&self) -> usize {
-        self.tris.len()
+        self.rt_tris.len()
     }
 
     /// Closest hit in (tmin, tmax).
@@ -297,9 +303,15 @@ impl Accel {
         best
     }
 
-    /// Triangles in BVH order: `Prim::Triangle(i)` is `triangles()[i]`.
-    pub(super) fn triangles(&self) -> &[Triangle] {
-        &self.tris
+    /// Vertices of triangle `i` (BVH order, `Prim::Triangle(i)`), from its mesh: the values
+    /// the BVH was built from (no second copy of every triangle is kept).
+    #[inline]
+    pub(super) fn triangle(&self, i: u32) -> [Vec3; 3] {
+        let (shape, local) = self.tri_ref[i as usize];
+        let mesh = self.meshes[shape as usize]
+            .as_ref()
+            .expect("triangle of a mesh shape");
+        mesh.indices[local as usize].map(|k| mesh.positions[k as usize])
     }
 
     /// Tests triangle `id` (BVH order) against every lane, keeping each lane's closest hit
@@ -339,9 +351,12 @@ impl Accel {
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> SurfaceInteraction {
         match hit.prim {
             Prim::Triangle(i) => {
-                let tri = &self.tris[i as usize];
                 let (shape, local) = self.tri_ref[i as usize];
-                let (v0, v1, v2) = (Vec3::from(tri.v0), Vec3::from(tri.v1), Vec3::from(tri.v2));
+                let mesh = self.meshes[shape as usize]
+                    .as_ref()
+                    .expect("triangle of a mesh shape");
+                let idx = mesh.indices[local as usize];
+                let [v0, v1, v2] = idx.map(|k| mesh.positions[k as usize]);
                 let e1 = v1 - v0;
                 let e2 = v2 - v0;
                 // Barycentrics of the hit point (Möller–Trumbore), robust to the ray's tmin.
@@ -355,10 +370,6 @@ impl Accel {
                 let b0 = 1.0 - b1 - b2;
                 let p = v0 * b0 + v1 * b1 + v2 * b2;
                 let ng = e1.cross(e2).normalize();
-                let mesh = self.meshes[shape as usize]
-                    .as_ref()
-                    .expect("triangle of a mesh shape");
-                let idx = mesh.indices[local as usize];
                 let mut ns = ng;
                 if !mesh.normals.is_empty() {
                     let n = mesh.normals[idx[0] as usize] * b0
@@ -459,6 +470,23 @@ impl RepeatFilter {
                 false
             }
         }
+    }
+}
+
+/// BVH build effort for `tris` triangles and `samples` camera samples. obvhs' slow_build
+/// (pre-split, wider PLOC search, more reinsertion) traces ~20 % faster than medium_build on
+/// the 36k-triangle teapot for ~50 ms more set-up, but its reinsertion pass grows faster
+/// than the triangle count: on a 2M-triangle sphere it took 4.3 s of CPU against 1.9 s for
+/// the whole render with fast_build (256², 4 spp). Hits and images do not depend on the
+/// BVH (closest hit, ties to the smaller triangle id), so this only trades time.
+fn build_params(samples: u64, tris: usize) -> obvhs::BvhBuildParams {
+    let per_tri = samples as f64 / tris.max(1) as f64;
+    if per_tri >= 16.0 {
+        obvhs::BvhBuildParams::slow_build()
+    } else if per_tri >= 2.0 {
+        obvhs::BvhBuildParams::medium_build()
+    } else {
+        obvhs::BvhBuildParams::fast_build()
     }
 }
 
@@ -1155,7 +1183,7 @@ mod tests {
             "sphere.xml",
         )
         .unwrap();
-        let (accel, _) = Accel::build(&scene).unwrap();
+        let (accel, _) = Accel::build(&scene, 1 << 20).unwrap();
         for (origin, dir, uv) in [
             (Vec3::new(5.0, 0.0, 1.0), -Vec3::X, Vec2::new(0.375, 0.5)),
             (Vec3::new(0.0, 5.0, 1.0), -Vec3::Y, Vec2::new(0.625, 0.5)),

@@ -22,6 +22,11 @@ pub struct Distribution1D {
     func: Vec<f32>,
     cdf: Vec<f32>,
     integral: f32,
+    /// Guide table (Chen & Asau 1974, "cutpoint" search): `guide[k]` is the first `j` with
+    /// `cdf[j] > k/n`, so a sample starts its search next to its answer instead of bisecting
+    /// the whole CDF. Same cell as a binary search, ~1 probe on average instead of log₂ n
+    /// dependent cache misses (the envmap's 257 × 513-entry CDFs exceed L2).
+    guide: Vec<u32>,
 }
 
 impl Distribution1D {
@@ -44,11 +49,33 @@ impl Distribution1D {
         } else {
             (0..=n).map(|i| i as f32 / n as f32).collect()
         };
+        let mut guide = vec![0u32; n];
+        for (k, g) in guide.iter_mut().enumerate().skip(1) {
+            let t = k as f32 / n as f32;
+            *g = cdf.partition_point(|&c| c <= t) as u32;
+        }
         Distribution1D {
             func,
             cdf,
             integral: integral as f32,
+            guide,
         }
+    }
+
+    /// `self.cdf.partition_point(|&c| c <= u)`, started from the guide table. The CDF is
+    /// non-decreasing, so walking from any start to the boundary finds the same index.
+    #[inline]
+    fn search(&self, u: f32) -> usize {
+        let n = self.guide.len();
+        let k = ((u * n as f32) as usize).min(n - 1);
+        let mut j = self.guide[k] as usize;
+        while j > 0 && self.cdf[j - 1] > u {
+            j -= 1;
+        }
+        while j < self.cdf.len() && self.cdf[j] <= u {
+            j += 1;
+        }
+        j
     }
 
     pub fn len(&self) -> usize {
@@ -63,7 +90,7 @@ impl Distribution1D {
     #[inline]
     pub fn sample(&self, u: f32) -> (f32, f32, usize) {
         let n = self.func.len();
-        let i = (self.cdf.partition_point(|&c| c <= u).max(1) - 1).min(n - 1);
+        let i = (self.search(u).max(1) - 1).min(n - 1);
         let width = self.cdf[i + 1] - self.cdf[i];
         let du = if width > 0.0 {
             ((u - self.cdf[i]) / width).clamp(0.0, 1.0)
@@ -1353,6 +1380,32 @@ mod tests {
             let fast = sigmoid_poly4(&poly, lambda).to_array();
             let scalar = lambda.to_array().map(|l| poly.eval(l));
             assert_eq!(fast.map(f32::to_bits), scalar.map(f32::to_bits), "{poly:?}");
+        }
+    }
+
+    #[test]
+    fn distribution_1d_guide_search_equals_bisection() {
+        // Smooth, peaked, zero runs, all-zero and one-cell functions; u on a fine grid plus
+        // the edges and cdf values themselves (ties decide which cell a sample lands in).
+        let mut funcs: Vec<Vec<f32>> = vec![
+            (0..513).map(|i| 1.0 + (i as f32 * 0.1).sin()).collect(),
+            (0..300).map(|i| if i == 77 { 1e6 } else { 1e-6 }).collect(),
+            (0..64)
+                .map(|i| if i % 7 < 4 { 0.0 } else { i as f32 })
+                .collect(),
+            vec![0.0; 10],
+            vec![2.5],
+        ];
+        funcs.push((0..1000).map(|i| ((i * 7919) % 101) as f32).collect());
+        for f in funcs {
+            let d = Distribution1D::new(&f);
+            let mut us: Vec<f32> = (0..=4096).map(|i| i as f32 / 4096.0).collect();
+            us.extend(d.cdf.iter().copied());
+            us.extend([1.0 - f32::EPSILON, -0.0, 1.5, -1.0, f32::NAN]);
+            for u in us {
+                let expected = d.cdf.partition_point(|&c| c <= u);
+                assert_eq!(d.search(u), expected, "len {} u {u}", f.len());
+            }
         }
     }
 

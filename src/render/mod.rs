@@ -381,7 +381,8 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         );
     }
     let camera = camera::Camera::new(&scene.camera, width, height)?;
-    let (accel, degenerate_triangles) = accel::Accel::build(scene)?;
+    let samples = width as u64 * height as u64 * (sample_range.1 - sample_range.0) as u64;
+    let (accel, degenerate_triangles) = accel::Accel::build(scene, samples)?;
     // Screen bins need camera rays from one pinhole (`lights` hook: not for lens cameras).
     let primary_bins = camera
         .pinhole()

@@ -70,19 +70,19 @@ impl PrimaryBins {
         width: u32,
         height: u32,
     ) -> Option<Self> {
-        let tris = accel.triangles();
+        let n_tris = accel.triangle_count();
         let (w, h) = (width as usize, height as usize);
-        if tris.is_empty() || w == 0 || h == 0 || w * h > MAX_PIXELS {
+        if n_tris == 0 || w == 0 || h == 0 || w * h > MAX_PIXELS {
             return None;
         }
         // Conservative margin in pixels: f32 ray directions and triangle tests are accurate
         // to ~1e-6 relative, i.e. far below 1e-3 px even at 8K.
         let margin = 0.05 + 1e-5 * w.max(h) as f64;
         let mut crossing = Vec::new();
-        let mut footprints = Vec::with_capacity(tris.len());
+        let mut footprints = Vec::with_capacity(n_tris);
         let mut bbox_pixels = 0usize;
-        for (id, tri) in tris.iter().enumerate() {
-            let q = [tri.v0, tri.v1, tri.v2].map(|v| camera.camera_local(v.into()));
+        for id in 0..n_tris {
+            let q = accel.triangle(id as u32).map(|v| camera.camera_local(v));
             let zmin = q[0].z.min(q[1].z).min(q[2].z);
             let zmax = q[0].z.max(q[1].z).max(q[2].z);
             if zmax.is_nan() || zmax < 0.0 {

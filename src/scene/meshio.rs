@@ -1,5 +1,5 @@
-//! Mesh files: Wavefront OBJ (via `tobj`) and Stanford PLY, ASCII or binary (via
-//! `ply-rs-bw`), plus a small binary-PLY writer for the project's own assets.
+//! Mesh files: Wavefront OBJ (via `tobj`) and Stanford PLY, ASCII or binary (binary meshes
+//! through [`super::ply_binary`], everything else via `ply-rs-bw`), plus a small binary-PLY writer for the project's own assets.
 //!
 //! Texture coordinates follow Mitsuba 3: OBJ `vt` v is flipped (v ↦ 1 − v, as Mitsuba's OBJ
 //! loader does), PLY `u v` (or `s t`, `texture_u texture_v`) are taken as stored.
@@ -173,6 +173,14 @@ fn check_ply_header(path: &Path, what: &str) -> Result<()> {
 /// `vertex_indices` or `vertex_index`, polygons fan-triangulated.
 pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
     check_exists(path, "PLY")?;
+    if let Some(mesh) = super::ply_binary::load_file(path, &format!("PLY {}", path.display()))? {
+        return Ok(mesh);
+    }
+    load_ply_general(path)
+}
+
+/// [`load_ply`] through `ply-rs-bw`: every PLY the direct binary reader does not handle.
+pub(super) fn load_ply_general(path: &Path) -> Result<TriangleMesh> {
     check_ply_header(path, &format!("PLY {}", path.display()))?;
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let mut reader = std::io::BufReader::new(file);

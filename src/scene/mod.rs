@@ -185,12 +185,50 @@ pub enum Geometry {
 }
 
 /// A world-space triangle mesh. `normals` and `uvs` are either empty or one per vertex.
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct TriangleMesh {
     pub positions: Vec<Vec3>,
     pub normals: Vec<Vec3>,
     pub uvs: Vec<Vec2>,
     pub indices: Vec<[u32; 3]>,
+}
+
+/// Sizes and a hash of every bit of the arrays, not the arrays: a render's provenance hashes
+/// the scene's `Debug` form, and a 2M-triangle mesh printed in full was ~200 MB of float
+/// formatting (~1 s). Any change to a coordinate, normal, uv or index changes the hash.
+impl std::fmt::Debug for TriangleMesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // FNV-1a over 32-bit words, one stream per array so a value cannot move between them
+        // unnoticed.
+        let words = |it: &mut dyn Iterator<Item = u32>| {
+            it.fold(0xcbf2_9ce4_8422_2325u64, |h, w| {
+                (h ^ w as u64).wrapping_mul(0x0000_0100_0000_01b3)
+            })
+        };
+        let hash = [
+            words(
+                &mut self
+                    .positions
+                    .iter()
+                    .flat_map(|p| p.to_array().map(f32::to_bits)),
+            ),
+            words(
+                &mut self
+                    .normals
+                    .iter()
+                    .flat_map(|n| n.to_array().map(f32::to_bits)),
+            ),
+            words(&mut self.uvs.iter().flat_map(|t| t.to_array().map(f32::to_bits))),
+            words(&mut self.indices.iter().flat_map(|t| *t)),
+        ];
+        f.debug_struct("TriangleMesh")
+            .field("vertices", &self.positions.len())
+            .field("normals", &self.normals.len())
+            .field("uvs", &self.uvs.len())
+            .field("triangles", &self.indices.len())
+            .field("content_hash", &hash.map(|h| format!("{h:016x}")))
+            .finish()
+    }
 }
 
 /// A spectral value as written in a scene file.
@@ -302,6 +340,7 @@ mod gltf_material;
 pub mod gltf_scene;
 pub mod meshio;
 pub mod mitsuba;
+mod ply_binary;
 pub mod serialized;
 pub mod shapes;
 pub mod sky;

@@ -39,8 +39,10 @@ fn layout(f: Format) -> (usize, usize) {
     }
 }
 
-/// The `KHR_texture_transform` of a textureInfo as Mitsuba's `to_uv` (the extension's
-/// `translation · rotation · scale`, GLSL column order), and its `texCoord` override.
+/// The `KHR_texture_transform` of a textureInfo as Mitsuba's `to_uv` — the extension's
+/// translation · rotation · scale, with the rotation u' = u cos r + v sin r,
+/// v' = −u sin r + v cos r as the glTF Sample Viewer and three.js apply it (counter-clockwise
+/// in the image, whose v runs down) — and its `texCoord` override.
 fn texture_transform(t: &Value, key: &str) -> Result<(Mat3, Option<u64>)> {
     let num = |v: Option<&Value>, d: f32| -> Result<f32> {
         match v {
@@ -64,7 +66,7 @@ fn texture_transform(t: &Value, key: &str) -> Result<(Mat3, Option<u64>)> {
     let r = num(t.get("rotation"), 0.0)?;
     let (s, c) = r.sin_cos();
     let translation = Mat3::from_cols_array(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, ox, oy, 1.0]);
-    let rotation = Mat3::from_cols_array(&[c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0]);
+    let rotation = Mat3::from_cols_array(&[c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]);
     let scale = Mat3::from_cols_array(&[sx, 0.0, 0.0, 0.0, sy, 0.0, 0.0, 0.0, 1.0]);
     Ok((
         translation * rotation * scale,
@@ -403,5 +405,29 @@ impl MaterialReader<'_> {
             }
         }
         Ok(e.iter().any(|&c| c > 0.0).then_some(SpectrumDesc::Rgb(e)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn texture_transform_is_translation_rotation_scale() {
+        let t = serde_json::json!({"offset": [0.5, 0.0], "rotation": std::f32::consts::FRAC_PI_2,
+                                   "scale": [2.0, 1.0], "texCoord": 1});
+        let (m, tc) = texture_transform(&t, "baseColorTexture").unwrap();
+        assert_eq!(tc, Some(1));
+        // (1, 0) → scale (2, 0) → rotate (0, −2) → offset (0.5, −2).
+        let p = m * glam::Vec3::new(1.0, 0.0, 1.0);
+        assert!((p - glam::Vec3::new(0.5, -2.0, 1.0)).length() < 1e-6, "{p}");
+        let bad = serde_json::json!({"scale": [1.0]});
+        let e = texture_transform(&bad, "normalTexture")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("normalTexture.KHR_texture_transform.scale"),
+            "{e}"
+        );
     }
 }

@@ -148,6 +148,70 @@ fn sub_fringe_films_with_a_lamp_mismatch_get_a_sigma_that_covers_it() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// What measured soap-film spectra do (fibre spectrometer): thick films lose fringe
+/// contrast towards the blue (their thickness varies across the light spot), a lamp ×
+/// response curve, a dark offset and stray light (given as the void spectrum), noise. A
+/// multiplier shared with the thick films absorbs their contrast loss as a red-rising
+/// lamp and biased films of less than half a fringe thin (15–25 nm at 80–125 nm on
+/// measured data): they must land within max(1 %, 10 nm) with σ covering the error.
+#[test]
+fn thin_films_are_not_biased_by_the_thick_films_contrast_loss() {
+    let dir = std::env::temp_dir().join(format!("thinfilm-soap-contrast-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // Lamp × response over the reference's: a colour-temperature drift, a tilt.
+    let lamp = |l: f64| 0.7 + 0.6 * (l - 400.0) / 400.0;
+    let void = |l: f64| 0.04 + 0.03 * (l - 400.0) / 400.0;
+    let dark = dir.join("void.xy");
+    write_spectrum(&dark, void);
+    // Thickness spread across the spot: R averaged over d ± δ (Gauss–Hermite-like nodes).
+    let smeared = |d: f64, delta: f64, l: f64| {
+        let nodes = [
+            (-2.0, 0.054),
+            (-1.0, 0.242),
+            (0.0, 0.4),
+            (1.0, 0.242),
+            (2.0, 0.054),
+        ];
+        let w: f64 = nodes.iter().map(|n| n.1).sum();
+        nodes
+            .iter()
+            .map(|(x, wt)| wt * soap_reflectance(1.33, d + x * delta, l))
+            .sum::<f64>()
+            / w
+    };
+    let mut seed = 23u64;
+    let (mut files, mut labels) = (Vec::new(), Vec::new());
+    for i in 0..30 {
+        let thin = i >= 14;
+        let (d, delta) = if thin {
+            (80.0 + 3.0 * (i - 14) as f64, 2.0)
+        } else {
+            (250.0 + 40.0 * i as f64, 25.0)
+        };
+        let d = d + 2.0 * jitter(&mut seed);
+        let gain = 8.0 + 2.0 * jitter(&mut seed);
+        let noise: Vec<f64> = (0..801).map(|_| 0.01 * jitter(&mut seed)).collect();
+        let p = dir.join(format!("film{i:02}.xy"));
+        write_spectrum(&p, |l| {
+            let k = ((l - 400.0) / 0.5).round() as usize;
+            gain * lamp(l) * smeared(d, delta, l) + void(l) + noise[k]
+        });
+        files.push(p);
+        labels.push(d);
+    }
+    let rows = fit(&files, &dark, &dir.join("fit"), "1.33");
+    let mut hits = 0;
+    for ((f, d, s), label) in rows.iter().zip(&labels) {
+        hits += within(*d, *label) as usize;
+        assert!(
+            (d - label).abs() <= 5.0 * s.max(0.5),
+            "{f}: d {d:.1} nm ± {s:.2} vs {label:.1} nm"
+        );
+    }
+    assert!(hits >= 26, "{hits} of 30 within max(1 %, 10 nm)");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn measured_soap_film_spectra_when_available() {
     let Some(base) = std::env::var_os("THINFILM_SOAP_SPECTRA").map(PathBuf::from) else {
@@ -156,16 +220,24 @@ fn measured_soap_film_spectra_when_available() {
     };
     let mut files = Vec::new();
     let mut labels = std::collections::HashMap::new();
+    // `known_value_large_tol.yaml`: labels its authors check at 25 % only (the thinnest).
     for k in 0..10 {
-        let yaml = base.join(format!("order{k}/known_value.yaml"));
-        let Ok(text) = std::fs::read_to_string(&yaml) else {
-            continue;
-        };
-        for line in text.lines().filter(|l| !l.trim_start().starts_with('#')) {
-            if let Some((f, v)) = line.trim().split_once(".xy:") {
-                let path = base.join(format!("order{k}/{f}.xy"));
-                labels.insert(path.display().to_string(), v.trim().parse::<f64>().unwrap());
-                files.push(path);
+        for name in ["known_value.yaml", "known_value_large_tol.yaml"] {
+            let yaml = base.join(format!("order{k}/{name}"));
+            let Ok(text) = std::fs::read_to_string(&yaml) else {
+                continue;
+            };
+            for line in text.lines().filter(|l| !l.trim_start().starts_with('#')) {
+                if let Some((f, v)) = line.trim().split_once(".xy:") {
+                    let path = base.join(format!("order{k}/{f}.xy"));
+                    let key = path.display().to_string();
+                    if labels
+                        .insert(key, v.trim().parse::<f64>().unwrap())
+                        .is_none()
+                    {
+                        files.push(path);
+                    }
+                }
             }
         }
     }
@@ -180,7 +252,15 @@ fn measured_soap_film_spectra_when_available() {
         .iter()
         .filter(|(f, d, _)| within(*d, labels[f]))
         .count();
-    eprintln!("{hits} of {} within max(1 %, 10 nm)", rows.len());
+    let covered = rows
+        .iter()
+        .filter(|(f, d, s)| (d - labels[f]).abs() <= 5.0 * s)
+        .count();
+    eprintln!(
+        "{hits} of {} within max(1 %, 10 nm); |error| ≤ 5σ for {covered}",
+        rows.len()
+    );
     assert!(hits as f64 >= 0.85 * rows.len() as f64);
+    assert!(covered as f64 >= 0.95 * rows.len() as f64);
     std::fs::remove_dir_all(&out).ok();
 }

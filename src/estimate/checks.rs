@@ -18,7 +18,7 @@
 use super::data::{spread, PixelData};
 use super::film::FilmModelKind;
 use super::joint::{Candidate, Joint, JointData, State, Structure};
-use super::nuisance::{Nuisance, NuisanceSpec, Whitening};
+use super::nuisance::{NuisanceSpec, Whitening};
 use super::solver::{FixedModel, ThicknessSolver};
 use super::stage::{Context, FilmSolution, ThicknessMap};
 use crate::capture::{Polarization, Radiometry};
@@ -107,10 +107,10 @@ pub fn run(cx: &Context, sol: &FilmSolution, map: &mut ThicknessMap) -> Checked 
         .count()
         >= 2;
     let blank_thin = obs.radiometry != Radiometry::Absolute && obs.angles == 1 && !anchored;
-    let (nuisance_shift, refitted) = if blank_thin {
-        (vec![0f32; obs.pixels()], 0)
+    let nuisance_shift = if blank_thin {
+        vec![0f32; obs.pixels()]
     } else {
-        sub_fringe_nuisance(cx, sol, map)
+        super::subfringe::refit(cx, sol, map)
     };
     let curv = map.curvature.as_ref().expect("filled above");
     let gains = if sol.nuisance.spec.free_gain {
@@ -173,21 +173,6 @@ pub fn run(cx: &Context, sol: &FilmSolution, map: &mut ThicknessMap) -> Checked 
             obs.geom.lambda_max()
         ));
     }
-    if refitted > 0 {
-        let mut shifts: Vec<f64> = nuisance_shift
-            .iter()
-            .filter(|s| **s > 0.0)
-            .map(|&s| s as f64)
-            .collect();
-        cx.warn(format!(
-            "{refitted} spectra have less than one interference fringe: their thickness \
-             depends on the shared spectral multiplier, background and substrate terms fitted \
-             mostly from thicker films ({}); each was also fitted with only its own gain, the \
-             better fit kept, and σ covers both (median shift {:.1} nm)",
-            sol.nuisance.spec.describe(),
-            super::data::median(&mut shifts).unwrap_or(0.0)
-        ));
-    }
     if out.ambiguous > 0 {
         cx.warn(format!(
             "{} pixels have a second thickness (another fringe order) that fits within 3σ: \
@@ -199,76 +184,6 @@ pub fn run(cx: &Context, sol: &FilmSolution, map: &mut ThicknessMap) -> Checked 
         diagnose(cx, sol, out.chi2_red);
     }
     out
-}
-
-/// Pixels with less than one fringe under a relative scale: their thickness is not
-/// identifiable independent of the shared nuisance (spectral multiplier, background,
-/// substrate shift), which the thicker pixels fixed — a shape those pixels need but these
-/// spectra do not share (a lamp that drifted between spectra, a re-taken reference, a
-/// misfit the multiplier absorbs on thick films) moves it by many times its noise σ. Each
-/// such pixel is refitted with the nuisance held to what one spectrum identifies by itself
-/// (its gain: multiplier 1, no background, substrate as given); the fit with the lower χ²
-/// is kept (both have the same free parameters per pixel) and the distance between the two
-/// thicknesses is returned per pixel, for σ. Also returns how many pixels were refitted.
-fn sub_fringe_nuisance(
-    cx: &Context,
-    sol: &FilmSolution,
-    map: &mut ThicknessMap,
-) -> (Vec<f32>, usize) {
-    let obs = &cx.obs;
-    let mut shift = vec![0f32; obs.pixels()];
-    let shared_terms = sol.nuisance.spec.per_angle() > 0 || sol.substrate_shift != 0.0;
-    if obs.radiometry == Radiometry::Absolute || !shared_terms {
-        return (shift, 0);
-    }
-    let thin: Vec<usize> = (0..obs.pixels())
-        .filter(|&p| map.d[p].is_finite() && fringes(cx, sol, map.d[p] as f64) < 1.0)
-        .collect();
-    if thin.is_empty() {
-        return (shift, 0);
-    }
-    let own = Nuisance::new(
-        NuisanceSpec::smallest(obs.radiometry),
-        obs.angles,
-        &obs.geom.wavelengths_nm,
-    );
-    let fixed = FixedModel {
-        geom: &obs.geom,
-        film: &sol.film,
-        substrate_shift: 0.0,
-        nuisance: &own,
-        sigma: &sol.sigma,
-    };
-    let solver = ThicknessSolver::new(
-        &fixed,
-        cx.opts.min_thickness_nm,
-        cx.opts.max_thickness_nm,
-        thin.len() > 64,
-    );
-    let white = Whitening::new(&own, &sol.sigma, obs.angles, obs.stride);
-    let refits: Vec<(usize, (f64, f64, f64))> = thin
-        .par_iter()
-        .map_init(
-            || PixelData::new(obs),
-            |px, &p| {
-                px.load(obs, &white, &sol.film, p);
-                (p, solver.refine(px, map.d[p] as f64, 12))
-            },
-        )
-        .collect();
-    let curv = map.curvature.get_or_insert_with(|| vec![0.0; obs.pixels()]);
-    for (p, (d, chi2, hess)) in refits {
-        if !d.is_finite() {
-            continue;
-        }
-        shift[p] = (d - map.d[p] as f64).abs() as f32;
-        if chi2 < map.chi2[p] as f64 {
-            map.d[p] = d as f32;
-            map.chi2[p] = chi2 as f32;
-            curv[p] = hess as f32;
-        }
-    }
-    (shift, thin.len())
 }
 
 /// Tries the likely causes of a bad fit on a subset of pixels and reports the best.

@@ -35,6 +35,7 @@ pub mod peaks;
 pub mod report;
 pub mod solver;
 pub mod stage;
+mod subfringe;
 pub mod synth;
 pub mod table;
 mod thickness;

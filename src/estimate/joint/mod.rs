@@ -189,7 +189,7 @@ impl<'a, 'c> Joint<'a, 'c> {
 }
 
 /// Bayesian information criterion with N_eff = N / inflation.
-fn criterion(fit: &JointFit, inflation: f64) -> f64 {
+pub(crate) fn criterion(fit: &JointFit, inflation: f64) -> f64 {
     let n = fit.samples as f64;
     let n_eff = (n / inflation).max(2.0);
     n_eff * (fit.chi2 / n).max(1e-300).ln() + fit.globals as f64 * n_eff.ln()

@@ -32,8 +32,6 @@
 
 use std::sync::OnceLock;
 
-use super::sampled::{SampledWavelengths, Spec};
-
 /// Σ ȳ·D65 / Σ ȳ over the 1 nm tables: D65 divided by this has luminance 1 under the film's
 /// 1/[`super::CIE_Y_INTEGRAL`] normalisation (see the module docs).
 pub const RGB_ILLUMINANT_D65_NORM: f64 = super::tables::D65_Y_SUM_1NM / super::CIE_Y_INTEGRAL;
@@ -67,11 +65,6 @@ impl RgbSigmoidPolynomial {
             return if x > 0.0 { 1.0 } else { 0.0 };
         }
         0.5 + x / (2.0 * (1.0 + x * x).sqrt())
-    }
-
-    /// Evaluate at the four path wavelengths.
-    pub fn sample(&self, wavelengths: &SampledWavelengths) -> Spec {
-        Spec::from_array(wavelengths.lambda.map(|l| self.eval(l)))
     }
 }
 
@@ -254,10 +247,5 @@ impl<const ILLUMINANT: bool> RgbScaledSpectrum<ILLUMINANT> {
         } else {
             v
         }
-    }
-
-    /// Evaluate at the four path wavelengths.
-    pub fn sample(&self, wavelengths: &SampledWavelengths) -> Spec {
-        Spec::from_array(wavelengths.lambda.map(|l| self.eval(l)))
     }
 }

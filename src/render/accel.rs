@@ -477,8 +477,8 @@ impl RepeatFilter {
 /// (pre-split, wider PLOC search, more reinsertion) traces ~20 % faster than medium_build on
 /// the 36k-triangle teapot for ~50 ms more set-up, but its reinsertion pass grows faster
 /// than the triangle count: on a 2M-triangle sphere it took 4.3 s of CPU against 1.9 s for
-/// the whole render with fast_build (256², 4 spp). Hits and images do not depend on the
-/// BVH (closest hit, ties to the smaller triangle id), so this only trades time.
+/// the whole render with fast_build (256², 4 spp). A closest hit does not depend on the BVH
+/// except at exact ties (smaller id in BVH order), so this trades time, not images.
 fn build_params(samples: u64, tris: usize) -> obvhs::BvhBuildParams {
     let per_tri = samples as f64 / tris.max(1) as f64;
     if per_tri >= 16.0 {

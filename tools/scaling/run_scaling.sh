@@ -10,7 +10,7 @@ mkdir -p "$OUT"
 
 # One render: prints "wall_s cpu_s setup_s render_s peak_MB".
 run() {
-    /usr/bin/time -f "TIME %e %U %S %M" "$BIN" render "$@" -o "$OUT/out.exr" 2>"$OUT/log" >/dev/null
+    /usr/bin/time -f "TIME %e %U %S %M" "$BIN" render "$@" -o "$OUT/out.exr" >"$OUT/log" 2>&1
     awk '/^rendered/ { for (i = 1; i <= NF; i++) { if ($i == "in") r = $(i + 1); if ($i ~ /^\(\+/) { s = substr($i, 3) } } }
          /^TIME/ { printf "%.2f %.2f %s %s %.0f\n", $2, $3 + $4, s, r, $5 / 1024 }' "$OUT/log"
 }

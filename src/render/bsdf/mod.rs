@@ -350,6 +350,10 @@ bsdf_models! {
     TwoSided(twosided::TwoSided),
     Polarizer(polarizer::PolarizerBsdf),
     Blend(blend::BlendBsdf),
+    RoughDielectric(roughdielectric::RoughDielectric),
+    ThinDielectric(thindielectric::ThinDielectric),
+    NormalMap(normal_map::NormalMap),
+    Mask(mask::Mask),
 }
 
 impl Bsdf {

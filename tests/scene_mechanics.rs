@@ -469,41 +469,60 @@ fn accepted_and_refused_parameters() {
 }
 
 #[test]
-fn models_the_renderer_lacks_are_refused_not_substituted() {
-    // Mitsuba's rough BSDFs default to Beckmann; the renderer has GGX only. Rendering one
-    // for the other would be a different highlight, so the scene is refused — with the
-    // plugin, the parameter and the way out in the message.
-    // (`roughdielectric` has no model at all here: refused as an unsupported plugin.)
-    let e = err(
-        r#"<shape type="sphere"><bsdf type="roughdielectric"><string name="distribution" value="ggx"/></bsdf></shape>"#,
-    );
-    assert!(
-        e.contains("unsupported bsdf plugin \"roughdielectric\""),
-        "{e}"
-    );
-    for plugin in ["roughconductor", "roughplastic"] {
-        for dist in ["", r#"<string name="distribution" value="beckmann"/>"#] {
-            let e = err(&format!(
+fn rough_models_and_what_is_still_refused() {
+    // A model the renderer does not have is refused where it is read, naming the plugin.
+    let e = err(r#"<shape type="sphere"><bsdf type="pplastic"/></shape>"#);
+    assert!(e.contains("unsupported bsdf plugin \"pplastic\""), "{e}");
+    // Mitsuba's rough BSDFs default to Beckmann, and Beckmann is what they get.
+    use thinfilm::render::bsdf::microfacet::Distribution;
+    for (dist, kind) in [
+        ("", Distribution::Beckmann),
+        (
+            r#"<string name="distribution" value="beckmann"/>"#,
+            Distribution::Beckmann,
+        ),
+        (
+            r#"<string name="distribution" value="ggx"/>"#,
+            Distribution::Ggx,
+        ),
+    ] {
+        for plugin in ["roughconductor", "roughplastic", "roughdielectric"] {
+            let s = load(&format!(
                 r#"<shape type="sphere"><bsdf type="{plugin}">{dist}<float name="alpha" value="0.2"/></bsdf></shape>"#
-            ));
-            assert!(
-                e.contains(&format!("bsdf \"{plugin}\"")) && e.contains("Beckmann"),
-                "{plugin} {dist}: {e}"
+            ))
+            .unwrap();
+            let mf = match &s.bsdfs[s.shapes[0].bsdf] {
+                Bsdf::Conductor(c) => c.ggx.unwrap(),
+                Bsdf::Plastic(p) => p.ggx.unwrap(),
+                Bsdf::RoughDielectric(d) => d.mf,
+                b => panic!("{plugin}: {b:?}"),
+            };
+            assert_eq!(
+                (mf.kind, mf.alpha_u, mf.alpha_v),
+                (kind, 0.2, 0.2),
+                "{plugin} {dist}"
             );
-            assert!(e.contains("value=\"ggx\""), "{e}");
         }
-        let ggx = format!(
-            r#"<shape type="sphere"><bsdf type="{plugin}"><string name="distribution" value="ggx"/></bsdf></shape>"#
-        );
-        load(&ggx).unwrap();
     }
-    // Anisotropic roughness: Mitsuba orients α_u along dp/du, the renderer's frame does not.
     let e = err(
-        r#"<shape type="sphere"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>
-             <float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.3"/></bsdf></shape>"#,
+        r#"<shape type="sphere"><bsdf type="roughconductor"><string name="distribution" value="phong"/></bsdf></shape>"#,
+    );
+    assert!(e.contains("unknown distribution \"phong\""), "{e}");
+    // Anisotropic roughness: α_u along dp/du as in Mitsuba; roughplastic refuses it, as
+    // Mitsuba's does.
+    let s = load(
+        r#"<shape type="sphere"><bsdf type="roughconductor"><float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.3"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    let Bsdf::Conductor(c) = &s.bsdfs[s.shapes[0].bsdf] else {
+        panic!()
+    };
+    assert_eq!(c.ggx.map(|g| (g.alpha_u, g.alpha_v)), Some((0.05, 0.3)));
+    let e = err(
+        r#"<shape type="sphere"><bsdf type="roughplastic"><float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.3"/></bsdf></shape>"#,
     );
     assert!(
-        e.contains("roughconductor") && e.contains("anisotropic"),
+        e.contains("roughplastic") && e.contains("anisotropic"),
         "{e}"
     );
     // A scaled specular lobe and RGB-valued indices name the plugin and the parameter.

@@ -444,12 +444,20 @@ fn bsdfs() {
         }
         b => panic!("{b:?}"),
     }
-    // A rough dielectric is not a model of this renderer: refused where it is read.
+    // A rough dielectric: Mitsuba's defaults (bk7 in air, Beckmann, α = 0.1).
+    match bsdf(r#"<bsdf type="roughdielectric"/>"#) {
+        Bsdf::RoughDielectric(d) => {
+            assert!((d.eta - 1.5046 / 1.000277).abs() < 1e-6, "{}", d.eta);
+            assert_eq!((d.mf.alpha_u, d.mf.alpha_v), (0.1, 0.1));
+        }
+        b => panic!("{b:?}"),
+    }
+    // A dispersive index is refused for it (Mitsuba's is a constant), naming the plugin.
     let e = err(
-        r#"<shape type="cube"><bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf></shape>"#,
+        r#"<shape type="cube"><bsdf type="roughdielectric"><string name="int_ior" value="cauchy:1.5,4200"/></bsdf></shape>"#,
     );
     assert!(
-        e.contains("roughdielectric") && e.contains("supported:") && e.contains("test.xml:2:"),
+        e.contains("roughdielectric") && e.contains("dispersive") && e.contains("test.xml:2:"),
         "{e}"
     );
     let (eta, au, av) = conductor(bsdf(

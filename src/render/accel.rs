@@ -418,8 +418,9 @@ impl Accel {
                 if s.flip_normals {
                     n = -n;
                 }
-                // Mitsuba's sphere: ∂p/∂u ∝ (−y, x, 0) about the centre (zero at the poles).
-                let dpdu = Vec3::new(-(p.y - s.center.y), p.x - s.center.x, 0.0);
+                // Mitsuba's sphere: ∂p/∂u ∝ (−y, x, 0) in its local frame (zero at the
+                // poles), turned with the sphere (anisotropic lobes follow it).
+                let dpdu = s.to_local.transpose() * Vec3::new(-local.y, local.x, 0.0) * s.radius;
                 SurfaceInteraction {
                     p,
                     t: hit.t,

@@ -1,11 +1,16 @@
-//! Smooth and rough (GGX) conductors (Mitsuba `conductor`, `roughconductor`), one-sided.
+//! Smooth and rough (GGX or Beckmann, isotropic or anisotropic) conductors (Mitsuba
+//! `conductor`, `roughconductor`), one-sided. Anisotropic roughness is oriented as Mitsuba
+//! orients it: α_u along the shading tangent dp/du ([`super::normal_map::dpdu_frame`]).
 //! The complex index comes from [`crate::optics::Ior`] (constant, a named metal, or `eta`/`k`
 //! spectra). Polarised: Mitsuba's `specular_reflection` Mueller matrix of the complex
 //! Fresnel amplitudes at the (micro)facet.
 
-use super::microfacet::{opaque_reflector_methods, reflection_lobe, Ggx, OpaqueReflector};
+use super::microfacet::{
+    opaque_reflector_methods, reflection_lobe, Distribution, Microfacet, OpaqueReflector,
+};
 use super::{fresnel::fresnel_conductor, BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
 use crate::optics::Ior;
+use crate::render::geometry::{Frame, SurfaceInteraction};
 use crate::render::polarization::{specular_reflection_conductor, Mueller};
 use crate::render::texture::Spec;
 use crate::scene::mitsuba::{PluginParams, RealSpectrum};
@@ -15,7 +20,7 @@ use num_complex::Complex32;
 pub struct Conductor {
     pub eta: Ior,
     /// None = smooth (a delta lobe).
-    pub ggx: Option<Ggx>,
+    pub ggx: Option<Microfacet>,
 }
 
 /// Roughness must be finite and ≥ 0 (0: smooth).
@@ -30,17 +35,27 @@ pub(super) fn check_alpha(alpha: f32, what: &str) -> anyhow::Result<()> {
 impl Conductor {
     /// A conductor of complex index `eta`; GGX roughness (α_u, α_v), (0, 0) = smooth.
     pub fn new(eta: Ior, alpha_u: f32, alpha_v: f32) -> anyhow::Result<Self> {
+        Self::with_distribution(eta, Distribution::Ggx, alpha_u, alpha_v)
+    }
+
+    /// [`Self::new`] with the microfacet distribution `kind`.
+    pub fn with_distribution(
+        eta: Ior,
+        kind: Distribution,
+        alpha_u: f32,
+        alpha_v: f32,
+    ) -> anyhow::Result<Self> {
         check_alpha(alpha_u, "conductor alpha_u")?;
         check_alpha(alpha_v, "conductor alpha_v")?;
         Ok(Conductor {
             eta,
-            ggx: (alpha_u > 0.0 || alpha_v > 0.0).then(|| Ggx::new(alpha_u, alpha_v)),
+            ggx: (alpha_u > 0.0 || alpha_v > 0.0).then(|| Microfacet::of(kind, alpha_u, alpha_v)),
         })
     }
 }
 
 impl OpaqueReflector for Conductor {
-    fn ggx(&self) -> Option<Ggx> {
+    fn ggx(&self) -> Option<Microfacet> {
         self.ggx
     }
 
@@ -68,10 +83,10 @@ impl BsdfPlugin for Conductor {
     /// perfect mirror) or `eta`/`k` (numbers or spectra; Mitsuba's defaults 0 and 1), and for
     /// `roughconductor` the microfacet roughness.
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
-        let alpha = if p.plugin() == "roughconductor" {
+        let (kind, au, av) = if p.plugin() == "roughconductor" {
             p.microfacet()?
         } else {
-            0.0
+            (Distribution::Ggx, 0.0, 0.0)
         };
         let material = p.string("material")?;
         let plugin = p.plugin().to_string();
@@ -93,7 +108,7 @@ impl BsdfPlugin for Conductor {
                 p.complex_index(&n, &k, "eta/k")
             }
         };
-        Conductor::new(ior, alpha, alpha).map_err(|e| p.error(e))
+        Conductor::with_distribution(ior, kind, au, av).map_err(|e| p.error(e))
     }
 }
 
@@ -105,10 +120,16 @@ impl BsdfModel for Conductor {
     fn describe(&self) -> String {
         match self.ggx {
             None => format!("conductor {}", self.eta),
-            Some(g) => format!(
-                "roughconductor {} α=({}, {})",
-                self.eta, g.alpha_u, g.alpha_v
-            ),
+            Some(g) => format!("roughconductor {} {}", self.eta, g.describe()),
+        }
+    }
+
+    /// Mitsuba's frame (s along dp/du) when the roughness is anisotropic; an isotropic lobe
+    /// does not depend on the tangent.
+    fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
+        match self.ggx {
+            Some(g) if g.is_anisotropic() => super::normal_map::dpdu_frame(si),
+            _ => si.shading,
         }
     }
 

@@ -355,6 +355,10 @@ bsdf_models! {
     Polarizer(polarizer::PolarizerBsdf),
     Blend(blend::BlendBsdf),
     GltfPbr(gltf_pbr::GltfPbr),
+    RoughDielectric(roughdielectric::RoughDielectric),
+    ThinDielectric(thindielectric::ThinDielectric),
+    NormalMap(normal_map::NormalMap),
+    Mask(mask::Mask),
 }
 
 impl Bsdf {

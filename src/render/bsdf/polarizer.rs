@@ -101,18 +101,7 @@ impl BsdfModel for PolarizerBsdf {
 
     /// The frame aligned with dp/du (Mitsuba's `sh_frame`), where the polariser's axes are.
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
-        let n = si.shading.n;
-        let s = si.dpdu - n * n.dot(si.dpdu);
-        if s.length_squared() > 1e-20 && s.is_finite() {
-            let s = s.normalize();
-            Frame {
-                s,
-                t: n.cross(s),
-                n,
-            }
-        } else {
-            si.shading
-        }
+        super::normal_map::dpdu_frame(si)
     }
 }
 

@@ -8,6 +8,7 @@
 
 use super::{mitsuba_ior, Ctx, Prop, Props, Val, MITSUBA_IOR_TABLE};
 use crate::optics::{dispersion, Complex64, Ior};
+use crate::render::bsdf::microfacet::Distribution;
 use crate::render::bsdf::Bsdf;
 use crate::scene::{BitmapTexture, SpectrumDesc, TextureDesc};
 use anyhow::Result;
@@ -284,31 +285,22 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         Ok(ior)
     }
 
-    /// `alpha` or `alpha_u`/`alpha_v` (default 0.1) and `distribution`, as one isotropic α.
-    /// Only GGX is implemented: Beckmann — also Mitsuba's default when `distribution` is
-    /// omitted — is refused rather than rendered as GGX (the highlights differ in shape and
-    /// tails). Anisotropic roughness is refused too: Mitsuba stretches α_u along its shading
-    /// tangent dp/du, and the renderer's BSDF frame is built from the normal alone.
-    pub fn microfacet(&mut self) -> Result<f32> {
+    /// `distribution` (Mitsuba's default `beckmann`, or `ggx`) and `alpha` or
+    /// `alpha_u`/`alpha_v` (default 0.1) of a rough plugin. α_u applies along the shading
+    /// tangent dp/du, as in Mitsuba ([`crate::render::bsdf::normal_map::dpdu_frame`]).
+    /// `sample_visible` changes only the noise (the renderer always samples visible normals).
+    pub fn microfacet(&mut self) -> Result<(Distribution, f32, f32)> {
         let dist = self.string("distribution")?;
-        match dist.as_deref() {
-            Some("ggx") => {}
-            Some("beckmann") | None => {
-                return Err(self.error(format!(
-                    "{} \"{}\": the Beckmann microfacet distribution ({}) is not supported; only GGX is implemented — add <string name=\"distribution\" value=\"ggx\"/> to render it with GGX, knowing the highlight will differ from Mitsuba's",
-                    self.props.tag,
-                    self.props.plugin,
-                    if dist.is_some() {
-                        "'distribution' = \"beckmann\""
-                    } else {
-                        "Mitsuba's default when 'distribution' is omitted"
-                    }
-                )))
-            }
+        let kind = match dist.as_deref() {
+            Some("ggx") => Distribution::Ggx,
+            Some("beckmann") | None => Distribution::Beckmann,
             Some(other) => {
-                return Err(self.ctx.err(self.props.node, format!("unknown distribution \"{other}\" (ggx, beckmann)")))
+                return Err(self.ctx.err(
+                    self.props.node,
+                    format!("unknown distribution \"{other}\" (ggx, beckmann)"),
+                ))
             }
-        }
+        };
         self.accept_bool("sample_visible", |_| true)?;
         let alpha = self.float_opt("alpha")?;
         let au = self.float_opt("alpha_u")?;
@@ -327,16 +319,7 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         if !(u >= 0.0 && v >= 0.0) {
             return Err(self.ctx.err(self.props.node, "roughness must be ≥ 0"));
         }
-        if u != v {
-            // Mitsuba stretches α_u along its shading tangent s = dp/du made ⟂ n (the
-            // texture's u direction); the renderer's BSDF frame is built from the normal
-            // alone, so the highlight would be rotated: refused, not substituted.
-            return Err(self.error(format!(
-                "{} \"{}\": anisotropic roughness (alpha_u = {u} ≠ alpha_v = {v}) is not supported (the renderer does not orient α_u along dp/du as Mitsuba does); give one 'alpha'",
-                self.props.tag, self.props.plugin
-            )));
-        }
-        Ok(u as f32)
+        Ok((kind, u as f32, v as f32))
     }
 
     /// A conductor `material`: a metal of the dispersion library, or Mitsuba's `none`.

@@ -150,11 +150,11 @@ impl Accel {
             None
         } else {
             let mut core_time = std::time::Duration::default();
-            let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-                &tris,
-                build_params(samples, tris.len()),
-                &mut core_time,
-            );
+            let params = build_params(samples, tris.len());
+            let bvh = match tie_broken_boxes(&tris) {
+                Some(boxes) => obvhs::cwbvh::builder::build_cwbvh(&boxes, params, &mut core_time),
+                None => obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut core_time),
+            };
             // Reorder once so leaf primitive ids index the triangle arrays directly.
             rt_tris = bvh
                 .primitive_indices
@@ -472,6 +472,45 @@ impl RepeatFilter {
             }
         }
     }
+}
+
+/// Build boxes for a mesh in which many distinct triangles share one bounding box (a hostile
+/// input: e.g. triangles spanning one box's diagonal). obvhs' PLOC merges only mutual nearest
+/// neighbours; equal boxes tie on every merge cost, and a run of ties merges one pair per pass,
+/// so such a mesh builds in O(n²) (60 000 triangles with one box: 33 s of CPU). Widening each box
+/// by a tiny amount that differs per triangle breaks the ties. The boxes stay conservative, so the
+/// hits do not change (closest hit, ties to the smaller triangle id). None — build from the
+/// triangles as usual — unless at least 1/64 of a strided sample of boxes repeats another.
+fn tie_broken_boxes(tris: &[Triangle]) -> Option<Vec<obvhs::aabb::Aabb>> {
+    const SAMPLE: usize = 8192;
+    let key = |b: &obvhs::aabb::Aabb| {
+        let (lo, hi) = (b.min.to_array(), b.max.to_array());
+        [lo, hi].map(|v| v.map(f32::to_bits))
+    };
+    let stride = tris.len().div_ceil(SAMPLE).max(1);
+    let mut seen = std::collections::HashSet::new();
+    let (mut sampled, mut repeats) = (0usize, 0usize);
+    for t in tris.iter().step_by(stride) {
+        sampled += 1;
+        repeats += usize::from(!seen.insert(key(&t.aabb())));
+    }
+    if repeats * 64 < sampled {
+        return None;
+    }
+    Some(
+        (tris.iter().enumerate())
+            .map(|(i, t)| {
+                let b = t.aabb();
+                // A per-triangle fraction in [0, 1) from the index (Knuth's multiplicative hash).
+                let u = (i as u32).wrapping_mul(2_654_435_761) as f32 / 4_294_967_296.0;
+                let pad = (b.max - b.min).max_element().max(1e-6) * 1e-5 * (1.0 + u);
+                obvhs::aabb::Aabb {
+                    min: b.min - pad,
+                    max: b.max + pad,
+                }
+            })
+            .collect(),
+    )
 }
 
 /// BVH build effort for `tris` triangles and `samples` camera samples. obvhs' slow_build
@@ -1120,6 +1159,50 @@ mod tests {
             hits > 2_000 && occluded > 2_000,
             "{hits} hits, {occluded} occluded"
         );
+    }
+
+    /// Distinct triangles sharing one bounding box (a hostile mesh that made PLOC quadratic) are
+    /// built from tie-broken boxes, an ordinary mesh is not, and the tie-broken BVH finds
+    /// exactly the hits of the one built from the triangles.
+    #[test]
+    fn shared_box_triangles_build_from_tie_broken_boxes_with_the_same_hits() {
+        let mut rng = crate::render::sampler::Sampler::from_seed(3);
+        let tris: Vec<Triangle> = (0..3000)
+            .map(|_| Triangle {
+                v0: Vec3::ZERO.into(),
+                v1: Vec3::ONE.into(),
+                v2: Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()).into(),
+            })
+            .collect();
+        assert!(tie_broken_boxes(&obvhs::test_util::geometry::icosphere(3)).is_none());
+        let boxes = tie_broken_boxes(&tris).expect("one shared box");
+        for (b, t) in boxes.iter().zip(&tris) {
+            let a = t.aabb();
+            assert!(b.min.cmple(a.min).all() && b.max.cmpge(a.max).all());
+        }
+        let params = obvhs::BvhBuildParams::fast_build();
+        let mut time = std::time::Duration::default();
+        let with_boxes = obvhs::cwbvh::builder::build_cwbvh(&boxes, params, &mut time);
+        let with_tris = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut time);
+        let rt = |bvh: &CwBvh| -> Vec<RtTriangle> {
+            (bvh.primitive_indices.iter())
+                .map(|&i| RtTriangle::from(&tris[i as usize]))
+                .collect()
+        };
+        let (rt_boxes, rt_tris) = (rt(&with_boxes), rt(&with_tris));
+        let mut hits = 0;
+        for i in 0..5_000 {
+            let o = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) * 4.0 - 2.0;
+            let d = (Vec3::splat(0.5) - o + Vec3::new(rng.next_1d(), rng.next_1d(), 0.0) * 0.5)
+                .normalize();
+            let r = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, f32::INFINITY);
+            let a = closest_hit(&with_boxes, &rt_boxes, r).map(|(t, _)| t.to_bits());
+            let b = closest_hit(&with_tris, &rt_tris, r).map(|(t, _)| t.to_bits());
+            assert_eq!(a, b, "ray {i}");
+            assert_eq!(any_hit(&with_boxes, &rt_boxes, r), b.is_some(), "ray {i}");
+            hits += a.is_some() as u32;
+        }
+        assert!(hits > 1_000, "{hits} hits");
     }
 
     /// Axis-aligned rays onto an axis-aligned flat quad (a zero-thickness box, infinite

@@ -77,11 +77,6 @@ impl<'a> Observations<'a> {
             .collect()
     }
 
-    /// Whether any angle has a per-pixel incidence map.
-    pub fn has_angle_maps(&self) -> bool {
-        self.set.angles.iter().any(|a| a.incident_deg_map.is_some())
-    }
-
     /// Phase-equivalent thickness scale of pixel `p` at each angle: the model of the
     /// nominal angle θa at thickness ρ·d has the phase of angle θp at d, with
     /// ρ = √(n² − n1² sin²θp) / √(n² − n1² sin²θa) (n at 550 nm). The Fresnel amplitudes

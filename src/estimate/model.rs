@@ -64,20 +64,6 @@ impl Geometry {
         }
     }
 
-    /// Angle-averaged 1 / √(n² − n1² sin²θ1): thickness d times n_eff is what a spectrum
-    /// measures (d · √(n² − kx²) sets the phase), so ∂d/∂n ≈ −d · n · this².
-    pub fn inverse_phase_index(&self, n: f64) -> f64 {
-        let k = self.incident_deg.len().max(1) as f64;
-        self.incident_deg
-            .iter()
-            .map(|a| {
-                let kx = self.ambient_ior * a.to_radians().sin();
-                1.0 / (n * n - kx * kx).max(1e-9).sqrt()
-            })
-            .sum::<f64>()
-            / k
-    }
-
     /// True when the substrate absorbs anywhere in the band (metals): its reflection phase
     /// is not 0 or π, so a substrate index error shifts fringes.
     pub fn substrate_absorbs(&self) -> bool {

@@ -187,20 +187,6 @@ impl Nuisance {
         }
         n
     }
-
-    /// Largest relative deviation of any angle's multiplier from 1 over the band.
-    pub fn multiplier_range(&self) -> (f64, f64) {
-        let mut lo = f64::INFINITY;
-        let mut hi = f64::NEG_INFINITY;
-        for a in 0..self.multiplier.len() {
-            for b in 0..self.bands() {
-                let s = self.multiplier_at(a, b);
-                lo = lo.min(s);
-                hi = hi.max(s);
-            }
-        }
-        (lo, hi)
-    }
 }
 
 /// Per angle and band: data offset (background) and scale (1/σ, times the multiplier for

@@ -130,10 +130,6 @@ impl ThicknessSolver {
         s
     }
 
-    pub fn gain_mode(&self) -> GainMode {
-        self.gain
-    }
-
     /// The five sums of angle `a` at (phase-equivalent) thickness `d`.
     #[inline]
     pub fn sums(&self, d: f64, a: usize, ya: &[f32]) -> AngleSums {

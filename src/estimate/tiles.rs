@@ -2,12 +2,13 @@
 //! stitches into exactly the whole fit.
 //!
 //! With the film index given, the `full` method's thickness of a pixel depends on the rest of
-//! the image only through (1) the global search on a lattice of seed pixels spread over the
-//! whole image, and the typical residual of those seeds, (2) its own row (propagation from the
-//! left neighbour), and (3) spatial order resolution: two rounds of a 5×5 median, which reach
-//! [`HALO_ROWS`] rows above and below. A band fit therefore searches every seed of the whole
-//! image, fits its rows plus the halo, resolves orders there, and keeps its own rows: the same
-//! arithmetic on the same values as the whole fit, so the stitched map is bit-identical. The
+//! the image through (1) the global search on a lattice of seed pixels spread over the whole
+//! image, and the typical residual of those seeds, (2) its own row (propagation from the left
+//! neighbour), and (3) spatial order resolution (two rounds of a 5×5 median, reaching four rows
+//! above and below), besides the global stages that run on pixel samples of the whole capture.
+//! A band fit runs every stage on the whole capture and keeps its own rows: the same arithmetic
+//! on the same values as the whole fit, so the stitched map is bit-identical. (It therefore
+//! saves no compute yet; fitting only the band and a four-row halo is the planned saving.) The
 //! `paper` and `grid` methods fit each pixel on its own. Without `--film-ior`, the index is
 //! fitted from the band's own pixels (phase one of the two-phase recipe for huge captures:
 //! the index from a band, then every band with that index).
@@ -22,9 +23,6 @@ use crate::render::provenance::{parse_range, Fnv, KIND, VERSION};
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-
-/// Rows above and below a band that its order resolution reads (2 rounds × radius 2).
-pub const HALO_ROWS: usize = 4;
 
 const ROWS: &str = "thinfilm.rows";
 const IMAGE_HEIGHT: &str = "thinfilm.imageHeight";
@@ -181,12 +179,4 @@ impl RowBand {
             }
         }
     }
-}
-
-/// Rows a band's thickness stage computes: the band and its halo, inside the image.
-pub fn compute_rows(rows: (usize, usize), height: usize) -> (usize, usize) {
-    (
-        rows.0.saturating_sub(HALO_ROWS),
-        (rows.1 + HALO_ROWS).min(height),
-    )
 }

@@ -864,18 +864,8 @@ impl Light {
         }
     }
 
-    /// Radiance of an infinite light along world direction `dir`.
-    #[inline]
-    pub fn eval_env(&self, dir: Vec3, wl: &SampledWavelengths) -> Spec {
-        match self {
-            Light::Env(e) => e.eval(dir, wl),
-            Light::Constant(s) => s.eval(wl),
-            _ => Spec::ZERO,
-        }
-    }
-
-    /// `out[i] +=` [`Self::eval_env`]`(dirs[i], λ = lambda[i])`, batched for environment
-    /// maps; `d65[i]`: the D65 factor at those wavelengths
+    /// `out[i] +=` the radiance of this infinite light along `dirs[i]` at λ = `lambda[i]`,
+    /// batched for environment maps; `d65[i]`: the D65 factor at those wavelengths
     /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]), which the caller has already looked up.
     pub fn add_env_batch(&self, dirs: &[Vec3], lambda: &[Spec], d65: &[Spec], out: &mut [Spec]) {
         match self {

@@ -6,38 +6,15 @@
 //! emissive) are sRGB-decoded; data textures are linear. Every error names the file, the
 //! material and the key.
 
-use super::{BitmapTexture, SpectrumDesc, TextureFilter, WrapMode};
+use super::gltf_scene::{image_layout, wrap_mode};
+use super::texture::srgb_to_linear;
+use super::{BitmapTexture, SpectrumDesc, TextureFilter};
 use crate::render::bsdf::gltf_pbr::{AlphaMode, GltfMaterial, GltfPbr, Iridescence, Volume};
 use crate::render::bsdf::Bsdf;
 use anyhow::{bail, Context, Result};
 use glam::Mat3;
-use gltf::image::Format;
 use serde_json::Value;
 use std::sync::Arc;
-
-fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// Channel count and bytes per channel of a decoded image.
-fn layout(f: Format) -> (usize, usize) {
-    match f {
-        Format::R8 => (1, 1),
-        Format::R8G8 => (2, 1),
-        Format::R8G8B8 => (3, 1),
-        Format::R8G8B8A8 => (4, 1),
-        Format::R16 => (1, 2),
-        Format::R16G16 => (2, 2),
-        Format::R16G16B16 => (3, 2),
-        Format::R16G16B16A16 => (4, 2),
-        Format::R32G32B32FLOAT => (3, 4),
-        Format::R32G32B32A32FLOAT => (4, 4),
-    }
-}
 
 /// The `KHR_texture_transform` of a textureInfo as Mitsuba's `to_uv` — the extension's
 /// translation · rotation · scale, with the rotation u' = u cos r + v sin r,
@@ -139,7 +116,7 @@ impl MaterialReader<'_> {
             .images
             .get(tex.source().index())
             .with_context(|| format!("{key}: image {} was not loaded", tex.source().index()))?;
-        let (n, bytes) = layout(img.format);
+        let (n, bytes) = image_layout(img.format);
         if channels == [3] && n < 4 {
             return Ok(None);
         }
@@ -173,11 +150,7 @@ impl MaterialReader<'_> {
         )
         .with_context(|| key.clone())?;
         let sampler = tex.sampler();
-        b.wrap = match sampler.wrap_s() {
-            gltf::texture::WrappingMode::ClampToEdge => WrapMode::Clamp,
-            gltf::texture::WrappingMode::MirroredRepeat => WrapMode::Mirror,
-            gltf::texture::WrappingMode::Repeat => WrapMode::Repeat,
-        };
+        b.wrap = wrap_mode(sampler.wrap_s());
         if let Some(gltf::texture::MagFilter::Nearest) = sampler.mag_filter() {
             b.filter = TextureFilter::Nearest;
         }

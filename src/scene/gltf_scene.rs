@@ -31,9 +31,9 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 
-/// One channel of a decoded glTF image as floats in [0,1] (row-major, top row first).
-fn image_channel(img: &gltf::image::Data, channel: usize) -> Result<Vec<f32>> {
-    let (n, bytes_per) = match img.format {
+/// Channel count and bytes per channel of a decoded glTF image.
+pub(super) fn image_layout(f: Format) -> (usize, usize) {
+    match f {
         Format::R8 => (1, 1),
         Format::R8G8 => (2, 1),
         Format::R8G8B8 => (3, 1),
@@ -44,7 +44,12 @@ fn image_channel(img: &gltf::image::Data, channel: usize) -> Result<Vec<f32>> {
         Format::R16G16B16A16 => (4, 2),
         Format::R32G32B32FLOAT => (3, 4),
         Format::R32G32B32A32FLOAT => (4, 4),
-    };
+    }
+}
+
+/// One channel of a decoded glTF image as floats in [0,1] (row-major, top row first).
+fn image_channel(img: &gltf::image::Data, channel: usize) -> Result<Vec<f32>> {
+    let (n, bytes_per) = image_layout(img.format);
     if channel >= n {
         bail!("image has {n} channel(s), channel {channel} requested");
     }
@@ -65,7 +70,7 @@ fn image_channel(img: &gltf::image::Data, channel: usize) -> Result<Vec<f32>> {
         .collect())
 }
 
-fn wrap_mode(m: gltf::texture::WrappingMode) -> WrapMode {
+pub(super) fn wrap_mode(m: gltf::texture::WrappingMode) -> WrapMode {
     match m {
         gltf::texture::WrappingMode::ClampToEdge => WrapMode::Clamp,
         gltf::texture::WrappingMode::MirroredRepeat => WrapMode::Mirror,

@@ -244,7 +244,7 @@ pub fn load_rgb_image(path: &Path) -> Result<RgbImage> {
     load_rgb_image_raw(path, false)
 }
 
-fn srgb_to_linear(v: f32) -> f32 {
+pub(crate) fn srgb_to_linear(v: f32) -> f32 {
     // IEC 61966-2-1 inverse transfer function.
     if v <= 0.04045 {
         v / 12.92

@@ -47,97 +47,74 @@ fn mad_sigma(v: &mut [f64]) -> Option<f64> {
     median(v).map(|m| m / 0.674_489_75)
 }
 
+/// One pixel's noise samples per (angle, band), `angles × bands` (NaN = none).
+struct Samples {
+    /// Spectral filter outputs h·y / ‖h‖.
+    spectral: Vec<f64>,
+    /// Spatial second differences / √6.
+    spatial: Vec<f64>,
+}
+
+/// A pixel's spectrum and mask, and its two row neighbours'.
+struct Neighbourhood {
+    y: Vec<f32>,
+    m: Vec<bool>,
+    yl: Vec<f32>,
+    ml: Vec<bool>,
+    yr: Vec<f32>,
+    mr: Vec<bool>,
+}
+
+impl Neighbourhood {
+    fn new(obs: &Observations) -> Self {
+        let (n, s) = (obs.angles, obs.stride);
+        Neighbourhood {
+            y: vec![0f32; n * s],
+            m: vec![false; n],
+            yl: vec![0f32; n * s],
+            ml: vec![false; n],
+            yr: vec![0f32; n * s],
+            mr: vec![false; n],
+        }
+    }
+}
+
 /// Estimates the noise from `pixels` (a spread subset of usable pixels).
 pub fn estimate(obs: &Observations, pixels: &[usize]) -> NoiseEstimate {
-    let (na, nb, s) = (obs.angles, obs.bands, obs.stride);
-    let h = cubic_residual_filter();
-    let hn = h.iter().map(|v| v * v).sum::<f64>().sqrt();
-    // Per pixel: spectral filter outputs and spatial second differences (NaN = none).
-    let per_pixel: Vec<(Vec<f64>, Vec<f64>)> = pixels
+    let (na, nb) = (obs.angles, obs.bands);
+    let per_pixel: Vec<Samples> = pixels
         .par_iter()
         .map_init(
-            || {
-                (
-                    vec![0f32; na * s],
-                    vec![false; na],
-                    vec![0f32; na * s],
-                    vec![false; na],
-                    vec![0f32; na * s],
-                    vec![false; na],
-                )
-            },
-            |(y, m, yl, ml, yr, mr), &p| {
-                let mut spec = vec![f64::NAN; na * nb];
-                let mut spat = vec![f64::NAN; na * nb];
-                obs.get(p, y, m);
-                for a in 0..na {
-                    if !m[a] || nb < 7 {
-                        continue;
-                    }
-                    let ya = &y[a * s..a * s + nb];
-                    for b in 3..nb - 3 {
-                        let r: f64 = (0..7).map(|k| h[k] * ya[b + k - 3] as f64).sum();
-                        spec[a * nb + b] = r / hn;
-                    }
-                }
-                let x = p % obs.width;
-                if !obs.independent_pixels() && x > 0 && x + 1 < obs.width {
-                    obs.get(p - 1, yl, ml);
-                    obs.get(p + 1, yr, mr);
-                    for a in 0..na {
-                        if !(m[a] && ml[a] && mr[a]) {
-                            continue;
-                        }
-                        for b in 0..nb {
-                            let i = a * s + b;
-                            let e = yl[i] as f64 - 2.0 * y[i] as f64 + yr[i] as f64;
-                            spat[a * nb + b] = e / 6f64.sqrt();
-                        }
-                    }
-                }
-                (spec, spat)
-            },
+            || Neighbourhood::new(obs),
+            |nh, &p| pixel_samples(obs, p, nh),
         )
         .collect();
-    // Pool neighbouring bands until each (angle, band) has enough samples.
-    let want = 48usize;
-    let per_band = |which: usize, a: usize| -> Vec<f64> {
-        let count_at = |b: usize| {
-            per_pixel
-                .iter()
-                .filter(|pp| {
-                    let v = if which == 0 { &pp.0 } else { &pp.1 };
-                    v[a * nb + b].is_finite()
-                })
-                .count()
-        };
-        let typical = count_at(nb / 2).max(1);
-        let half = (want.div_ceil(typical) / 2).min(nb / 2);
-        (0..nb)
-            .map(|b| {
-                let lo = b.saturating_sub(half);
-                let hi = (b + half + 1).min(nb);
-                let mut v: Vec<f64> = per_pixel
-                    .iter()
-                    .flat_map(|pp| {
-                        let v = if which == 0 { &pp.0 } else { &pp.1 };
-                        v[a * nb + lo..a * nb + hi].iter().copied()
-                    })
-                    .filter(|x| x.is_finite())
-                    .collect();
-                if v.len() < 8 {
-                    return f64::NAN;
-                }
-                mad_sigma(&mut v).unwrap_or(f64::NAN)
-            })
-            .collect()
+    let (mut sigma, used_spectral, used_spatial) = smaller_estimate(&per_pixel, na, nb);
+    let (typical, floor) = fill_and_floor(&mut sigma, na, nb);
+    let source = match (used_spectral, used_spatial) {
+        (true, true) => {
+            "smaller of spectral (7-band cubic residual) and spatial (second difference) estimates"
+        }
+        (true, false) => "spectral estimate (7-band cubic residual)",
+        (false, true) => "spatial estimate (second difference across pixels)",
+        (false, false) => "no estimate possible (too few bands and pixels); floor value",
     };
+    NoiseEstimate {
+        sigma,
+        typical: typical.max(floor),
+        source: format!("{source} over {} pixels", pixels.len()),
+    }
+}
+
+/// Per (angle, band), the smaller of the pooled spectral and spatial σ (each is an upper
+/// bound: signal can only leak in), NaN where neither exists; and whether each was used.
+fn smaller_estimate(per_pixel: &[Samples], na: usize, nb: usize) -> (Vec<f32>, bool, bool) {
     let mut sigma = vec![0f32; na * nb];
     let mut used_spatial = false;
     let mut used_spectral = false;
     for a in 0..na {
-        let spec = per_band(0, a);
-        let spat = per_band(1, a);
+        let spec = pooled_sigma(per_pixel, |s| &s.spectral, a, nb);
+        let spat = pooled_sigma(per_pixel, |s| &s.spatial, a, nb);
         for b in 0..nb {
             let (x, z) = (spec[b], spat[b]);
             let v = match (x.is_finite() && x > 0.0, z.is_finite() && z > 0.0) {
@@ -163,8 +140,90 @@ pub fn estimate(obs: &Observations, pixels: &[usize]) -> NoiseEstimate {
             sigma[a * nb + b] = v as f32;
         }
     }
-    // Bands without an estimate (edges, flat data) take their angle's median; a floor
-    // keeps noise-free simulations from getting infinite weights.
+    (sigma, used_spectral, used_spatial)
+}
+
+/// Pixel `p`'s spectral residuals and, where it has both row neighbours (and pixels are
+/// neighbours at all), its spatial second differences.
+fn pixel_samples(obs: &Observations, p: usize, nh: &mut Neighbourhood) -> Samples {
+    let (na, nb, s) = (obs.angles, obs.bands, obs.stride);
+    let h = cubic_residual_filter();
+    let hn = h.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let mut spec = vec![f64::NAN; na * nb];
+    let mut spat = vec![f64::NAN; na * nb];
+    let (y, m) = (&mut nh.y, &mut nh.m);
+    obs.get(p, y, m);
+    for a in 0..na {
+        if !m[a] || nb < 7 {
+            continue;
+        }
+        let ya = &y[a * s..a * s + nb];
+        for b in 3..nb - 3 {
+            let r: f64 = (0..7).map(|k| h[k] * ya[b + k - 3] as f64).sum();
+            spec[a * nb + b] = r / hn;
+        }
+    }
+    let x = p % obs.width;
+    if !obs.independent_pixels() && x > 0 && x + 1 < obs.width {
+        let (yl, ml, yr, mr) = (&mut nh.yl, &mut nh.ml, &mut nh.yr, &mut nh.mr);
+        obs.get(p - 1, yl, ml);
+        obs.get(p + 1, yr, mr);
+        for a in 0..na {
+            if !(m[a] && ml[a] && mr[a]) {
+                continue;
+            }
+            for b in 0..nb {
+                let i = a * s + b;
+                let e = yl[i] as f64 - 2.0 * y[i] as f64 + yr[i] as f64;
+                spat[a * nb + b] = e / 6f64.sqrt();
+            }
+        }
+    }
+    Samples {
+        spectral: spec,
+        spatial: spat,
+    }
+}
+
+/// σ per band of angle `a` from one kind of sample (`which`), by MAD over pixels; with
+/// too few pixels, neighbouring bands are pooled until each band has about 48 samples.
+/// NaN where fewer than 8 samples remain.
+fn pooled_sigma(
+    per_pixel: &[Samples],
+    which: impl Fn(&Samples) -> &Vec<f64>,
+    a: usize,
+    nb: usize,
+) -> Vec<f64> {
+    let want = 48usize;
+    let count_at = |b: usize| {
+        per_pixel
+            .iter()
+            .filter(|pp| which(pp)[a * nb + b].is_finite())
+            .count()
+    };
+    let typical = count_at(nb / 2).max(1);
+    let half = (want.div_ceil(typical) / 2).min(nb / 2);
+    (0..nb)
+        .map(|b| {
+            let lo = b.saturating_sub(half);
+            let hi = (b + half + 1).min(nb);
+            let mut v: Vec<f64> = per_pixel
+                .iter()
+                .flat_map(|pp| which(pp)[a * nb + lo..a * nb + hi].iter().copied())
+                .filter(|x| x.is_finite())
+                .collect();
+            if v.len() < 8 {
+                return f64::NAN;
+            }
+            mad_sigma(&mut v).unwrap_or(f64::NAN)
+        })
+        .collect()
+}
+
+/// Bands without an estimate (edges, flat data) take their angle's median; a floor (5 %
+/// of the median over all bands) keeps noise-free simulations from getting infinite
+/// weights. Returns that median and the floor.
+fn fill_and_floor(sigma: &mut [f32], na: usize, nb: usize) -> (f64, f64) {
     let mut all: Vec<f64> = sigma
         .iter()
         .filter(|v| v.is_finite() && **v > 0.0)
@@ -186,19 +245,7 @@ pub fn estimate(obs: &Observations, pixels: &[usize]) -> NoiseEstimate {
             *v = v.max(floor as f32);
         }
     }
-    let source = match (used_spectral, used_spatial) {
-        (true, true) => {
-            "smaller of spectral (7-band cubic residual) and spatial (second difference) estimates"
-        }
-        (true, false) => "spectral estimate (7-band cubic residual)",
-        (false, true) => "spatial estimate (second difference across pixels)",
-        (false, false) => "no estimate possible (too few bands and pixels); floor value",
-    };
-    NoiseEstimate {
-        sigma,
-        typical: typical.max(floor),
-        source: format!("{source} over {} pixels", pixels.len()),
-    }
+    (typical, floor)
 }
 
 #[cfg(test)]

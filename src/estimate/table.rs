@@ -56,6 +56,20 @@ pub struct PassSums {
 }
 
 impl AngleSums {
+    /// The five sums from per-lane partial sums (my, mm, dy, dm, dd), each lane array
+    /// added in order.
+    #[inline]
+    fn from_lanes<const N: usize>(lanes: &[[f32; N]; 5]) -> Self {
+        let s = |i: usize| lanes[i].iter().sum::<f32>();
+        AngleSums {
+            my: s(0),
+            mm: s(1),
+            dy: s(2),
+            dm: s(3),
+            dd: s(4),
+        }
+    }
+
     /// Adds this angle's contribution for data energy `yy` = Σy² and derivative scale
     /// `rho` (dm/dd of the pixel = rho · tabulated dm/dd; 1 unless the pixel has its own
     /// incidence angle). With a free gain, g = max(0, m·y / m·m) and the residual is
@@ -194,14 +208,7 @@ mod x86 {
                 _mm256_storeu_ps(o.as_mut_ptr(), v);
             }
         }
-        let s = |i: usize| lanes[i].iter().sum::<f32>();
-        AngleSums {
-            my: s(0),
-            mm: s(1),
-            dy: s(2),
-            dm: s(3),
-            dd: s(4),
-        }
+        AngleSums::from_lanes(&lanes)
     }
 
     /// # Safety
@@ -251,14 +258,7 @@ mod x86 {
                 _mm_storeu_ps(o.as_mut_ptr(), v);
             }
         }
-        let s = |i: usize| lanes[i].iter().sum::<f32>();
-        AngleSums {
-            my: s(0),
-            mm: s(1),
-            dy: s(2),
-            dm: s(3),
-            dd: s(4),
-        }
+        AngleSums::from_lanes(&lanes)
     }
 }
 
@@ -291,14 +291,7 @@ fn hermite_sums_scalar(
             acc[4][i] += dv * dv;
         }
     }
-    let s = |i: usize| acc[i].iter().sum::<f32>();
-    AngleSums {
-        my: s(0),
-        mm: s(1),
-        dy: s(2),
-        dm: s(3),
-        dd: s(4),
-    }
+    AngleSums::from_lanes(&acc)
 }
 
 /// Dot product with 8 independent accumulators so it vectorises without fast-math.

@@ -252,19 +252,24 @@ mod tests {
         assert_eq!(tabulated(&t, 900.0), 3.0);
     }
 
-    #[test]
-    fn bitmap_scalar_lookup_and_range() {
-        let b = BitmapTexture {
-            width: 2,
-            height: 1,
+    /// A one-channel `width × height` bitmap, nearest lookup, clamped.
+    fn scalar_bitmap(width: usize, height: usize, data: Vec<f32>) -> BitmapTexture {
+        BitmapTexture {
+            width,
+            height,
             channels: 1,
-            data: vec![100.0, 300.0],
+            data,
             filter: TextureFilter::Nearest,
             wrap: WrapMode::Clamp,
             to_uv: Mat3::IDENTITY,
             value_range: None,
             path: None,
-        };
+        }
+    }
+
+    #[test]
+    fn bitmap_scalar_lookup_and_range() {
+        let b = scalar_bitmap(2, 1, vec![100.0, 300.0]);
         let t = Texture::Bitmap(Arc::new(b.clone()));
         assert_eq!(t.eval_scalar(Vec2::new(0.1, 0.5)), 100.0);
         assert_eq!(t.eval_scalar(Vec2::new(0.9, 0.5)), 300.0);
@@ -279,17 +284,7 @@ mod tests {
     /// textured thin films disagree with the Mitsuba references by ΔE00 ≈ 5.
     #[test]
     fn bitmap_v_zero_is_the_top_row() {
-        let b = BitmapTexture {
-            width: 1,
-            height: 2,
-            channels: 1,
-            data: vec![100.0, 300.0],
-            filter: TextureFilter::Nearest,
-            wrap: WrapMode::Clamp,
-            to_uv: Mat3::IDENTITY,
-            value_range: None,
-            path: None,
-        };
+        let b = scalar_bitmap(1, 2, vec![100.0, 300.0]);
         let t = Texture::Bitmap(Arc::new(b));
         assert_eq!(t.eval_scalar(Vec2::new(0.5, 0.1)), 100.0);
         assert_eq!(t.eval_scalar(Vec2::new(0.5, 0.9)), 300.0);

@@ -237,8 +237,20 @@ fn extensions(
     out
 }
 
-impl RefineStage for JointRefine {
-    fn run(&self, cx: &Context, first: IndexEstimate) -> Result<FilmSolution> {
+/// Where model selection starts: the joint pixels, the simplest candidate and its state
+/// before any thickness is known, and which extensions the options leave to the data.
+struct Start {
+    /// The film index is fitted (not given).
+    fitted: bool,
+    pixels: Vec<usize>,
+    cand: Candidate,
+    blank: State,
+    film_auto: bool,
+    substrate_auto: bool,
+}
+
+impl Start {
+    fn new(cx: &Context, first: &IndexEstimate) -> Result<Start> {
         let obs = &cx.obs;
         let opts = cx.opts;
         let fitted = !matches!(first.film, FilmIndex::Known(_));
@@ -250,19 +262,15 @@ impl RefineStage for JointRefine {
                 "no pixel has a usable spectrum"
             });
         }
-        let joint = Joint::new(cx);
-        let pixels = spread(&usable, opts.joint_pixels.max(1));
         let film_kind = if fitted {
             Some(opts.film_model.unwrap_or(FilmModelKind::Constant))
         } else {
             None
         };
-        let film_auto = fitted && opts.film_model.is_none();
-        let substrate_auto = opts.fit_substrate.is_none() && !cx.obs.geom.substrate_absorbs();
-        let mut cand = Candidate {
+        let cand = Candidate {
             film: film_kind,
             fit_substrate: opts.fit_substrate == Some(true),
-            nuisance: NuisanceSpec::smallest(cx.obs.radiometry),
+            nuisance: NuisanceSpec::smallest(obs.radiometry),
         };
         let init_film = match (film_kind, &first.dispersive_start) {
             (Some(FilmModelKind::Constant), _) | (None, _) => first.film.clone(),
@@ -276,135 +284,209 @@ impl RefineStage for JointRefine {
             nuisance: Nuisance::new(cand.nuisance, obs.angles, &obs.geom.wavelengths_nm),
             d: Vec::new(),
         };
-        // Model selection on a subset.
-        let sel_idx: Vec<usize> = spread(&(0..pixels.len()).collect::<Vec<_>>(), SELECTION_PIXELS);
-        let sel_pixels: Vec<usize> = sel_idx.iter().map(|&i| pixels[i]).collect();
-        let sel_data = JointData::new(obs, &sel_pixels);
-        let mut cur = joint.fit_with_search(&sel_data, &cand, &blank, 2);
-        let mut selection = vec![SelectionStep {
-            model: cand.describe(),
-            chi2: cur.chi2,
-            parameters: cur.globals,
-            criterion: criterion(&cur, cur.inflation()),
-            chosen: true,
-        }];
-        let (mut model_dn, mut model_dd) = (0f64, 0f64);
-        loop {
-            let infl = cur.inflation();
-            let base = criterion(&cur, infl);
-            let tried: Vec<(Candidate, JointFit)> =
-                extensions(cx, &cand, film_auto, substrate_auto)
-                    .into_iter()
-                    .map(|c| {
-                        let mut f = joint.fit(&sel_data, &c, &cur.state, 15);
-                        // A dispersive film far from the constant fit: also start from
-                        // the peaks' dispersion with fresh thickness orders.
-                        if let (true, Some(start)) = (c.film != cand.film, &first.dispersive_start)
-                        {
-                            let init = State {
-                                film: start.clone(),
-                                ..cur.state.clone()
-                            };
-                            let g = joint.fit_with_search(&sel_data, &c, &init, 2);
-                            if g.chi2 < f.chi2 {
-                                f = g;
-                            }
-                        }
-                        (c, f)
-                    })
-                    .collect();
-            let mut best: Option<(usize, f64)> = None;
-            for (i, (c, f)) in tried.iter().enumerate() {
-                let crit = criterion(f, infl);
-                selection.push(SelectionStep {
-                    model: c.describe(),
-                    chi2: f.chi2,
-                    parameters: f.globals,
-                    criterion: crit,
-                    chosen: false,
-                });
-                if crit < base - MIN_IMPROVEMENT && best.is_none_or(|b| crit < b.1) {
-                    best = Some((i, crit));
+        Ok(Start {
+            fitted,
+            pixels: spread(&usable, opts.joint_pixels.max(1)),
+            cand,
+            blank,
+            film_auto: fitted && opts.film_model.is_none(),
+            substrate_auto: opts.fit_substrate.is_none() && !obs.geom.substrate_absorbs(),
+        })
+    }
+}
+
+/// The outcome of model selection on the subset.
+struct Selected {
+    cand: Candidate,
+    fit: JointFit,
+    steps: Vec<SelectionStep>,
+    /// Model sensitivity: how far the extensions the data did not ask for move n(550)
+    /// and (median, relative) the thicknesses — a model error the noise does not show.
+    model_dn: f64,
+    model_dd: f64,
+}
+
+/// Greedy selection on `sel_data`: each round fits every extension of the current model
+/// and keeps the one with the lowest criterion if it beats the current one by more than
+/// [`MIN_IMPROVEMENT`].
+fn select_model(
+    joint: &Joint,
+    first: &IndexEstimate,
+    sel_data: &JointData,
+    start: &Start,
+) -> Selected {
+    let mut cand = start.cand;
+    let mut cur = joint.fit_with_search(sel_data, &cand, &start.blank, 2);
+    let mut steps = vec![SelectionStep {
+        model: cand.describe(),
+        chi2: cur.chi2,
+        parameters: cur.globals,
+        criterion: criterion(&cur, cur.inflation()),
+        chosen: true,
+    }];
+    loop {
+        let infl = cur.inflation();
+        let base = criterion(&cur, infl);
+        let tried = try_extensions(joint, first, sel_data, start, &cand, &cur);
+        let mut best: Option<(usize, f64)> = None;
+        for (i, (c, f)) in tried.iter().enumerate() {
+            let crit = criterion(f, infl);
+            steps.push(SelectionStep {
+                model: c.describe(),
+                chi2: f.chi2,
+                parameters: f.globals,
+                criterion: crit,
+                chosen: false,
+            });
+            if crit < base - MIN_IMPROVEMENT && best.is_none_or(|b| crit < b.1) {
+                best = Some((i, crit));
+            }
+        }
+        let Some((i, _)) = best else {
+            let (model_dn, model_dd) = model_sensitivity(&cur, &tried, start.fitted);
+            return Selected {
+                cand,
+                fit: cur,
+                steps,
+                model_dn,
+                model_dd,
+            };
+        };
+        let n = steps.len() - tried.len() + i;
+        steps[n].chosen = true;
+        let (c, f) = tried
+            .into_iter()
+            .nth(i)
+            .expect("index of a tried candidate");
+        cand = c;
+        cur = f;
+    }
+}
+
+/// Fits every extension of `cand` (worth trying) from the current fit `cur`.
+fn try_extensions(
+    joint: &Joint,
+    first: &IndexEstimate,
+    sel_data: &JointData,
+    start: &Start,
+    cand: &Candidate,
+    cur: &JointFit,
+) -> Vec<(Candidate, JointFit)> {
+    extensions(joint.cx, cand, start.film_auto, start.substrate_auto)
+        .into_iter()
+        .map(|c| {
+            let mut f = joint.fit(sel_data, &c, &cur.state, 15);
+            // A dispersive film far from the constant fit: also start from the peaks'
+            // dispersion with fresh thickness orders.
+            if let (true, Some(start)) = (c.film != cand.film, &first.dispersive_start) {
+                let init = State {
+                    film: start.clone(),
+                    ..cur.state.clone()
+                };
+                let g = joint.fit_with_search(sel_data, &c, &init, 2);
+                if g.chi2 < f.chi2 {
+                    f = g;
                 }
             }
-            let Some((i, _)) = best else {
-                // Model sensitivity: how far the extensions the data did not ask for move
-                // n(550) and the thicknesses (a model error the noise does not show).
-                let n0 = cur.state.film.n550();
-                for (_, f) in &tried {
-                    if fitted {
-                        model_dn = model_dn.max((f.state.film.n550() - n0).abs());
-                    }
-                    let mut rel: Vec<f64> = f
-                        .state
-                        .d
-                        .iter()
-                        .zip(&cur.state.d)
-                        .filter(|(_, b)| **b > 1.0)
-                        .map(|(a, b)| ((a - b) / b).abs())
-                        .collect();
-                    model_dd = model_dd.max(super::data::median(&mut rel).unwrap_or(0.0));
-                }
-                break;
-            };
-            let n = selection.len() - tried.len() + i;
-            selection[n].chosen = true;
-            let (c, f) = tried
-                .into_iter()
-                .nth(i)
-                .expect("index of a tried candidate");
-            cand = c;
-            cur = f;
+            (c, f)
+        })
+        .collect()
+}
+
+/// Largest change of n(550) (when the index is fitted) and of the median relative
+/// thickness between `cur` and the rejected extensions `tried`.
+fn model_sensitivity(cur: &JointFit, tried: &[(Candidate, JointFit)], fitted: bool) -> (f64, f64) {
+    let (mut model_dn, mut model_dd) = (0f64, 0f64);
+    let n0 = cur.state.film.n550();
+    for (_, f) in tried {
+        if fitted {
+            model_dn = model_dn.max((f.state.film.n550() - n0).abs());
         }
-        // Final fit of the chosen model on every joint pixel.
-        let data = JointData::new(obs, &pixels);
-        let mut init = cur.state.clone();
-        init.d.clear();
-        let fit = joint.fit_with_search(&data, &cand, &init, 4);
-        let st = &fit.state;
-        let nf = if cand.film.is_some() {
-            st.film.params().len()
-        } else {
-            0
-        };
-        let mut film_param_sigma: Vec<f64> = (0..nf).filter_map(|i| fit.sigma(i)).collect();
-        if let Some(s0) = film_param_sigma.first_mut() {
-            *s0 = s0.hypot(model_dn);
-        }
-        let substrate_sigma = cand.fit_substrate.then(|| fit.sigma(nf)).flatten();
-        let mut rel: Vec<f64> = fit
+        let mut rel: Vec<f64> = f
             .state
             .d
             .iter()
+            .zip(&cur.state.d)
+            .filter(|(_, b)| **b > 1.0)
+            .map(|(a, b)| ((a - b) / b).abs())
+            .collect();
+        model_dd = model_dd.max(super::data::median(&mut rel).unwrap_or(0.0));
+    }
+    (model_dn, model_dd)
+}
+
+/// The stage's result from the final fit: parameter σ widened by the model sensitivity
+/// (added in quadrature), and the median σ(d)/d the shared parameters cause.
+fn solution(
+    cx: &Context,
+    first: &IndexEstimate,
+    sel: Selected,
+    fit: &JointFit,
+    pixels: Vec<usize>,
+) -> FilmSolution {
+    let cand = sel.cand;
+    let st = &fit.state;
+    let nf = if cand.film.is_some() {
+        st.film.params().len()
+    } else {
+        0
+    };
+    let mut film_param_sigma: Vec<f64> = (0..nf).filter_map(|i| fit.sigma(i)).collect();
+    if let Some(s0) = film_param_sigma.first_mut() {
+        *s0 = s0.hypot(sel.model_dn);
+    }
+    let substrate_sigma = cand.fit_substrate.then(|| fit.sigma(nf)).flatten();
+    let mut rel: Vec<f64> =
+        st.d.iter()
             .zip(&fit.d_sigma_global)
             .filter(|(d, _)| **d > 1.0)
             .map(|(d, s)| s / d)
             .collect();
-        let thickness_rel_sigma = super::data::median(&mut rel).unwrap_or(0.0).hypot(model_dd);
-        let note = format!(
-            "{}; joint Levenberg–Marquardt on {} pixels ({} model, {}; χ²/dof {:.2})",
-            first.note,
-            pixels.len(),
-            match cand.film {
-                Some(k) => k.to_string(),
-                None => "given".into(),
-            },
-            cand.nuisance.describe(),
-            fit.chi2_red()
-        );
-        Ok(FilmSolution {
-            film: st.film.clone(),
-            film_param_sigma,
-            note,
-            substrate_shift: st.substrate_shift,
-            substrate_sigma,
-            nuisance: st.nuisance.clone(),
-            sigma: cx.noise.sigma.clone(),
-            thickness_rel_sigma,
-            inflation: fit.inflation(),
-            chi2_red: fit.chi2_red(),
-            joint_pixels: pixels,
-            selection,
-        })
+    let thickness_rel_sigma = super::data::median(&mut rel)
+        .unwrap_or(0.0)
+        .hypot(sel.model_dd);
+    let note = format!(
+        "{}; joint Levenberg–Marquardt on {} pixels ({} model, {}; χ²/dof {:.2})",
+        first.note,
+        pixels.len(),
+        match cand.film {
+            Some(k) => k.to_string(),
+            None => "given".into(),
+        },
+        cand.nuisance.describe(),
+        fit.chi2_red()
+    );
+    FilmSolution {
+        film: st.film.clone(),
+        film_param_sigma,
+        note,
+        substrate_shift: st.substrate_shift,
+        substrate_sigma,
+        nuisance: st.nuisance.clone(),
+        sigma: cx.noise.sigma.clone(),
+        thickness_rel_sigma,
+        inflation: fit.inflation(),
+        chi2_red: fit.chi2_red(),
+        joint_pixels: pixels,
+        selection: sel.steps,
+    }
+}
+
+impl RefineStage for JointRefine {
+    fn run(&self, cx: &Context, first: IndexEstimate) -> Result<FilmSolution> {
+        let start = Start::new(cx, &first)?;
+        let joint = Joint::new(cx);
+        // Model selection on a subset.
+        let pixels = &start.pixels;
+        let sel_idx: Vec<usize> = spread(&(0..pixels.len()).collect::<Vec<_>>(), SELECTION_PIXELS);
+        let sel_pixels: Vec<usize> = sel_idx.iter().map(|&i| pixels[i]).collect();
+        let sel_data = JointData::new(&cx.obs, &sel_pixels);
+        let sel = select_model(&joint, &first, &sel_data, &start);
+        // Final fit of the chosen model on every joint pixel.
+        let data = JointData::new(&cx.obs, pixels);
+        let mut init = sel.fit.state.clone();
+        init.d.clear();
+        let fit = joint.fit_with_search(&data, &sel.cand, &init, 4);
+        Ok(solution(cx, &first, sel, &fit, start.pixels))
     }
 }

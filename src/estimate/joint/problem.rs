@@ -167,6 +167,147 @@ struct FdParam {
     angle: Option<usize>,
 }
 
+/// The column index of a pixel's own thickness among an angle's local Jacobian columns
+/// (the others are θ indices).
+const D_COLUMN: usize = usize::MAX;
+
+/// What every pixel's evaluation shares at one state.
+struct EvalSetup<'s> {
+    st: &'s State,
+    /// Build the normal-equation blocks (else χ² only).
+    lin: bool,
+    /// G, and the offset of the nuisance block in θ.
+    g_count: usize,
+    nuis_off: usize,
+    /// The model at `st`, and one model per finite-difference parameter (when `lin`).
+    m0: FilmModel,
+    fd: Vec<FdParam>,
+    n550: f64,
+    /// Per angle and band: s_ab/σ_ab (multiplier over noise), c_ab (background), 1/σ_ab.
+    sw: Vec<f64>,
+    cb: Vec<f64>,
+    w: Vec<f64>,
+}
+
+/// One pixel's working rows at one angle (length: bands).
+struct AngleRows {
+    /// Model spectrum, its thickness derivative, a finite-difference model's spectrum.
+    r: Vec<f32>,
+    dr: Vec<f32>,
+    rf: Vec<f32>,
+    /// Whitened data minus background, whitened model, residual g·m − y.
+    yt: Vec<f64>,
+    mt: Vec<f64>,
+    e: Vec<f64>,
+    /// Local Jacobian columns: (θ index, or [`D_COLUMN`]; values per band).
+    cols: Vec<(usize, Vec<f64>)>,
+}
+
+impl AngleRows {
+    fn new(nb: usize) -> Self {
+        AngleRows {
+            r: vec![0f32; nb],
+            dr: vec![0f32; nb],
+            rf: vec![0f32; nb],
+            yt: vec![0f64; nb],
+            mt: vec![0f64; nb],
+            e: vec![0f64; nb],
+            cols: Vec::new(),
+        }
+    }
+}
+
+/// Sums of an evaluation over pixels (one per rayon fold, then merged).
+struct Acc {
+    chi2: f64,
+    samples: usize,
+    gains: usize,
+    lag: (f64, f64),
+    hgg: Vec<f64>,
+    gg: Vec<f64>,
+    px: Vec<(usize, PixelLin)>,
+}
+
+impl Acc {
+    fn new(lin: bool, g_count: usize) -> Self {
+        Acc {
+            chi2: 0.0,
+            samples: 0,
+            gains: 0,
+            lag: (0.0, 0.0),
+            hgg: vec![0.0; if lin { g_count * g_count } else { 0 }],
+            gg: vec![0.0; if lin { g_count } else { 0 }],
+            px: Vec::new(),
+        }
+    }
+
+    fn merge(mut self, b: Acc) -> Acc {
+        self.chi2 += b.chi2;
+        self.samples += b.samples;
+        self.gains += b.gains;
+        self.lag.0 += b.lag.0;
+        self.lag.1 += b.lag.1;
+        for (x, y) in self.hgg.iter_mut().zip(&b.hgg) {
+            *x += y;
+        }
+        for (x, y) in self.gg.iter_mut().zip(&b.gg) {
+            *x += y;
+        }
+        self.px.extend(b.px);
+        self
+    }
+
+    /// The evaluation, pixel blocks in joint-pixel order.
+    fn into_evaluation(self) -> Evaluation {
+        let mut px = self.px;
+        px.sort_by_key(|x| x.0);
+        Evaluation {
+            chi2: self.chi2,
+            samples: self.samples,
+            free_gains: self.gains,
+            lag: self.lag,
+            pixels: px.into_iter().map(|x| x.1).collect(),
+            hgg: self.hgg,
+            gg: self.gg,
+        }
+    }
+}
+
+/// Adds one angle's local columns to the normal equations: the gradient (column ·
+/// residual) and the Gauss–Newton Hessian (column · column), split into the pixel's own
+/// d entries (`pl`) and the shared θ blocks (`acc`).
+fn add_normal_blocks(
+    cols: &[(usize, Vec<f64>)],
+    e: &[f64],
+    g_count: usize,
+    pl: &mut PixelLin,
+    acc: &mut Acc,
+) {
+    for (ci, (ii, vi)) in cols.iter().enumerate() {
+        let ge: f64 = vi.iter().zip(e).map(|(x, y)| x * y).sum();
+        if *ii == D_COLUMN {
+            pl.gd += ge;
+        } else {
+            acc.gg[*ii] += ge;
+            pl.score[*ii] += ge;
+        }
+        for (jj, vj) in cols[ci..].iter() {
+            let h: f64 = vi.iter().zip(vj).map(|(x, y)| x * y).sum();
+            match (*ii == D_COLUMN, *jj == D_COLUMN) {
+                (true, true) => pl.hdd += h,
+                (true, false) => pl.hdg[*jj] += h,
+                (false, true) => pl.hdg[*ii] += h,
+                (false, false) => {
+                    acc.hgg[ii * g_count + jj] += h;
+                    if ii != jj {
+                        acc.hgg[jj * g_count + ii] += h;
+                    }
+                }
+            }
+        }
+    }
+}
+
 impl Problem<'_> {
     fn film_params(&self, st: &State) -> usize {
         if self.structure.fit_film {
@@ -281,21 +422,26 @@ impl Problem<'_> {
         out
     }
 
-    /// χ² at `st` and, when `lin`, the normal-equation blocks.
+    /// χ² at `st` and, when `lin`, the normal-equation blocks: per pixel, per angle, the
+    /// gain is eliminated ([`Problem::fit_gain`]), the residual summed, and the local Jacobian
+    /// columns ([`Problem::jacobian_columns`]) projected off the model direction
+    /// (Kaufman) are accumulated into the block-arrow normal equations.
     fn evaluate(&self, st: &State, lin: bool) -> Evaluation {
-        let obs = self.obs;
-        let (na, nb, stride) = (obs.angles, obs.bands, obs.stride);
-        let g_count = self.globals(st);
-        let nuis_off = self.nuisance_offset(st);
-        let (kmul, kbg) = (
-            st.nuisance.spec.multiplier_terms,
-            st.nuisance.spec.background_terms,
-        );
-        let free = st.nuisance.spec.free_gain;
-        let m0 = self.geometry(st).model_of(&st.film, st.substrate_shift);
-        let fd = if lin { self.fd_params(st) } else { Vec::new() };
-        let n550 = st.film.n550();
-        // Per band: s_ab/σ_ab, c_ab, 1/σ_ab.
+        let setup = self.eval_setup(st, lin);
+        let new_acc = || Acc::new(lin, setup.g_count);
+        let acc = (0..self.data.pixels.len())
+            .into_par_iter()
+            .fold(new_acc, |mut acc, i| {
+                self.add_pixel(&setup, i, &mut acc);
+                acc
+            })
+            .reduce(new_acc, Acc::merge);
+        acc.into_evaluation()
+    }
+
+    /// The model, finite-difference models and per-band weights at `st`.
+    fn eval_setup<'s>(&self, st: &'s State, lin: bool) -> EvalSetup<'s> {
+        let (na, nb) = (self.obs.angles, self.obs.bands);
         let mut sw = vec![0f64; na * nb];
         let mut cb = vec![0f64; na * nb];
         let mut w = vec![0f64; na * nb];
@@ -307,185 +453,153 @@ impl Problem<'_> {
                 cb[i] = st.nuisance.background_at(a, b);
             }
         }
-        struct Acc {
-            chi2: f64,
-            samples: usize,
-            gains: usize,
-            lag: (f64, f64),
-            hgg: Vec<f64>,
-            gg: Vec<f64>,
-            px: Vec<(usize, PixelLin)>,
+        EvalSetup {
+            st,
+            lin,
+            g_count: self.globals(st),
+            nuis_off: self.nuisance_offset(st),
+            m0: self.geometry(st).model_of(&st.film, st.substrate_shift),
+            fd: if lin { self.fd_params(st) } else { Vec::new() },
+            n550: st.film.n550(),
+            sw,
+            cb,
+            w,
         }
-        let new_acc = || Acc {
-            chi2: 0.0,
-            samples: 0,
-            gains: 0,
-            lag: (0.0, 0.0),
-            hgg: vec![0.0; if lin { g_count * g_count } else { 0 }],
-            gg: vec![0.0; if lin { g_count } else { 0 }],
-            px: Vec::new(),
+    }
+
+    /// Adds joint pixel `i`'s χ² (and, when linearising, its blocks) to `acc`.
+    fn add_pixel(&self, s: &EvalSetup, i: usize, acc: &mut Acc) {
+        let (na, nb) = (self.obs.angles, self.obs.bands);
+        let (lin, g_count) = (s.lin, s.g_count);
+        let mask = &self.data.mask[i];
+        let mut rho = vec![1f32; na];
+        self.obs.rho(self.data.pixels[i], s.n550, &mut rho);
+        let d = s.st.d[i];
+        let mut pl = PixelLin {
+            hdg: vec![0.0; if lin { g_count } else { 0 }],
+            score: vec![0.0; if lin { g_count } else { 0 }],
+            ..PixelLin::default()
         };
-        let acc = (0..self.data.pixels.len())
-            .into_par_iter()
-            .fold(new_acc, |mut acc, i| {
-                let p = self.data.pixels[i];
-                let y = &self.data.y[i];
-                let mask = &self.data.mask[i];
-                let mut rho = vec![1f32; na];
-                obs.rho(p, n550, &mut rho);
-                let d = st.d[i];
-                let mut pl = PixelLin {
-                    hdg: vec![0.0; if lin { g_count } else { 0 }],
-                    score: vec![0.0; if lin { g_count } else { 0 }],
-                    ..PixelLin::default()
-                };
-                let (mut r, mut dr, mut rf) = (vec![0f32; nb], vec![0f32; nb], vec![0f32; nb]);
-                let (mut yt, mut mt, mut e) = (vec![0f64; nb], vec![0f64; nb], vec![0f64; nb]);
-                // Local columns: (θ index or usize::MAX for d, values).
-                let mut cols: Vec<(usize, Vec<f64>)> = Vec::new();
-                for a in 0..na {
-                    if !mask[a] {
-                        continue;
-                    }
-                    let da = (d * rho[a] as f64).max(0.0);
-                    m0.spectrum_and_derivative(a, da, &mut r, &mut dr);
-                    let (mut my, mut mm) = (0.0, 0.0);
-                    for b in 0..nb {
-                        let k = a * nb + b;
-                        yt[b] = (y[a * stride + b] as f64 - cb[k]) * w[k];
-                        mt[b] = r[b] as f64 * sw[k];
-                        my += mt[b] * yt[b];
-                        mm += mt[b] * mt[b];
-                    }
-                    let g = if free {
-                        if mm > 0.0 {
-                            (my / mm).max(0.0)
-                        } else {
-                            0.0
-                        }
-                    } else {
-                        1.0
-                    };
-                    if free && g > 0.0 {
-                        acc.gains += 1;
-                    }
-                    let mut prev = f64::NAN;
-                    for b in 0..nb {
-                        e[b] = g * mt[b] - yt[b];
-                        acc.chi2 += e[b] * e[b];
-                        acc.lag.1 += e[b] * e[b];
-                        if prev.is_finite() {
-                            acc.lag.0 += prev * e[b];
-                        }
-                        prev = e[b];
-                    }
-                    acc.samples += nb;
-                    if !lin {
-                        continue;
-                    }
-                    cols.clear();
-                    if g > 0.0 {
-                        let k0 = a * nb;
-                        cols.push((
-                            usize::MAX,
-                            (0..nb)
-                                .map(|b| g * sw[k0 + b] * dr[b] as f64 * rho[a] as f64)
-                                .collect(),
-                        ));
-                        for f in fd.iter().filter(|f| f.angle.is_none_or(|fa| fa == a)) {
-                            f.model.spectrum(a, da, &mut rf);
-                            cols.push((
-                                f.index,
-                                (0..nb)
-                                    .map(|b| g * sw[k0 + b] * (rf[b] - r[b]) as f64 / f.step)
-                                    .collect(),
-                            ));
-                        }
-                        for k in 0..kmul {
-                            cols.push((
-                                nuis_off + a * (kmul + kbg) + k,
-                                (0..nb)
-                                    .map(|b| {
-                                        g * w[k0 + b]
-                                            * st.nuisance.multiplier_basis(k, b)
-                                            * r[b] as f64
-                                    })
-                                    .collect(),
-                            ));
-                        }
-                    }
-                    for j in 0..kbg {
-                        let k0 = a * nb;
-                        cols.push((
-                            nuis_off + a * (kmul + kbg) + kmul + j,
-                            (0..nb)
-                                .map(|b| w[k0 + b] * st.nuisance.background_basis(j, b))
-                                .collect(),
-                        ));
-                    }
-                    if free && g > 0.0 && mm > 0.0 {
-                        // Kaufman: project every column off the model direction.
-                        for (_, v) in cols.iter_mut() {
-                            let c = v.iter().zip(&mt).map(|(x, m)| x * m).sum::<f64>() / mm;
-                            for (x, m) in v.iter_mut().zip(&mt) {
-                                *x -= c * m;
-                            }
-                        }
-                    }
-                    for (ci, (ii, vi)) in cols.iter().enumerate() {
-                        let ge: f64 = vi.iter().zip(&e).map(|(x, y)| x * y).sum();
-                        if *ii == usize::MAX {
-                            pl.gd += ge;
-                        } else {
-                            acc.gg[*ii] += ge;
-                            pl.score[*ii] += ge;
-                        }
-                        for (jj, vj) in cols[ci..].iter() {
-                            let h: f64 = vi.iter().zip(vj).map(|(x, y)| x * y).sum();
-                            match (*ii == usize::MAX, *jj == usize::MAX) {
-                                (true, true) => pl.hdd += h,
-                                (true, false) => pl.hdg[*jj] += h,
-                                (false, true) => pl.hdg[*ii] += h,
-                                (false, false) => {
-                                    acc.hgg[ii * g_count + jj] += h;
-                                    if ii != jj {
-                                        acc.hgg[jj * g_count + ii] += h;
-                                    }
-                                }
-                            }
-                        }
+        let mut rows = AngleRows::new(nb);
+        for a in 0..na {
+            if !mask[a] {
+                continue;
+            }
+            let da = (d * rho[a] as f64).max(0.0);
+            s.m0.spectrum_and_derivative(a, da, &mut rows.r, &mut rows.dr);
+            let (g, mm) = self.fit_gain(s, &self.data.y[i], a, &mut rows, acc);
+            if !lin {
+                continue;
+            }
+            self.jacobian_columns(s, a, da, g, rho[a] as f64, &mut rows);
+            if s.st.nuisance.spec.free_gain && g > 0.0 && mm > 0.0 {
+                // Kaufman: project every column off the model direction.
+                for (_, v) in rows.cols.iter_mut() {
+                    let c = v.iter().zip(&rows.mt).map(|(x, m)| x * m).sum::<f64>() / mm;
+                    for (x, m) in v.iter_mut().zip(&rows.mt) {
+                        *x -= c * m;
                     }
                 }
-                if lin {
-                    acc.px.push((i, pl));
-                }
-                acc
-            })
-            .reduce(new_acc, |mut a, b| {
-                a.chi2 += b.chi2;
-                a.samples += b.samples;
-                a.gains += b.gains;
-                a.lag.0 += b.lag.0;
-                a.lag.1 += b.lag.1;
-                for (x, y) in a.hgg.iter_mut().zip(&b.hgg) {
-                    *x += y;
-                }
-                for (x, y) in a.gg.iter_mut().zip(&b.gg) {
-                    *x += y;
-                }
-                a.px.extend(b.px);
-                a
-            });
-        let mut px = acc.px;
-        px.sort_by_key(|x| x.0);
-        Evaluation {
-            chi2: acc.chi2,
-            samples: acc.samples,
-            free_gains: acc.gains,
-            lag: acc.lag,
-            pixels: px.into_iter().map(|x| x.1).collect(),
-            hgg: acc.hgg,
-            gg: acc.gg,
+            }
+            add_normal_blocks(&rows.cols, &rows.e, g_count, &mut pl, acc);
+        }
+        if lin {
+            acc.px.push((i, pl));
+        }
+    }
+
+    /// Angle `a` of a pixel whose raw values are `y` and whose model spectrum is in
+    /// `rows.r`: whitens data and model, eliminates the gain (its least-squares value
+    /// m·y/m·m, kept ≥ 0; 1 when the radiometry is absolute), leaves the residual in
+    /// `rows.e` and adds it to χ² and the lag-1 sums. Returns the gain and m·m.
+    fn fit_gain(
+        &self,
+        s: &EvalSetup,
+        y: &[f32],
+        a: usize,
+        rows: &mut AngleRows,
+        acc: &mut Acc,
+    ) -> (f64, f64) {
+        let (nb, stride) = (self.obs.bands, self.obs.stride);
+        let free = s.st.nuisance.spec.free_gain;
+        let (mut my, mut mm) = (0.0, 0.0);
+        for b in 0..nb {
+            let k = a * nb + b;
+            rows.yt[b] = (y[a * stride + b] as f64 - s.cb[k]) * s.w[k];
+            rows.mt[b] = rows.r[b] as f64 * s.sw[k];
+            my += rows.mt[b] * rows.yt[b];
+            mm += rows.mt[b] * rows.mt[b];
+        }
+        let g = if free {
+            if mm > 0.0 {
+                (my / mm).max(0.0)
+            } else {
+                0.0
+            }
+        } else {
+            1.0
+        };
+        if free && g > 0.0 {
+            acc.gains += 1;
+        }
+        let mut prev = f64::NAN;
+        for ((e, m), y) in rows.e.iter_mut().zip(&rows.mt).zip(&rows.yt) {
+            *e = g * m - y;
+            acc.chi2 += *e * *e;
+            acc.lag.1 += *e * *e;
+            if prev.is_finite() {
+                acc.lag.0 += prev * *e;
+            }
+            prev = *e;
+        }
+        acc.samples += nb;
+        (g, mm)
+    }
+
+    /// The whitened residual's derivatives at angle `a` (thickness `da` after the angle's
+    /// refraction scale `rho_a`, gain `g`) into `rows.cols`: the pixel's thickness
+    /// (analytic), the finite-difference parameters that affect this angle, and this
+    /// angle's multiplier terms — all zero when the gain is — and its background terms.
+    fn jacobian_columns(
+        &self,
+        s: &EvalSetup,
+        a: usize,
+        da: f64,
+        g: f64,
+        rho_a: f64,
+        rows: &mut AngleRows,
+    ) {
+        let nb = self.obs.bands;
+        let nuis = &s.st.nuisance;
+        let (kmul, kbg) = (nuis.spec.multiplier_terms, nuis.spec.background_terms);
+        let k0 = a * nb;
+        let first = s.nuis_off + a * (kmul + kbg);
+        let (sw, w) = (&s.sw[k0..k0 + nb], &s.w[k0..k0 + nb]);
+        rows.cols.clear();
+        if g > 0.0 {
+            let (r, dr) = (&rows.r, &rows.dr);
+            let d_col = (0..nb).map(|b| g * sw[b] * dr[b] as f64 * rho_a).collect();
+            rows.cols.push((D_COLUMN, d_col));
+            for f in s.fd.iter().filter(|f| f.angle.is_none_or(|fa| fa == a)) {
+                f.model.spectrum(a, da, &mut rows.rf);
+                let rf = &rows.rf;
+                let col = (0..nb)
+                    .map(|b| g * sw[b] * (rf[b] - r[b]) as f64 / f.step)
+                    .collect();
+                rows.cols.push((f.index, col));
+            }
+            for k in 0..kmul {
+                let col = (0..nb)
+                    .map(|b| g * w[b] * nuis.multiplier_basis(k, b) * r[b] as f64)
+                    .collect();
+                rows.cols.push((first + k, col));
+            }
+        }
+        for j in 0..kbg {
+            let col = (0..nb)
+                .map(|b| w[b] * nuis.background_basis(j, b))
+                .collect();
+            rows.cols.push((first + kmul + j, col));
         }
     }
 

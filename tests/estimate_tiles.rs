@@ -1,7 +1,8 @@
-//! A capture fitted in row bands (`thinfilm estimate --rows`, known index) and stitched by
-//! `thinfilm merge` equals the whole fit bit for bit — on a capture large enough that the
-//! thickness stage propagates from a seed lattice and resolves orders spatially, with bands
-//! that do not line up with that lattice. Tiles of different fits are refused.
+//! A capture fitted in row bands (`thinfilm estimate --rows`, known index; each band computes
+//! only its rows and a halo) and stitched by `thinfilm merge` equals the whole fit bit for
+//! bit, thickness and σ — on a capture large enough that the thickness stage propagates from
+//! a seed lattice and resolves orders spatially, with bands that do not line up with that
+//! lattice. Tiles of different fits are refused.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -38,10 +39,14 @@ fn estimate(cap: &Path, out: &Path, extra: &[&str]) {
 }
 
 fn thickness_bits(path: &Path) -> Vec<u32> {
+    channel_bits(path, "Y")
+}
+
+fn channel_bits(path: &Path, channel: &str) -> Vec<u32> {
     read_exr(path)
         .unwrap()
-        .channel("Y")
-        .expect("thickness.exr has one channel named Y")
+        .channel(channel)
+        .unwrap_or_else(|| panic!("{} has a channel {channel}", path.display()))
         .iter()
         .map(|v| v.to_bits())
         .collect()
@@ -92,6 +97,13 @@ fn stitched_row_bands_equal_the_whole_fit() {
             > 2000
     );
     assert_eq!(thickness_bits(&stitched), want);
+    // Each band computed only its rows and halo, yet its σ (curvature, χ², sub-fringe
+    // refits from its own pixels; shared terms from the whole capture) is the whole fit's.
+    let sigma = |dir: &Path| channel_bits(&dir.join("thickness_sigma.exr"), "thickness_sigma");
+    let stitched_sigma: Vec<u32> = (0..bands.len())
+        .flat_map(|i| sigma(&tmp.path().join(format!("band{i}"))))
+        .collect();
+    assert_eq!(stitched_sigma, sigma(&whole));
     assert_eq!(
         read_exr(&stitched).unwrap().attributes,
         read_exr(&whole.join("thickness.exr")).unwrap().attributes

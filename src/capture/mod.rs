@@ -158,6 +158,34 @@ impl CaptureSet {
     pub fn bands(&self) -> usize {
         self.wavelengths_nm.len()
     }
+
+    /// Rows `[a, b)` as a capture of their own (a band fitted by itself).
+    pub fn rows(&self, a: usize, b: usize) -> CaptureSet {
+        let (w, nb) = (self.width, self.bands());
+        let px = a * w..b * w;
+        let angles = self
+            .angles
+            .iter()
+            .map(|ang| AngleCapture {
+                incident_deg: ang.incident_deg,
+                incident_deg_map: ang
+                    .incident_deg_map
+                    .as_ref()
+                    .map(|m| m[px.clone()].to_vec()),
+                reflectance: ang.reflectance[px.start * nb..px.end * nb].to_vec(),
+                valid: ang.valid[px.clone()].to_vec(),
+            })
+            .collect();
+        CaptureSet {
+            pixel_names: self.pixel_names.as_ref().map(|n| n[px.clone()].to_vec()),
+            substrate_ior: self.substrate_ior.clone(),
+            wavelengths_nm: self.wavelengths_nm.clone(),
+            fwhm_nm: self.fwhm_nm.clone(),
+            height: b - a,
+            angles,
+            ..*self
+        }
+    }
 }
 
 /// Masked samples (pixel × band × angle) by cause.

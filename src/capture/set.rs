@@ -354,16 +354,16 @@ fn angle_map(
     Ok(map)
 }
 
-pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
-    let (dir, json) = if path.is_file() {
-        (
-            path.parent().unwrap_or(Path::new(".")).to_path_buf(),
-            path.to_path_buf(),
-        )
-    } else {
-        (path.to_path_buf(), path.join("capture.json"))
-    };
-    let text = crate::limits::read_text(&json, "capture set", 16)?;
+/// `capture.json` read and checked, with its media resolved.
+struct Spec {
+    file: CaptureFile,
+    ambient_ior: f64,
+    substrate_ior: Ior,
+}
+
+/// Reads and checks `capture.json` (not its cubes): every error names the field.
+fn read_spec(json: &Path) -> Result<Spec> {
+    let text = crate::limits::read_text(json, "capture set", 16)?;
     let j = json.display();
     let doc: Value = serde_json::from_str(&text).with_context(|| format!("{j}: not valid JSON"))?;
     // Checked by hand first so the message names the field and the allowed values.
@@ -379,16 +379,16 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     }
     drop(doc);
     // Typed from the text (not the parsed value) so that errors carry a line and column.
-    let spec: CaptureFile = serde_json::from_str(&text)
+    let file: CaptureFile = serde_json::from_str(&text)
         .with_context(|| format!("{j}: not a valid {CAPTURE_FORMAT} document"))?;
-    if spec.format != CAPTURE_FORMAT {
+    if file.format != CAPTURE_FORMAT {
         bail!(
             "{j}: field 'format' is '{}', expected '{CAPTURE_FORMAT}'",
-            spec.format
+            file.format
         );
     }
     let ambient =
-        ior_from_json(&spec.ambient_ior, "ambient_ior").with_context(|| format!("{j}"))?;
+        ior_from_json(&file.ambient_ior, "ambient_ior").with_context(|| format!("{j}"))?;
     let ambient_ior = match ambient {
         Ior::Constant(c) if c.im == 0.0 => c.re,
         other => bail!("{j}: ambient_ior must be a real number (light arrives through a lossless medium), got {other}"),
@@ -401,112 +401,165 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         MAX_AMBIENT_IOR,
     )?;
     let substrate_ior =
-        ior_from_json(&spec.substrate, "substrate").with_context(|| format!("{j}"))?;
+        ior_from_json(&file.substrate, "substrate").with_context(|| format!("{j}"))?;
     crate::limits::check_index(format!("{j}: substrate"), &substrate_ior)?;
-    if spec.angles.is_empty() {
+    if file.angles.is_empty() {
         bail!("{j}: 'angles' is empty");
     }
-    if spec.angles.len() > MAX_ANGLES {
+    if file.angles.len() > MAX_ANGLES {
         bail!(
             "{j}: 'angles' lists {} captures; at most {MAX_ANGLES} are supported",
-            spec.angles.len()
+            file.angles.len()
         );
     }
-    check_distinct_angles(&spec.angles, &j)?;
+    check_distinct_angles(&file.angles, &j)?;
+    for (i, a) in file.angles.iter().enumerate() {
+        if !(a.incident_deg.is_finite() && (0.0..90.0).contains(&a.incident_deg)) {
+            bail!(
+                "{j}: angles[{i}].incident_deg = {} must be in [0, 90)",
+                a.incident_deg
+            );
+        }
+    }
+    Ok(Spec {
+        file,
+        ambient_ior,
+        substrate_ior,
+    })
+}
+
+/// A cube of another angle must have the first one's size and wavelengths.
+fn check_same_cube(
+    j: &impl std::fmt::Display,
+    first: &envi::EnviHeader,
+    h: &envi::EnviHeader,
+) -> Result<()> {
+    if (first.samples, first.lines) != (h.samples, h.lines) {
+        bail!(
+            "{j}: cube sizes differ: {} is {}×{} but {} is {}×{}",
+            first.path.display(),
+            first.samples,
+            first.lines,
+            h.path.display(),
+            h.samples,
+            h.lines
+        );
+    }
+    let fw = first.wavelengths_nm.as_deref().unwrap_or_default();
+    let wl = h.wavelengths_nm.as_deref().unwrap_or_default();
+    if !same_wavelengths(fw, wl) {
+        bail!(
+            "{j}: wavelengths differ: {} has {} but {} has {}",
+            first.path.display(),
+            describe_wavelengths(fw),
+            h.path.display(),
+            describe_wavelengths(wl)
+        );
+    }
+    Ok(())
+}
+
+/// The white and dark per-band means of entry `field` (`None` without references).
+fn references(
+    json: &Path,
+    dir: &Path,
+    field: &str,
+    a: &AngleEntry,
+    file: &EnviFile,
+) -> Result<(Option<Vec<f64>>, Option<Vec<f64>>)> {
+    let white = a
+        .white
+        .as_deref()
+        .map(|n| reference_means(json, dir, &format!("{field}.white"), n, file))
+        .transpose()?;
+    let dark = match (&a.dark, &white) {
+        (Some(_), None) => {
+            bail!(
+                "{}: {field}: a 'dark' reference needs a 'white' reference too",
+                json.display()
+            )
+        }
+        (Some(n), Some(_)) => Some(reference_means(
+            json,
+            dir,
+            &format!("{field}.dark"),
+            n,
+            file,
+        )?),
+        (None, _) => None,
+    };
+    Ok((white, dark))
+}
+
+/// One angle of the set: its cube calibrated and masked, and its incidence map.
+fn load_angle(
+    json: &Path,
+    dir: &Path,
+    field: &str,
+    a: &AngleEntry,
+    file: &EnviFile,
+) -> Result<(AngleCapture, InvalidCounts)> {
+    let (white, dark) = references(json, dir, field, a, file)?;
+    let (data, mut valid, counts) = reflectance(file, white.as_deref(), dark.as_deref());
+    let map = a
+        .incident_deg_map
+        .as_deref()
+        .map(|name| {
+            let size = (file.header.samples, file.header.lines);
+            angle_map(json, dir, &format!("{field}.incident_deg_map"), name, size)
+        })
+        .transpose()?;
+    if let Some(m) = &map {
+        // Pixels of unknown incidence are not used at this angle.
+        for (v, th) in valid.iter_mut().zip(m) {
+            *v &= th.is_finite();
+        }
+    }
+    let angle = AngleCapture {
+        incident_deg: a.incident_deg,
+        incident_deg_map: map,
+        reflectance: data,
+        valid,
+    };
+    Ok((angle, counts))
+}
+
+pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
+    let (dir, json) = if path.is_file() {
+        (
+            path.parent().unwrap_or(Path::new(".")).to_path_buf(),
+            path.to_path_buf(),
+        )
+    } else {
+        (path.to_path_buf(), path.join("capture.json"))
+    };
+    let j = json.display();
+    let spec = read_spec(&json)?;
     // Decoded bytes of the angles loaded so far, against the memory budget.
     let mut decoded = 0u64;
     // Only the first header is kept (its mapping is dropped as soon as it is decoded).
     let mut first: Option<envi::EnviHeader> = None;
-    let mut angles = Vec::with_capacity(spec.angles.len());
+    let mut angles = Vec::with_capacity(spec.file.angles.len());
     let mut invalid = InvalidCounts::default();
-    for (i, a) in spec.angles.iter().enumerate() {
+    for (i, a) in spec.file.angles.iter().enumerate() {
         let field = format!("angles[{i}]");
-        if !(a.incident_deg.is_finite() && (0.0..90.0).contains(&a.incident_deg)) {
-            bail!(
-                "{j}: {field}.incident_deg = {} must be in [0, 90)",
-                a.incident_deg
-            );
-        }
         let file = open_named(&json, &dir, &format!("{field}.cube"), &a.cube)?;
         let h = &file.header;
         h.check_decode_budget(decoded)
             .with_context(|| format!("{j}: {field}.cube"))?;
         decoded += h.decoded_bytes();
-        let Some(wl) = &h.wavelengths_nm else {
+        if h.wavelengths_nm.is_none() {
             bail!(
                 "{}: header has no 'wavelength' field (a capture needs band wavelengths)",
                 h.path.display()
             );
-        };
+        }
         if let Some(fh) = &first {
-            if (fh.samples, fh.lines) != (h.samples, h.lines) {
-                bail!(
-                    "{j}: cube sizes differ: {} is {}×{} but {} is {}×{}",
-                    fh.path.display(),
-                    fh.samples,
-                    fh.lines,
-                    h.path.display(),
-                    h.samples,
-                    h.lines
-                );
-            }
-            let fw = fh.wavelengths_nm.as_deref().unwrap_or_default();
-            if !same_wavelengths(fw, wl) {
-                bail!(
-                    "{j}: wavelengths differ: {} has {} but {} has {}",
-                    fh.path.display(),
-                    describe_wavelengths(fw),
-                    h.path.display(),
-                    describe_wavelengths(wl)
-                );
-            }
+            check_same_cube(&j, fh, h)?;
         }
-        let white = a
-            .white
-            .as_deref()
-            .map(|n| reference_means(&json, &dir, &format!("{field}.white"), n, &file))
-            .transpose()?;
-        let dark = match (&a.dark, &white) {
-            (Some(_), None) => {
-                bail!("{j}: {field}: a 'dark' reference needs a 'white' reference too")
-            }
-            (Some(n), Some(_)) => Some(reference_means(
-                &json,
-                &dir,
-                &format!("{field}.dark"),
-                n,
-                &file,
-            )?),
-            (None, _) => None,
-        };
-        let (data, mut valid, counts) = reflectance(&file, white.as_deref(), dark.as_deref());
+        let (angle, counts) = load_angle(&json, &dir, &field, a, &file)?;
+        angles.push(angle);
         invalid.add(&counts);
-        let map = a
-            .incident_deg_map
-            .as_deref()
-            .map(|name| {
-                let size = (file.header.samples, file.header.lines);
-                angle_map(
-                    &json,
-                    &dir,
-                    &format!("{field}.incident_deg_map"),
-                    name,
-                    size,
-                )
-            })
-            .transpose()?;
-        if let Some(m) = &map {
-            // Pixels of unknown incidence are not used at this angle.
-            for (v, th) in valid.iter_mut().zip(m) {
-                *v &= th.is_finite();
-            }
-        }
-        angles.push(AngleCapture {
-            incident_deg: a.incident_deg,
-            incident_deg_map: map,
-            reflectance: data,
-            valid,
-        });
         if first.is_none() {
             first = Some(file.header);
         }
@@ -525,12 +578,12 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         );
     }
     Ok(CaptureSet {
-        polarization: spec.polarization,
-        radiometry: spec.radiometry,
-        film_model: spec.film_model,
+        polarization: spec.file.polarization,
+        radiometry: spec.file.radiometry,
+        film_model: spec.file.film_model,
         pixel_names: None,
-        ambient_ior,
-        substrate_ior,
+        ambient_ior: spec.ambient_ior,
+        substrate_ior: spec.substrate_ior,
         wavelengths_nm: h.wavelengths_nm.unwrap_or_default(),
         fwhm_nm: h.fwhm_nm,
         width: h.samples,

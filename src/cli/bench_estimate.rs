@@ -42,6 +42,11 @@ pub struct Args {
     /// Skip the band sweep and robustness sections.
     #[arg(long)]
     pub table_only: bool,
+    /// With the 1-megapixel test: also fit it in N row bands with the index given
+    /// (`estimate --part K/N --film-ior`), timing each band against the whole fit with
+    /// the same index and checking the stitched thickness is bit-identical.
+    #[arg(long, default_value_t = 0)]
+    pub bands: usize,
 }
 
 struct Row {
@@ -608,75 +613,185 @@ fn large(args: &Args, md: &mut String) -> Result<()> {
         write_capture_set(&cfg, &dir)?;
         cfg.progress = false;
     }
-    let t = Instant::now();
-    let cpu0 = thinfilm::estimate::process_cpu_seconds();
-    let run = report::fit_capture_dir(
-        &dir,
-        &args.out.join("large_fit"),
-        &Options {
-            progress: true,
-            ..Options::default()
-        },
-        Some(&dir.join("ground_truth")),
-    )?;
-    let total = t.elapsed().as_secs_f64();
-    let fit = &run.fit;
+    // The capture is calibrated ("absolute"): no nuisance terms. "relative" fits a gain per
+    // pixel and angle and a multiplier and background per angle as a real capture needs.
+    let runs = [
+        ("no nuisance terms", None),
+        (
+            "nuisance terms",
+            Some(thinfilm::capture::Radiometry::Relative),
+        ),
+    ];
+    let mut timed = Vec::new();
+    for (i, (what, radiometry)) in runs.into_iter().enumerate() {
+        let t = Instant::now();
+        let cpu0 = thinfilm::estimate::process_cpu_seconds();
+        let run = report::fit_capture_dir(
+            &dir,
+            &args.out.join(format!("large_fit{i}")),
+            &Options {
+                progress: true,
+                radiometry,
+                ..Options::default()
+            },
+            Some(&dir.join("ground_truth")),
+        )?;
+        let total = t.elapsed().as_secs_f64();
+        let cpu = cpu0
+            .zip(thinfilm::estimate::process_cpu_seconds())
+            .map(|(a, b)| b - a);
+        eprintln!("large ({what}): {total:.2} s");
+        timed.push((what, run, total, cpu));
+    }
+    let fit = &timed[0].1.fit;
     let (w, h) = (fit.width, fit.height);
-    let mp = (w * h) as f64 / 1e6;
     let (na, nb) = (cfg.angles_deg.len(), cfg.wavelengths_nm.len());
     let _ = writeln!(
         md,
-        "### 1-megapixel speed run (full, {w}×{h} × {na} angles × {nb} bands = {:.2} GB float32 ENVI on disk, {} threads)\n",
+        "### 1-megapixel speed run (full, {w}×{h} × {na} angles × {nb} bands = {:.2} GB float32 ENVI on disk, {} threads, load average {})\n",
         (w * h * na * nb * 4) as f64 / 1e9,
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        load_average()
     );
-    md.push_str(
-        "| stage | wall s | wall s/MP | CPU s (all threads) | CPU s/MP |\n|---|---|---|---|---|\n",
-    );
-    let cpu_of = |k: &str| {
-        fit.stage_cpu_seconds
-            .iter()
-            .chain(&run.io_cpu_seconds)
-            .find(|(n, _)| n == k)
-            .map(|(_, v)| *v)
+    large_table(md, &timed, (w * h) as f64 / 1e6);
+    if args.bands > 0 {
+        band_costs(&dir, fit.film_ior, args.bands, md)?;
+    }
+    Ok(())
+}
+
+/// The one-minute load average (`/proc/loadavg`), to read wall times on a shared machine.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|t| t.split_whitespace().next().map(String::from))
+        .unwrap_or_else(|| "unknown".into())
+}
+
+/// Per-stage wall and CPU seconds of the large runs, side by side.
+fn large_table(md: &mut String, timed: &[(&str, report::FitRun, f64, Option<f64>)], mp: f64) {
+    md.push_str("| stage |");
+    for (what, ..) in timed {
+        let _ = write!(md, " wall s ({what}) | CPU s ({what}) |");
+    }
+    md.push_str("\n|---|");
+    md.push_str(&"---|---|".repeat(timed.len()));
+    md.push('\n');
+    let names = |run: &report::FitRun| -> Vec<String> {
+        let load = run.io_seconds.iter().filter(|(k, _)| k == "load");
+        let rest = run.io_seconds.iter().filter(|(k, _)| k != "load");
+        load.chain(&run.fit.stage_seconds)
+            .chain(rest)
+            .map(|(k, _)| k.clone())
+            .collect()
     };
-    let load = run.io_seconds.iter().filter(|(k, _)| k == "load");
-    let rest = run.io_seconds.iter().filter(|(k, _)| k != "load");
-    for (k, v) in load.chain(&fit.stage_seconds).chain(rest) {
-        let c = cpu_of(k);
+    let mut rows = names(&timed[0].1);
+    for (_, run, ..) in &timed[1..] {
+        for k in names(run) {
+            if !rows.contains(&k) {
+                rows.push(k);
+            }
+        }
+    }
+    let find = |v: &[(String, f64)], k: &str| v.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
+    for k in &rows {
+        let _ = write!(md, "| {k} |");
+        for (_, run, ..) in timed {
+            let wall = find(&run.fit.stage_seconds, k).or(find(&run.io_seconds, k));
+            let cpu = find(&run.fit.stage_cpu_seconds, k).or(find(&run.io_cpu_seconds, k));
+            let _ = write!(md, " {} | {} |", opt(wall, 2), opt(cpu, 2));
+        }
+        md.push('\n');
+    }
+    md.push_str("| **total** |");
+    for (_, _, total, cpu) in timed {
+        let _ = write!(md, " **{total:.2}** | {} |", opt(*cpu, 2));
+    }
+    let _ = writeln!(
+        md,
+        "\n\nWall-clock time includes waiting for the cores when the machine is shared; CPU \
+         time / {} threads is the least wall time the same work needs on idle cores ({:.2} MP).",
+        rayon::current_num_threads(),
+        mp
+    );
+    for (what, run, ..) in timed {
+        let (n_err, mae) = run
+            .truth
+            .as_ref()
+            .map(|t| (t.film_ior_abs_error, t.thickness_mae_nm))
+            .unwrap_or((f64::NAN, f64::NAN));
         let _ = writeln!(
             md,
-            "| {k} | {v:.2} | {:.2} | {} | {} |",
-            v / mp,
-            opt(c, 2),
-            opt(c.map(|c| c / mp), 2)
+            "\n{what}: |n error| {n_err:.4}, thickness MAE {mae:.2} nm, {} valid px.",
+            run.fit.valid_pixels()
         );
     }
-    let cpu_total = cpu0
-        .zip(thinfilm::estimate::process_cpu_seconds())
-        .map(|(a, b)| b - a);
+    md.push('\n');
+}
+
+/// The large capture fitted whole and in `parts` row bands with the index `film_ior` given,
+/// each on the loaded capture (no load or write): what a band costs against the whole fit,
+/// and whether the stitched bands equal it bit for bit.
+fn band_costs(dir: &std::path::Path, film_ior: f64, parts: usize, md: &mut String) -> Result<()> {
+    let set = load_capture_set(dir)?;
+    let base = Options {
+        film_ior: Some(thinfilm::optics::Ior::Constant(
+            thinfilm::optics::Complex64::new(film_ior, 0.0),
+        )),
+        ..Options::default()
+    };
+    let timed = |opts: &Options| -> Result<(Fit, f64, Option<f64>)> {
+        let t = Instant::now();
+        let cpu0 = thinfilm::estimate::process_cpu_seconds();
+        let fit = estimate(&set, opts)?;
+        let cpu = cpu0
+            .zip(thinfilm::estimate::process_cpu_seconds())
+            .map(|(a, b)| b - a);
+        Ok((fit, t.elapsed().as_secs_f64(), cpu))
+    };
+    let (whole, whole_s, whole_cpu) = timed(&base)?;
     let _ = writeln!(
         md,
-        "| total | {total:.2} | {:.2} | {} | {} |",
-        total / mp,
-        opt(cpu_total, 2),
-        opt(cpu_total.map(|c| c / mp), 2)
+        "### Row bands ({parts} bands, index given, fit only: no load or write; load average {})\n",
+        load_average()
     );
-    let _ = writeln!(
-        md,
-        "\nWall-clock time includes waiting for the cores when the machine is shared; CPU \
-         time / {} threads is the least wall time the same work needs on idle cores.",
-        rayon::current_num_threads()
+    md.push_str(
+        "| fit | rows | wall s | CPU s | wall ÷ whole | CPU ÷ whole |\n|---|---|---|---|---|---|\n",
     );
-    let (n_err, mae) = run
-        .truth
-        .as_ref()
-        .map(|t| (t.film_ior_abs_error, t.thickness_mae_nm))
-        .unwrap_or((f64::NAN, f64::NAN));
+    let row = |md: &mut String, what: &str, rows: (usize, usize), s: f64, c: Option<f64>| {
+        let _ = writeln!(
+            md,
+            "| {what} | {}:{} | {s:.2} | {} | {:.2} | {} |",
+            rows.0,
+            rows.1,
+            opt(c, 2),
+            s / whole_s,
+            opt(c.zip(whole_cpu).map(|(c, w)| c / w), 2)
+        );
+    };
+    row(md, "whole", whole.rows, whole_s, whole_cpu);
+    let mut stitched: Vec<u32> = Vec::with_capacity(whole.thickness_nm.len());
+    for k in 0..parts {
+        let opts = Options {
+            rows: Some(thinfilm::estimate::tiles::RowBand::Part {
+                index: k,
+                count: parts,
+            }),
+            ..base.clone()
+        };
+        let (fit, s, c) = timed(&opts)?;
+        row(md, &format!("band {k}/{parts}"), fit.rows, s, c);
+        stitched.extend(fit.thickness_nm.iter().map(|v| v.to_bits()));
+    }
+    let want: Vec<u32> = whole.thickness_nm.iter().map(|v| v.to_bits()).collect();
     let _ = writeln!(
         md,
-        "\n|n error| {n_err:.4}, thickness MAE {mae:.2} nm, {} valid px (target ≤ 10 s total).\n",
-        fit.valid_pixels()
+        "\nStitched bands {} the whole fit's thickness bit for bit.\n",
+        if stitched == want {
+            "equal"
+        } else {
+            "DIFFER FROM"
+        }
     );
     Ok(())
 }

@@ -100,13 +100,9 @@ pub fn run(cx: &Context, sol: &FilmSolution, map: &mut ThicknessMap) -> Checked 
     // Thin-film identifiability: with relative radiometry and a single angle, the shape
     // of less than one fringe is indistinguishable from the spectral multiplier unless
     // other pixels with whole fringes fix that multiplier.
-    let anchored = sol
-        .joint_pixels
-        .iter()
-        .filter(|&&p| map.d[p].is_finite() && fringes(cx, sol, map.d[p] as f64) >= 1.0)
-        .count()
-        >= 2;
-    let blank_thin = obs.radiometry != Radiometry::Absolute && obs.angles == 1 && !anchored;
+    let blank_thin = obs.radiometry != Radiometry::Absolute
+        && obs.angles == 1
+        && !anchored(cx, sol, &fixed, &white);
     let nuisance_shift = if blank_thin {
         vec![0f32; obs.pixels()]
     } else {
@@ -168,7 +164,7 @@ pub fn run(cx: &Context, sol: &FilmSolution, map: &mut ThicknessMap) -> Checked 
              set \"radiometry\": \"absolute\" for calibrated reflectance, or fit them together \
              with thicker films of the same setup",
             out.not_identifiable,
-            obs.pixels(),
+            cx.band().len(),
             obs.geom.lambda_min(),
             obs.geom.lambda_max()
         ));
@@ -184,6 +180,34 @@ pub fn run(cx: &Context, sol: &FilmSolution, map: &mut ThicknessMap) -> Checked 
         diagnose(cx, sol, out.chi2_red);
     }
     out
+}
+
+/// Whether at least two pixels of the joint fit — those that fixed the shared multiplier —
+/// hold a whole fringe, by their own best thickness (a global search each, so that a band
+/// of rows decides as the whole fit does without the other rows' thickness).
+fn anchored(cx: &Context, sol: &FilmSolution, fixed: &FixedModel, white: &Whitening) -> bool {
+    let obs = &cx.obs;
+    let solver = ThicknessSolver::new(
+        fixed,
+        cx.opts.min_thickness_nm,
+        cx.opts.max_thickness_nm,
+        obs.pixels() > 64,
+    );
+    let whole: usize = sol
+        .joint_pixels
+        .par_iter()
+        .map_init(
+            || PixelData::new(obs),
+            |px, &p| {
+                if px.load(obs, white, &sol.film, p) == 0 {
+                    return 0;
+                }
+                let d = solver.search(px).0;
+                usize::from(d.is_finite() && fringes(cx, sol, d) >= 1.0)
+            },
+        )
+        .sum();
+    whole >= 2
 }
 
 /// Tries the likely causes of a bad fit on a subset of pixels and reports the best.

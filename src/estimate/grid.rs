@@ -90,12 +90,17 @@ impl ThicknessStage for GridThickness {
         let obs = &cx.obs;
         let m = obs.geom.model_of(&sol.film, 0.0);
         let sigma2 = cx.noise.typical * cx.noise.typical;
+        let band = cx.band();
         let res: Vec<(f32, f32, u32)> = (0..obs.pixels())
             .into_par_iter()
             .map_init(
                 || PixelData::new(obs),
                 |px, p| {
-                    let used = obs.get(p, &mut px.y, &mut px.mask);
+                    let used = if band.contains(&p) {
+                        obs.get(p, &mut px.y, &mut px.mask)
+                    } else {
+                        0
+                    };
                     if used == 0 {
                         return (f32::NAN, 0.0, 0);
                     }

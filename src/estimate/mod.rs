@@ -169,8 +169,9 @@ pub struct Options {
     /// Pixels used for the joint refinement of `full`.
     pub joint_pixels: usize,
     pub progress: bool,
-    /// Fit only a band of rows: the index from its pixels (unless given), its thickness
-    /// exactly as in the whole fit ([`tiles`]). `None`: every row.
+    /// Fit only a band of rows: everything from its pixels when the index is not given,
+    /// else its thickness exactly as in the whole fit, computing only its rows and a halo
+    /// ([`tiles`]). `None`: every row.
     pub rows: Option<tiles::RowBand>,
 }
 
@@ -341,8 +342,12 @@ fn known_index(ior: &Ior, cx: &Context) -> Result<IndexEstimate> {
 /// Runs the chosen estimator.
 pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     check_set(set)?;
-    if let Some(band) = opts.rows {
-        band.resolve(set.height)?;
+    let rows = match opts.rows {
+        Some(band) => band.resolve(set.height)?,
+        None => (0, set.height),
+    };
+    if opts.film_ior.is_none() && rows != (0, set.height) {
+        return band_on_its_own(set, opts, rows);
     }
     if opts.film_ior.is_none() {
         let mut distinct: Vec<f64> = set.angles.iter().map(|a| a.incident_deg).collect();
@@ -375,7 +380,11 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let sample = data::spread(&obs.pixels_with_angles(1), 4096);
     let noise = noise::estimate(&obs, &sample);
     t.stop("noise", &mut stages);
-    let cx = Context::new(obs, &opts, noise);
+    let mut cx = Context::new(obs, &opts, noise);
+    // A band with a given index: the global stages (noise, nuisance terms, thickness seeds)
+    // see the whole capture, the per-pixel ones fit the band (and the thickness stage its
+    // halo), so the band's rows come out exactly as in the whole fit.
+    cx.rows = rows;
     let pipe = opts.method.pipeline();
     let first = match &opts.film_ior {
         Some(ior) => known_index(ior, &cx)?,
@@ -395,13 +404,7 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
     let t = Stopwatch::start();
     let checked = checks::run(&cx, &sol, &mut map);
     t.stop("checks", &mut stages);
-    // A band of rows (`--rows`): every stage ran on the whole capture (the global stages
-    // on pixel samples of it), so the band's thickness is exactly the same rows of the
-    // whole fit; keep those rows.
-    let rows = match opts.rows {
-        Some(band) => band.resolve(set.height)?,
-        None => (0, set.height),
-    };
+    // Per-pixel maps are of the whole image, NaN outside the band: keep the band's rows.
     let kept = rows.0 * set.width..rows.1 * set.width;
     let mut sigma = checked.sigma;
     crop(&mut map.d, &kept);
@@ -450,6 +453,27 @@ pub fn estimate(set: &CaptureSet, opts: &Options) -> Result<Fit> {
         stage_cpu_seconds: stages.cpu,
         warnings: cx.take_warnings(),
     })
+}
+
+/// A band of rows fitted as a capture of its own — index, noise, nuisance terms and
+/// thickness from its pixels alone (phase one of the two-phase recipe: the index from a band
+/// of typical film) — reported as rows `rows` of `set`.
+fn band_on_its_own(set: &CaptureSet, opts: &Options, rows: (usize, usize)) -> Result<Fit> {
+    let band = set.rows(rows.0, rows.1);
+    let mut fit = estimate(
+        &band,
+        &Options {
+            rows: None,
+            ..opts.clone()
+        },
+    )?;
+    let mut hashed = opts.clone();
+    hashed.film_model = hashed.film_model.or(set.film_model);
+    fit.rows = rows;
+    fit.provenance.rows = rows;
+    fit.provenance.image_height = set.height;
+    fit.provenance.fit_hash = tiles::fit_hash(set, fit.film_ior, &hashed);
+    Ok(fit)
 }
 
 /// Keeps the pixels `kept` of a per-pixel map.

@@ -119,12 +119,17 @@ impl ThicknessStage for Eq13Thickness {
         let order = angle_order(obs.set);
         let pb = cx.progress_bar(obs.pixels(), "thickness");
         let sigma2: f64 = cx.noise.typical * cx.noise.typical;
+        let band = cx.band();
         let res: Vec<(f32, f32, u32)> = (0..obs.pixels())
             .into_par_iter()
             .map_init(
                 || (vec![0f32; na * s], vec![false; na]),
                 |(y, mk), p| {
-                    let used = obs.get(p, y, mk);
+                    let used = if band.contains(&p) {
+                        obs.get(p, y, mk)
+                    } else {
+                        0
+                    };
                     if used == 0 {
                         return (f32::NAN, 0.0, 0);
                     }

@@ -26,17 +26,29 @@ pub struct Context<'a> {
     pub obs: Observations<'a>,
     pub opts: &'a Options,
     pub noise: NoiseEstimate,
+    /// Rows `[A, B)` whose thickness the per-pixel stages fit (every row unless a band fit,
+    /// [`super::tiles`]); the global stages always see the whole capture.
+    pub rows: (usize, usize),
     warnings: Mutex<Vec<String>>,
 }
 
 impl<'a> Context<'a> {
+    /// A context for a fit of every row.
     pub fn new(obs: Observations<'a>, opts: &'a Options, noise: NoiseEstimate) -> Self {
+        let rows = (0, obs.height);
         Context {
             obs,
             opts,
             noise,
+            rows,
             warnings: Mutex::new(Vec::new()),
         }
+    }
+
+    /// The pixels (capture indices) of [`Context::rows`]: outside them per-pixel stages
+    /// leave NaN.
+    pub fn band(&self) -> std::ops::Range<usize> {
+        self.rows.0 * self.obs.width..self.rows.1 * self.obs.width
     }
 
     /// Records a warning for `fit.json` and the console.

@@ -7,6 +7,10 @@
 //! seeds and then to the global search where the fit is poor. Finally order jumps are
 //! removed with the spatial smoothness of d: where d leaves its neighbourhood median by
 //! more than a fraction of a fringe, the fit from the median is kept when about as good.
+//!
+//! A band fit ([`super::tiles`]) searches every seed (their typical residual sets what a good
+//! fit is), propagates only the band's rows and [`HALO_ROWS`] above and below, and resolves
+//! orders there: the band's rows see exactly the values they see in the whole fit.
 
 use super::data::{median, Observations, PixelData};
 use super::nuisance::Whitening;
@@ -22,6 +26,10 @@ pub struct TableThickness;
 type PixelFit = (f32, f32, u32, f32);
 
 const NONE: PixelFit = (f32::NAN, 0.0, 0, 0.0);
+
+/// Rows above and below a band that its order resolution reads: two rounds of a median of
+/// radius 2 (round two of a band row reads round one two rows away, which read two more).
+pub const HALO_ROWS: usize = 4;
 
 impl ThicknessStage for TableThickness {
     fn run(&self, cx: &Context, sol: &FilmSolution) -> Result<ThicknessMap> {
@@ -50,10 +58,17 @@ fn fit_all(
     // A few hundred seeds get the global search; the rest start from a neighbour.
     let stride = (((w * h) as f64 / 384.0).sqrt().floor() as usize).clamp(1, 48);
     let mut out = vec![NONE; w * h];
-    let pb = cx.progress_bar(w * h, "thickness");
+    // Rows fitted: the band and the halo its order resolution reads.
+    let win = (
+        cx.rows.0.saturating_sub(HALO_ROWS),
+        (cx.rows.1 + HALO_ROWS).min(h),
+    );
+    let pb = cx.progress_bar(w * (win.1 - win.0), "thickness");
     let load = |px: &mut PixelData, p: usize| px.load(obs, white, film, p) > 0;
-    // 1. Seeds.
-    let seeds: Vec<usize> = (0..h)
+    // 1. Seeds: all of them where rows propagate from them (their typical residual is
+    // what a good fit is), else (every pixel a seed) those of the fitted rows.
+    let seed_rows = if stride > 1 { 0..h } else { win.0..win.1 };
+    let seeds: Vec<usize> = seed_rows
         .step_by(stride)
         .flat_map(|y| (0..w).step_by(stride).map(move |x| y * w + x))
         .collect();
@@ -70,7 +85,6 @@ fn fit_all(
             },
         )
         .collect();
-    pb.inc(seeds.len() as u64);
     for (p, f) in seed_fits {
         out[p] = f;
     }
@@ -89,7 +103,7 @@ fn fit_all(
         let typical = median(&mut seed_chi).unwrap_or(1.0);
         // A fit this good is taken as the right order (no global search).
         let good = 2.0 * typical + 1e-6;
-        let rows: Vec<(usize, Vec<PixelFit>)> = (0..h)
+        let rows: Vec<(usize, Vec<PixelFit>)> = (win.0..win.1)
             .into_par_iter()
             .map_init(
                 || PixelData::new(obs),
@@ -143,11 +157,13 @@ fn fit_all(
         for (yy, row) in rows {
             out[yy * w..(yy + 1) * w].copy_from_slice(&row);
         }
-    } else {
-        pb.inc((w * h - seeds.len()) as u64);
     }
     pb.finish_and_clear();
-    resolve_orders(obs, solver, white, film, &mut out);
+    resolve_orders(obs, solver, white, film, &mut out, win);
+    // Seeds and halo rows outside the band belong to other bands' fits.
+    let band = cx.band();
+    out[..band.start].fill(NONE);
+    out[band.end..].fill(NONE);
     ThicknessMap {
         d: out.iter().map(|f| f.0).collect(),
         chi2: out.iter().map(|f| f.1).collect(),
@@ -156,33 +172,39 @@ fn fit_all(
     }
 }
 
-/// Spatial order resolution (twice): where d jumps from its neighbourhood median by more
-/// than a quarter fringe, re-fit from the median and keep it when the fit is about as good
-/// (an order jump with equal residual is the smoothness prior's call).
+/// Spatial order resolution (twice) on rows `win`: where d jumps from its neighbourhood
+/// median by more than a quarter fringe, re-fit from the median and keep it when the fit is
+/// about as good (an order jump with equal residual is the smoothness prior's call). Rows
+/// within [`HALO_ROWS`] of an edge of `win` that is not the image's are not final.
 fn resolve_orders(
     obs: &Observations,
     solver: &ThicknessSolver,
     white: &Whitening,
     film: &super::film::FilmIndex,
     out: &mut [PixelFit],
+    win: (usize, usize),
 ) {
     let (w, h) = (obs.width, obs.height);
+    let first = win.0 * w;
     for _ in 0..2 {
         let d: Vec<f32> = out.iter().map(|f| f.0).collect();
-        let med = median_filter(&d, w, h, 2);
+        // med[i] is the median at pixel first + i.
+        let med = median_filter_rows(&d, w, h, 2, win);
         let tau = solver.scan_step * 2.0;
-        let changes: Vec<(usize, PixelFit)> = (0..w * h)
+        let changes: Vec<(usize, PixelFit)> = (win.0 * w..win.1 * w)
             .into_par_iter()
             .filter(|&p| {
-                d[p].is_finite() && med[p].is_finite() && (d[p] - med[p]).abs() as f64 > tau
+                let m = med[p - first];
+                d[p].is_finite() && m.is_finite() && (d[p] - m).abs() as f64 > tau
             })
             .map_init(
                 || PixelData::new(obs),
                 |px, p| {
+                    let m = med[p - first];
                     px.load(obs, white, film, p);
-                    let (d2, s2, h2) = solver.refine(px, med[p] as f64, 8);
+                    let (d2, s2, h2) = solver.refine(px, m as f64, 8);
                     let tol = 1.25 * out[p].1 as f64 + 1e-9;
-                    if s2 <= tol && (d2 - med[p] as f64).abs() < tau {
+                    if s2 <= tol && (d2 - m as f64).abs() < tau {
                         (p, (d2 as f32, s2 as f32, out[p].2, h2 as f32))
                     } else {
                         (p, out[p])
@@ -232,9 +254,10 @@ fn interpolate_seed(
     (wsum > 0.0).then(|| acc / wsum)
 }
 
-/// Median over the (2r+1)² neighbourhood, ignoring NaN.
-pub fn median_filter(d: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    (0..w * h)
+/// Median over the (2r+1)² neighbourhood (inside the image), ignoring NaN, for the pixels
+/// of rows `[rows.0, rows.1)`.
+fn median_filter_rows(d: &[f32], w: usize, h: usize, r: usize, rows: (usize, usize)) -> Vec<f32> {
+    (rows.0 * w..rows.1 * w)
         .into_par_iter()
         .map_init(Vec::new, |buf: &mut Vec<f32>, p| {
             let (x, y) = (p % w, p / w);

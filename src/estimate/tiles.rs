@@ -4,14 +4,21 @@
 //! With the film index given, the `full` method's thickness of a pixel depends on the rest of
 //! the image through (1) the global search on a lattice of seed pixels spread over the whole
 //! image, and the typical residual of those seeds, (2) its own row (propagation from the left
-//! neighbour), and (3) spatial order resolution (two rounds of a 5×5 median, reaching four rows
-//! above and below), besides the global stages that run on pixel samples of the whole capture.
-//! A band fit runs every stage on the whole capture and keeps its own rows: the same arithmetic
-//! on the same values as the whole fit, so the stitched map is bit-identical. (It therefore
-//! saves no compute yet; fitting only the band and a four-row halo is the planned saving.) The
-//! `paper` and `grid` methods fit each pixel on its own. Without `--film-ior`, the index is
-//! fitted from the band's own pixels (phase one of the two-phase recipe for huge captures:
-//! the index from a band, then every band with that index).
+//! neighbour), (3) spatial order resolution (two rounds of a 5×5 median, reaching
+//! [`HALO_ROWS`](super::thickness::HALO_ROWS) = 4 rows above and below), and (4) the global
+//! stages, which run on pixel samples of the whole capture (noise, the nuisance terms of the
+//! joint fit, whether thin films are anchored by the joint fit's pixels). A band fit runs (1)
+//! and (4) on the whole capture, (2) and (3) on its rows and the halo, and the checks (σ,
+//! identifiability, sub-fringe refits, χ²/dof, warnings) and the report on its rows: the band's
+//! thickness is the same arithmetic on the same values as in the whole fit, so the stitched map
+//! is bit-identical, and its σ, χ²/dof and warnings describe the band. The `paper` and `grid`
+//! methods fit each pixel on its own; a band fits only its pixels. Without `--film-ior`, a band
+//! is fitted as a capture of its own — index, noise, nuisance terms and thickness from its
+//! pixels (phase one of the two-phase recipe for huge captures: the index from a band, then
+//! every band with that index).
+//!
+//! Cost (`thinfilm bench estimate --bands 4`, 1024×1024 × 5 angles × 81 bands): see
+//! `docs/scale-out.md`.
 //!
 //! Every thickness EXR carries its provenance (text attributes `thinfilm.kind` = `fit`,
 //! `thinfilm.rows` `A:B`, `thinfilm.imageHeight`, `thinfilm.fitHash` — a fingerprint of the

@@ -63,112 +63,41 @@ impl Accel {
     /// be hit, or add nothing to their twin); the count is returned so the caller can report it.
     /// `samples` (pixels × samples per pixel to render) picks the build's effort, see
     /// [`build_params`].
+    ///
+    /// Memory: at 2M triangles the peak is obvhs' BVH2 → CWBVH conversion (a 7-entry cost
+    /// table per BVH2 node, ~110 bytes per triangle, beside the BVH2's own 64). Nothing else of
+    /// size is held then: triangles are (shape, index) references into the scene's meshes until
+    /// the intersection array is made after the build, the build boxes are freed once the BVH2
+    /// exists, and the meshes are copied only after the build.
     pub fn build(scene: &Scene, samples: u64) -> anyhow::Result<(Self, usize)> {
-        // Exact capacities: for millions of triangles a doubling Vec's spare half was
-        // ~100 MB of the peak.
-        let n_tris: usize = (scene.shapes.iter())
-            .map(|s| match &s.geometry {
-                Geometry::Mesh(m) => m.indices.len(),
-                Geometry::Sphere { .. } => 0,
-            })
-            .sum();
-        let mut tris = Vec::with_capacity(n_tris);
-        let mut tri_ref = Vec::with_capacity(n_tris);
-        let mut spheres = Vec::new();
-        let mut meshes = Vec::with_capacity(scene.shapes.len());
-        let mut dropped = 0usize;
-        let mut repeats = RepeatFilter::default();
-        for (si, shape) in scene.shapes.iter().enumerate() {
-            match &shape.geometry {
-                Geometry::Mesh(m) => {
-                    let name = shape.name.as_deref().unwrap_or("<unnamed>");
-                    if !m.normals.is_empty() && m.normals.len() != m.positions.len() {
-                        anyhow::bail!(
-                            "mesh '{name}' (shape {si}): {} normals for {} vertices",
-                            m.normals.len(),
-                            m.positions.len()
-                        );
-                    }
-                    if !m.uvs.is_empty() && m.uvs.len() != m.positions.len() {
-                        anyhow::bail!(
-                            "mesh '{name}' (shape {si}): {} uvs for {} vertices",
-                            m.uvs.len(),
-                            m.positions.len()
-                        );
-                    }
-                    for (ti, idx) in m.indices.iter().enumerate() {
-                        if idx.iter().any(|&i| i as usize >= m.positions.len()) {
-                            anyhow::bail!(
-                                "mesh '{name}' (shape {si}): triangle {ti} indexes vertex {:?} but the mesh has {} vertices",
-                                idx,
-                                m.positions.len()
-                            );
-                        }
-                        let [a, b, c] = idx.map(|i| m.positions[i as usize]);
-                        let area2 = (b - a).cross(c - a).length();
-                        if !(a.is_finite() && b.is_finite() && c.is_finite())
-                            || area2 <= 0.0
-                            || !area2.is_finite()
-                            || repeats.seen_before([a, b, c], &tris)
-                        {
-                            dropped += 1;
-                            continue;
-                        }
-                        tris.push(Triangle {
-                            v0: a.into(),
-                            v1: b.into(),
-                            v2: c.into(),
-                        });
-                        tri_ref.push((si as u32, ti as u32));
-                    }
-                    meshes.push(Some(m.clone()));
-                }
-                Geometry::Sphere {
-                    center,
-                    radius,
-                    rotation,
-                    flip_normals,
-                } => {
-                    if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
-                        anyhow::bail!(
-                            "sphere shape {si}: radius must be finite and > 0, got {radius}"
-                        );
-                    }
-                    spheres.push(SphereGeom {
-                        center: *center,
-                        radius: *radius,
-                        to_local: rotation.transpose(),
-                        flip_normals: *flip_normals,
-                        shape: si as u32,
-                    });
-                    meshes.push(None);
-                }
+        let (tri_ref, spheres, dropped) = collect_triangles(scene)?;
+        let vertices = |&(shape, local): &(u32, u32)| -> [Vec3; 3] {
+            match &scene.shapes[shape as usize].geometry {
+                Geometry::Mesh(m) => m.indices[local as usize].map(|k| m.positions[k as usize]),
+                Geometry::Sphere { .. } => unreachable!("triangle references point into meshes"),
             }
-        }
-        let mut rt_tris = Vec::new();
-        let bvh = if tris.is_empty() {
-            None
-        } else {
-            let mut core_time = std::time::Duration::default();
-            let params = build_params(samples, tris.len());
-            let bvh = match tie_broken_boxes(&tris) {
-                Some(boxes) => obvhs::cwbvh::builder::build_cwbvh(&boxes, params, &mut core_time),
-                None => obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut core_time),
-            };
-            // Reorder once so leaf primitive ids index the triangle arrays directly.
-            rt_tris = bvh
-                .primitive_indices
-                .iter()
-                .map(|&i| RtTriangle::from(&tris[i as usize]))
-                .collect();
-            drop(tris);
-            tri_ref = bvh
-                .primitive_indices
-                .iter()
-                .map(|&i| tri_ref[i as usize])
-                .collect();
-            Some(bvh)
         };
+        let (bvh, rt_tris, tri_ref) = if tri_ref.is_empty() {
+            (None, Vec::new(), tri_ref)
+        } else {
+            let bvh = build_bvh(&tri_ref, vertices, build_params(samples, tri_ref.len()));
+            // Reorder once so leaf primitive ids index the triangle arrays directly.
+            let order = &bvh.primitive_indices;
+            let rt_tris = (order.iter())
+                .map(|&i| {
+                    let [a, b, c] = vertices(&tri_ref[i as usize]);
+                    RtTriangle::new(a.into(), b.into(), c.into())
+                })
+                .collect();
+            let tri_ref = order.iter().map(|&i| tri_ref[i as usize]).collect();
+            (Some(bvh), rt_tris, tri_ref)
+        };
+        let meshes = (scene.shapes.iter())
+            .map(|s| match &s.geometry {
+                Geometry::Mesh(m) => Some(m.clone()),
+                Geometry::Sphere { .. } => None,
+            })
+            .collect();
         Ok((
             Accel {
                 bvh,
@@ -440,6 +369,183 @@ impl Accel {
     }
 }
 
+/// A triangle of the scene: (shape, triangle index within the shape's mesh).
+type TriRef = (u32, u32);
+
+/// The scene's triangles that can be hit, as references into its meshes, its spheres, and
+/// how many triangles were dropped (degenerate, non-finite or repeated); errors name the
+/// mesh whose normals, uvs or indices do not fit its vertices.
+fn collect_triangles(scene: &Scene) -> anyhow::Result<(Vec<TriRef>, Vec<SphereGeom>, usize)> {
+    // Exact capacity: for millions of triangles a doubling Vec's spare half was ~100 MB of
+    // the peak.
+    let n_tris: usize = (scene.shapes.iter())
+        .map(|s| match &s.geometry {
+            Geometry::Mesh(m) => m.indices.len(),
+            Geometry::Sphere { .. } => 0,
+        })
+        .sum();
+    let mut tri_ref = Vec::with_capacity(n_tris);
+    let mut spheres = Vec::new();
+    let mut dropped = 0usize;
+    let mut repeats = RepeatFilter::default();
+    for (si, shape) in scene.shapes.iter().enumerate() {
+        match &shape.geometry {
+            Geometry::Mesh(m) => {
+                check_mesh(m, shape.name.as_deref().unwrap_or("<unnamed>"), si)?;
+                for (ti, idx) in m.indices.iter().enumerate() {
+                    let [a, b, c] = idx.map(|i| m.positions[i as usize]);
+                    let area2 = (b - a).cross(c - a).length();
+                    if !(a.is_finite() && b.is_finite() && c.is_finite())
+                        || area2 <= 0.0
+                        || !area2.is_finite()
+                        || repeats.seen_before([a, b, c], tri_ref.len(), |k| {
+                            let (s, t) = tri_ref[k];
+                            match &scene.shapes[s as usize].geometry {
+                                Geometry::Mesh(m) => {
+                                    m.indices[t as usize].map(|i| m.positions[i as usize])
+                                }
+                                Geometry::Sphere { .. } => {
+                                    unreachable!("kept triangles are mesh triangles")
+                                }
+                            }
+                        })
+                    {
+                        dropped += 1;
+                        continue;
+                    }
+                    tri_ref.push((si as u32, ti as u32));
+                }
+            }
+            Geometry::Sphere {
+                center,
+                radius,
+                rotation,
+                flip_normals,
+            } => {
+                if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
+                    anyhow::bail!("sphere shape {si}: radius must be finite and > 0, got {radius}");
+                }
+                spheres.push(SphereGeom {
+                    center: *center,
+                    radius: *radius,
+                    to_local: rotation.transpose(),
+                    flip_normals: *flip_normals,
+                    shape: si as u32,
+                });
+            }
+        }
+    }
+    Ok((tri_ref, spheres, dropped))
+}
+
+/// Normals and uvs per vertex (or none), indices within the vertices.
+fn check_mesh(m: &TriangleMesh, name: &str, si: usize) -> anyhow::Result<()> {
+    if !m.normals.is_empty() && m.normals.len() != m.positions.len() {
+        anyhow::bail!(
+            "mesh '{name}' (shape {si}): {} normals for {} vertices",
+            m.normals.len(),
+            m.positions.len()
+        );
+    }
+    if !m.uvs.is_empty() && m.uvs.len() != m.positions.len() {
+        anyhow::bail!(
+            "mesh '{name}' (shape {si}): {} uvs for {} vertices",
+            m.uvs.len(),
+            m.positions.len()
+        );
+    }
+    if let Some((ti, idx)) = (m.indices.iter().enumerate())
+        .find(|(_, idx)| idx.iter().any(|&i| i as usize >= m.positions.len()))
+    {
+        anyhow::bail!(
+            "mesh '{name}' (shape {si}): triangle {ti} indexes vertex {:?} but the mesh has {} vertices",
+            idx,
+            m.positions.len()
+        );
+    }
+    Ok(())
+}
+
+/// The CWBVH over `tris` (vertices through `vertices`): obvhs' `build_cwbvh` steps (PLOC,
+/// reinsertion, conversion) with less held at once. PLOC starts from leaves made straight
+/// from the triangles (no array of build boxes beside them), and the BVH2's parent links are
+/// freed before the conversion, whose cost table (7 entries per BVH2 node) is the peak of the
+/// build. `slow_build` splits triangles (pre-split) and goes through obvhs' own builder on
+/// the triangles. The boxes are those of obvhs' `Triangle::aabb`, so the BVH is the one
+/// obvhs builds from the triangles (test `reference_build_equals_obvhs_triangle_build`).
+fn build_bvh(
+    tris: &[TriRef],
+    vertices: impl Fn(&TriRef) -> [Vec3; 3],
+    params: obvhs::BvhBuildParams,
+) -> CwBvh {
+    use obvhs::aabb::Aabb;
+    use obvhs::ploc::PlocSearchDistance as D;
+    let plain_box = |i: usize| Aabb::from_points(&vertices(&tris[i]).map(Into::into));
+    let tied = boxes_tie(tris.len(), plain_box);
+    let build_box = |i: usize| {
+        let b = plain_box(i);
+        if tied {
+            widen_box(b, i)
+        } else {
+            b
+        }
+    };
+    if params.pre_split && !tied {
+        let tris: Vec<Triangle> = (tris.iter())
+            .map(|r| {
+                let [a, b, c] = vertices(r);
+                Triangle {
+                    v0: a.into(),
+                    v1: b.into(),
+                    v2: c.into(),
+                }
+            })
+            .collect();
+        let mut time = std::time::Duration::default();
+        let mut bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut time);
+        bvh.nodes.shrink_to_fit();
+        return bvh;
+    }
+    // obvhs `PlocBuilder::build_ploc`, with the leaves made here.
+    let n = tris.len();
+    let mut ploc = obvhs::ploc::PlocBuilder::with_capacity(n);
+    let mut bvh2 = obvhs::bvh2::Bvh2::zeroed(n);
+    bvh2.reset_for_reuse(n, Some((0..n as u32).collect()));
+    let mut total = Aabb::empty();
+    for (i, node) in ploc.current_nodes.iter_mut().enumerate() {
+        let b = build_box(i);
+        total.extend(b.min);
+        total.extend(b.max);
+        *node = obvhs::bvh2::node::Bvh2Node::new(b, 1, i as u32);
+    }
+    let (precision, depth) = (params.sort_precision, params.search_depth_threshold);
+    let b = &mut bvh2;
+    match params.ploc_search_distance {
+        D::Minimum => ploc.build_ploc_from_leaves::<1, false>(b, total, precision, depth),
+        D::VeryLow => ploc.build_ploc_from_leaves::<2, false>(b, total, precision, depth),
+        D::Low => ploc.build_ploc_from_leaves::<6, false>(b, total, precision, depth),
+        D::Medium => ploc.build_ploc_from_leaves::<14, false>(b, total, precision, depth),
+        D::High => ploc.build_ploc_from_leaves::<24, false>(b, total, precision, depth),
+        D::VeryHigh => ploc.build_ploc_from_leaves::<32, false>(b, total, precision, depth),
+    }
+    drop(ploc);
+    obvhs::bvh2::reinsertion::ReinsertionOptimizer::default().run(
+        &mut bvh2,
+        params.reinsertion_batch_ratio,
+        None,
+    );
+    bvh2.parents = Vec::new();
+    let mut bvh = obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(
+        &bvh2,
+        params.max_prims_per_leaf.clamp(1, 3),
+        true,
+        false,
+    );
+    // The node array was reserved at one node per triangle (80 bytes each); ~1/8 is used.
+    bvh.nodes.shrink_to_fit();
+    bvh
+}
+
 /// Exact repeats of a triangle already kept (a polygon fan over three vertices, a glTF
 /// primitive listed 20 000 times, an instance placed twice at one spot). A copy adds nothing
 /// a ray could see, and PLOC pairs identical boxes one merge per pass: 20 000 copies took
@@ -448,9 +554,14 @@ impl Accel {
 struct RepeatFilter(std::collections::HashMap<u64, u32>);
 
 impl RepeatFilter {
-    /// Whether `v` (in any vertex order) equals a triangle of `kept`; otherwise records that
-    /// it is about to be pushed as `kept[kept.len()]`.
-    fn seen_before(&mut self, v: [Vec3; 3], kept: &[Triangle]) -> bool {
+    /// Whether `v` (in any vertex order) equals a kept triangle (`kept(k)`: the vertices of
+    /// kept triangle k); otherwise records that it is about to be kept as number `next`.
+    fn seen_before(
+        &mut self,
+        v: [Vec3; 3],
+        next: usize,
+        kept: impl FnOnce(usize) -> [Vec3; 3],
+    ) -> bool {
         let key = |v: [Vec3; 3]| {
             let mut k = v.map(|p| p.to_array().map(f32::to_bits));
             k.sort_unstable();
@@ -462,55 +573,48 @@ impl RepeatFilter {
             (h ^ w as u64).wrapping_mul(0x0100_0000_01b3)
         });
         match self.0.entry(hash) {
-            std::collections::hash_map::Entry::Occupied(e) => {
-                let t = &kept[*e.get() as usize];
-                key([t.v0.into(), t.v1.into(), t.v2.into()]) == k
-            }
+            std::collections::hash_map::Entry::Occupied(e) => key(kept(*e.get() as usize)) == k,
             std::collections::hash_map::Entry::Vacant(e) => {
-                e.insert(kept.len() as u32);
+                e.insert(next as u32);
                 false
             }
         }
     }
 }
 
-/// Build boxes for a mesh in which many distinct triangles share one bounding box (a hostile
-/// input: e.g. triangles spanning one box's diagonal). obvhs' PLOC merges only mutual nearest
-/// neighbours; equal boxes tie on every merge cost, and a run of ties merges one pair per pass,
-/// so such a mesh builds in O(n²) (60 000 triangles with one box: 33 s of CPU). Widening each box
-/// by a tiny amount that differs per triangle breaks the ties. The boxes stay conservative, so the
-/// hits do not change (closest hit, ties to the smaller triangle id). None — build from the
-/// triangles as usual — unless at least 1/64 of a strided sample of boxes repeats another.
-fn tie_broken_boxes(tris: &[Triangle]) -> Option<Vec<obvhs::aabb::Aabb>> {
+/// Whether many distinct triangles share one build box (a hostile input: e.g. triangles
+/// spanning one box's diagonal): at least 1/64 of a strided sample of the `n` boxes
+/// (`box_of(i)`) repeats another. obvhs' PLOC merges only mutual nearest neighbours; equal
+/// boxes tie on every merge cost, and a run of ties merges one pair per pass, so such a mesh
+/// builds in O(n²) (60 000 triangles with one box: 33 s of CPU). Then [`widen_box`] breaks
+/// the ties.
+fn boxes_tie(n: usize, box_of: impl Fn(usize) -> obvhs::aabb::Aabb) -> bool {
     const SAMPLE: usize = 8192;
     let key = |b: &obvhs::aabb::Aabb| {
         let (lo, hi) = (b.min.to_array(), b.max.to_array());
         [lo, hi].map(|v| v.map(f32::to_bits))
     };
-    let stride = tris.len().div_ceil(SAMPLE).max(1);
+    let stride = n.div_ceil(SAMPLE).max(1);
     let mut seen = std::collections::HashSet::new();
     let (mut sampled, mut repeats) = (0usize, 0usize);
-    for t in tris.iter().step_by(stride) {
+    for i in (0..n).step_by(stride) {
         sampled += 1;
-        repeats += usize::from(!seen.insert(key(&t.aabb())));
+        repeats += usize::from(!seen.insert(key(&box_of(i))));
     }
-    if repeats * 64 < sampled {
-        return None;
+    repeats * 64 >= sampled
+}
+
+/// Box `b` of triangle `i` widened by a tiny amount that differs per triangle, which breaks
+/// PLOC's ties (see [`boxes_tie`]). The box stays conservative, so the hits do not change
+/// (closest hit, ties to the smaller triangle id).
+fn widen_box(b: obvhs::aabb::Aabb, i: usize) -> obvhs::aabb::Aabb {
+    // A per-triangle fraction in [0, 1) from the index (Knuth's multiplicative hash).
+    let u = (i as u32).wrapping_mul(2_654_435_761) as f32 / 4_294_967_296.0;
+    let pad = (b.max - b.min).max_element().max(1e-6) * 1e-5 * (1.0 + u);
+    obvhs::aabb::Aabb {
+        min: b.min - pad,
+        max: b.max + pad,
     }
-    Some(
-        (tris.iter().enumerate())
-            .map(|(i, t)| {
-                let b = t.aabb();
-                // A per-triangle fraction in [0, 1) from the index (Knuth's multiplicative hash).
-                let u = (i as u32).wrapping_mul(2_654_435_761) as f32 / 4_294_967_296.0;
-                let pad = (b.max - b.min).max_element().max(1e-6) * 1e-5 * (1.0 + u);
-                obvhs::aabb::Aabb {
-                    min: b.min - pad,
-                    max: b.max + pad,
-                }
-            })
-            .collect(),
-    )
 }
 
 /// BVH build effort for `tris` triangles and `samples` camera samples. obvhs' slow_build
@@ -1174,15 +1278,17 @@ mod tests {
                 v2: Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()).into(),
             })
             .collect();
-        assert!(tie_broken_boxes(&obvhs::test_util::geometry::icosphere(3)).is_none());
-        let boxes = tie_broken_boxes(&tris).expect("one shared box");
-        for (b, t) in boxes.iter().zip(&tris) {
-            let a = t.aabb();
+        let sphere = obvhs::test_util::geometry::icosphere(3);
+        assert!(!boxes_tie(sphere.len(), |i| sphere[i].aabb()));
+        assert!(boxes_tie(tris.len(), |i| tris[i].aabb()), "one shared box");
+        for (i, t) in tris.iter().enumerate() {
+            let (a, b) = (t.aabb(), widen_box(t.aabb(), i));
             assert!(b.min.cmple(a.min).all() && b.max.cmpge(a.max).all());
         }
         let params = obvhs::BvhBuildParams::fast_build();
         let mut time = std::time::Duration::default();
-        let with_boxes = obvhs::cwbvh::builder::build_cwbvh(&boxes, params, &mut time);
+        let refs: Vec<TriRef> = (0..tris.len() as u32).map(|i| (0, i)).collect();
+        let with_boxes = build_bvh(&refs, |&(_, i)| tri_vertices(&tris[i as usize]), params);
         let with_tris = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut time);
         let rt = |bvh: &CwBvh| -> Vec<RtTriangle> {
             (bvh.primitive_indices.iter())
@@ -1203,6 +1309,31 @@ mod tests {
             hits += a.is_some() as u32;
         }
         assert!(hits > 1_000, "{hits} hits");
+    }
+
+    fn tri_vertices(t: &Triangle) -> [Vec3; 3] {
+        [t.v0.into(), t.v1.into(), t.v2.into()]
+    }
+
+    /// The build from triangle references (boxes freed before the conversion) is obvhs'
+    /// build from the triangles: the same primitive order and nodes, for each effort level.
+    #[test]
+    fn reference_build_equals_obvhs_triangle_build() {
+        let mut tris: Vec<Triangle> = obvhs::test_util::geometry::icosphere(4);
+        tris.extend(obvhs::test_util::geometry::PLANE);
+        let refs: Vec<TriRef> = (0..tris.len() as u32).map(|i| (0, i)).collect();
+        let vertices = |&(_, i): &TriRef| tri_vertices(&tris[i as usize]);
+        for params in [
+            obvhs::BvhBuildParams::fast_build(),
+            obvhs::BvhBuildParams::medium_build(),
+            obvhs::BvhBuildParams::slow_build(),
+        ] {
+            let ours = build_bvh(&refs, vertices, params);
+            let mut time = std::time::Duration::default();
+            let theirs = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut time);
+            assert_eq!(ours.primitive_indices, theirs.primitive_indices);
+            assert!(ours.nodes == theirs.nodes);
+        }
     }
 
     /// Axis-aligned rays onto an axis-aligned flat quad (a zero-thickness box, infinite

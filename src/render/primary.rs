@@ -79,40 +79,39 @@ impl PrimaryBins {
         // to ~1e-6 relative, i.e. far below 1e-3 px even at 8K.
         let margin = 0.05 + 1e-5 * w.max(h) as f64;
         let mut crossing = Vec::new();
-        let mut footprints = Vec::with_capacity(n_tris);
+        // Ids of the triangles with a footprint; footprints (~130 bytes) are recomputed for
+        // the second pass instead of kept: at 2M triangles they were 256 MB, the render's
+        // peak memory.
+        let mut visible = Vec::new();
+        let mut counts = vec![0u32; w * h];
         let mut bbox_pixels = 0usize;
-        for id in 0..n_tris {
-            let q = accel.triangle(id as u32).map(|v| camera.camera_local(v));
-            let zmin = q[0].z.min(q[1].z).min(q[2].z);
-            let zmax = q[0].z.max(q[1].z).max(q[2].z);
-            if zmax.is_nan() || zmax < 0.0 {
-                // Wholly behind the pinhole (q.z ≥ 0 on every camera ray), or NaN.
-                continue;
-            }
-            if zmin <= 0.0 {
-                crossing.push(id as u32);
-                if crossing.len() > MAX_CROSSING {
-                    return None;
+        for id in 0..n_tris as u32 {
+            let f = match project(accel, camera, id, margin, width, height) {
+                Projection::Hidden => continue,
+                Projection::Crossing => {
+                    crossing.push(id);
+                    if crossing.len() > MAX_CROSSING {
+                        return None;
+                    }
+                    continue;
                 }
-                continue;
-            }
-            // In front of the camera a triangle projects to the triangle of its projected
-            // vertices: a ray can hit it only if that 2-D triangle meets the ray's pixel.
-            let r = q.map(|qi| camera.raster_of(qi, width, height));
-            let Some(f) = Footprint::new(id as u32, zmin as f32, r, margin, w, h) else {
-                continue; // off screen
+                Projection::Footprint(f) => f,
             };
             bbox_pixels += (f.x1 - f.x0 + 1) * (f.y1 - f.y0 + 1);
             if bbox_pixels > MAX_ENTRIES_PER_PIXEL * w * h {
                 return None;
             }
-            footprints.push(f);
-        }
-
-        let mut counts = vec![0u32; w * h];
-        for f in &footprints {
             f.for_each_pixel(|x, y| counts[y * w + x] += 1);
+            visible.push(id);
         }
+        let footprints =
+            visible.iter().map(
+                |&id| match project(accel, camera, id, margin, width, height) {
+                    Projection::Footprint(f) => f,
+                    _ => unreachable!("the same projection as in the first pass"),
+                },
+            );
+
         let bvh_pixel: Vec<bool> = counts.iter().map(|&c| c as usize > MAX_PER_PIXEL).collect();
         let mut offsets = Vec::with_capacity(w * h + 1);
         let mut total = 0u32;
@@ -125,7 +124,7 @@ impl PrimaryBins {
         }
         let mut fill: Vec<u32> = offsets[..w * h].to_vec();
         let mut candidates = vec![Candidate { depth: 0.0, tri: 0 }; total as usize];
-        for f in &footprints {
+        for f in footprints {
             f.for_each_pixel(|x, y| {
                 let p = y * w + x;
                 if !bvh_pixel[p] {
@@ -294,6 +293,43 @@ impl PixelRays {
             tmin: self.tmin[i],
             tmax: self.tmax[i],
         }
+    }
+}
+
+/// Where triangle `id` (BVH order) lies for the screen bins.
+enum Projection {
+    /// Wholly behind the pinhole, off screen, or NaN: no camera ray can hit it.
+    Hidden,
+    /// Crosses the camera plane: tried in every pixel.
+    Crossing,
+    Footprint(Footprint),
+}
+
+fn project(
+    accel: &Accel,
+    camera: &PerspectiveCamera,
+    id: u32,
+    margin: f64,
+    width: u32,
+    height: u32,
+) -> Projection {
+    let q = accel.triangle(id).map(|v| camera.camera_local(v));
+    let zmin = q[0].z.min(q[1].z).min(q[2].z);
+    let zmax = q[0].z.max(q[1].z).max(q[2].z);
+    if zmax.is_nan() || zmax < 0.0 {
+        // Wholly behind the pinhole (q.z ≥ 0 on every camera ray), or NaN.
+        return Projection::Hidden;
+    }
+    if zmin <= 0.0 {
+        return Projection::Crossing;
+    }
+    // In front of the camera a triangle projects to the triangle of its projected
+    // vertices: a ray can hit it only if that 2-D triangle meets the ray's pixel.
+    let r = q.map(|qi| camera.raster_of(qi, width, height));
+    let (w, h) = (width as usize, height as usize);
+    match Footprint::new(id, zmin as f32, r, margin, w, h) {
+        Some(f) => Projection::Footprint(f),
+        None => Projection::Hidden, // off screen
     }
 }
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use thinfilm::render::provenance::{self, RenderInfo};
-use thinfilm::render::{prepare, render_prepared, Cancel, RenderOptions};
+use thinfilm::render::{prepare, render_prepared, Cancel, RenderOptions, RenderOutput};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -200,27 +200,7 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         args.environment.as_ref(),
         args.environment_rotation,
     )?;
-    let sample_range = match args.part {
-        Some((k, n)) => Some(thinfilm::render::passes::part(
-            args.spp.unwrap_or(scene.spp),
-            u32::try_from(k).unwrap_or(u32::MAX),
-            u32::try_from(n).unwrap_or(u32::MAX),
-        )?),
-        None => args.sample_range,
-    };
-    let options = RenderOptions {
-        spp: args.spp,
-        seed: args.seed,
-        threads: args.threads,
-        max_depth: args.max_depth,
-        resolution: args.resolution,
-        sample_range,
-        sampler: args.sampler,
-        fresnel_splits: args.fresnel_splits,
-        progress: report.progress(),
-        cancel: Some(Cancel::on_flag(cancel_on_interrupt())),
-        force_polarization: args.force_polarization,
-    };
+    let options = options(&args, scene.spp, report)?;
     let t0 = std::time::Instant::now();
     let prepared =
         prepare(&scene, &options).with_context(|| format!("preparing {}", args.scene.display()))?;
@@ -244,6 +224,52 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     provenance::write_exr(&path, &out.image, out.filter_weights.as_deref(), &info)?;
     let png = path.with_extension("png");
     thinfilm::image_io::write_png_tonemapped(&png, &out.image, args.exposure)?;
+    print_stats(report, &out);
+    report.text(format_args!(
+        "wrote {} and {}",
+        path.display(),
+        png.display()
+    ));
+    let resume = if out.interrupted {
+        thinfilm::render::passes::remaining_nodes(out.requested_range, out.sample_range.1)
+    } else {
+        Vec::new()
+    };
+    report.json(&summary_json(&out, &info, &path, &png, &resume))?;
+    if out.interrupted {
+        eprintln!("{}", resume_hint(&args, &out, &path, &resume));
+        return Err(Interrupted.into());
+    }
+    Ok(())
+}
+
+/// The render options of the command line (`--part K/N` becomes its sample range).
+fn options(args: &Args, scene_spp: u32, report: Output) -> Result<RenderOptions> {
+    let sample_range = match args.part {
+        Some((k, n)) => Some(thinfilm::render::passes::part(
+            args.spp.unwrap_or(scene_spp),
+            u32::try_from(k).unwrap_or(u32::MAX),
+            u32::try_from(n).unwrap_or(u32::MAX),
+        )?),
+        None => args.sample_range,
+    };
+    Ok(RenderOptions {
+        spp: args.spp,
+        seed: args.seed,
+        threads: args.threads,
+        max_depth: args.max_depth,
+        resolution: args.resolution,
+        sample_range,
+        sampler: args.sampler,
+        fresnel_splits: args.fresnel_splits,
+        progress: report.progress(),
+        cancel: Some(Cancel::on_flag(cancel_on_interrupt())),
+        force_polarization: args.force_polarization,
+    })
+}
+
+/// Time, throughput and the counters worth a line (warnings on stderr).
+fn print_stats(report: Output, out: &RenderOutput) {
     let s = &out.stats;
     let (r0, r1) = out.sample_range;
     report.text(format_args!(
@@ -276,17 +302,19 @@ pub fn run(args: Args, report: Output) -> Result<()> {
             s.degenerate_triangles
         ));
     }
-    report.text(format_args!(
-        "wrote {} and {}",
-        path.display(),
-        png.display()
-    ));
-    let resume = if out.interrupted {
-        thinfilm::render::passes::remaining_nodes(out.requested_range, r1)
-    } else {
-        Vec::new()
-    };
-    report.json(&serde_json::json!({
+}
+
+/// The `--json` result.
+fn summary_json(
+    out: &RenderOutput,
+    info: &RenderInfo,
+    path: &Path,
+    png: &Path,
+    resume: &[(u32, u32)],
+) -> serde_json::Value {
+    let s = &out.stats;
+    let (r0, r1) = out.sample_range;
+    serde_json::json!({
         "output": path,
         "png": png,
         "width": out.image.width,
@@ -303,25 +331,26 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         "samples_per_second": s.samples_per_second(),
         "rays_per_second": s.rays_per_second(),
         "invalid_samples": s.invalid_samples,
-    }))?;
-    if out.interrupted {
-        let (q0, q1) = out.requested_range;
-        let mut pieces = vec![path.display().to_string()];
-        let mut lines = Vec::new();
-        for &range in &resume {
-            let piece = piece_path(&args.output, range);
-            lines.push(format!("  {}", command_for(&piece, range)));
-            pieces.push(piece.display().to_string());
-        }
-        eprintln!(
-            "interrupted: {} holds samples {r0}:{r1} of {q0}:{q1} (a whole number of \
-             power-of-two sample passes). To finish the render exactly, run\n{}\n  thinfilm merge {} -o {}",
-            path.display(),
-            lines.join("\n"),
-            pieces.join(" "),
-            args.output.display()
-        );
-        return Err(Interrupted.into());
+    })
+}
+
+/// What an interrupted render saved, and the commands that finish it exactly.
+fn resume_hint(args: &Args, out: &RenderOutput, path: &Path, resume: &[(u32, u32)]) -> String {
+    let (r0, r1) = out.sample_range;
+    let (q0, q1) = out.requested_range;
+    let mut pieces = vec![path.display().to_string()];
+    let mut lines = Vec::new();
+    for &range in resume {
+        let piece = piece_path(&args.output, range);
+        lines.push(format!("  {}", command_for(&piece, range)));
+        pieces.push(piece.display().to_string());
     }
-    Ok(())
+    format!(
+        "interrupted: {} holds samples {r0}:{r1} of {q0}:{q1} (a whole number of \
+         power-of-two sample passes). To finish the render exactly, run\n{}\n  thinfilm merge {} -o {}",
+        path.display(),
+        lines.join("\n"),
+        pieces.join(" "),
+        args.output.display()
+    )
 }

@@ -526,8 +526,10 @@ pub(super) fn trace_lanes<C: Carrier>(
         }
     }
     for r in shadow.iter() {
-        if !scene.occluded(&r.ray) {
-            lanes[r.lane as usize].radiance += r.contribution;
+        // gltf branch hook: shadow rays pass alpha cut-outs (`lights::shadow_transmittance`).
+        let tr = super::lights::shadow_transmittance(scene, &r.ray);
+        if tr > 0.0 {
+            lanes[r.lane as usize].radiance += r.contribution * tr;
         }
     }
     resolve_env(scene, scratch);
@@ -653,9 +655,10 @@ fn vertex<C: Carrier>(
     }
     if let Some(light) = si.emitter() {
         if !hide_emitter {
-            if let Some(le) = light.emitted(si.ng, ray.dir, wl) {
+            if let Some(le) = light.emitted(si.ng, si.uv, ray.dir, wl) {
                 let w = b.path.emitter_hit_weight(|prev_p| {
-                    sel_pdf * light.pdf_direction(prev_p, ray.dir, si.t, si.ng)
+                    // From the MIS vertex, which may lie before null interactions (gltf hook).
+                    sel_pdf * light.pdf_direction(prev_p, ray.dir, (si.p - prev_p).length(), si.ng)
                 });
                 *radiance += b.carrier.s0() * le * w;
             }
@@ -742,9 +745,17 @@ fn advance<C: Carrier>(
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
 ) -> bool {
+    let mis_vertex = (b.path.prev_p, b.path.prev_bsdf_pdf, b.path.prev_bsdf_delta);
     let Some(wo_world) = b.path.cross(si, &v.frame, v.wi, bs) else {
         return false;
     };
+    // gltf branch hook: passing an alpha cut-out (a null interaction that shadow rays also
+    // pass, `lights::shadow_transmittance`) keeps the MIS state of the vertex before it.
+    if bs.lobe.contains(super::bsdf::BsdfFlags::NULL)
+        && super::lights::passes_shadow_rays(scene, si.shape)
+    {
+        (b.path.prev_p, b.path.prev_bsdf_pdf, b.path.prev_bsdf_delta) = mis_vertex;
+    }
     if bs.terminate_secondary && !wl.secondary_terminated() {
         wl.terminate_secondary();
         count(Counter::SecondaryTerminations, 1);

@@ -719,6 +719,8 @@ pub enum Light {
         shape: u32,
         radiance: Spectrum,
         geometry: AreaGeometry,
+        /// Per-texel emission (glTF `emissiveTexture`), replacing `radiance` where set.
+        texture: Option<Box<TexturedEmission>>,
     },
 }
 
@@ -853,12 +855,15 @@ impl Light {
         matches!(self, Light::Env(_) | Light::Constant(_))
     }
 
-    /// Radiance emitted towards a ray along `dir` that hit this light's shape where the
-    /// geometric normal is `ng`: area lights emit from their front face only (Mitsuba).
-    /// None where nothing is emitted.
+    /// Radiance emitted towards a ray along `dir` that hit this light's shape at texture
+    /// coordinates `uv` where the geometric normal is `ng`: area lights emit from their
+    /// front face only (Mitsuba). None where nothing is emitted.
     #[inline]
-    pub fn emitted(&self, ng: Vec3, dir: Vec3, wl: &SampledWavelengths) -> Option<Spec> {
+    pub fn emitted(&self, ng: Vec3, uv: Vec2, dir: Vec3, wl: &SampledWavelengths) -> Option<Spec> {
         match self {
+            Light::Area {
+                texture: Some(t), ..
+            } if ng.dot(-dir) > 0.0 => Some(t.radiance(uv, wl)),
             Light::Area { radiance, .. } if ng.dot(-dir) > 0.0 => Some(radiance.eval(wl)),
             _ => None,
         }
@@ -1021,8 +1026,12 @@ impl Light {
                 delta: true,
             }),
             Light::Area {
-                radiance, geometry, ..
+                radiance,
+                geometry,
+                texture,
+                ..
             } => {
+                let mut uv = Vec2::ZERO;
                 let (q, n, pdf) = match geometry {
                     AreaGeometry::Triangles { tris, dist, area } => {
                         let (x, _, i) = dist.sample(u.x);
@@ -1032,6 +1041,9 @@ impl Light {
                         let b = square_to_uniform_triangle(Vec2::new(ux, u.y));
                         let [a, bb, c] = tris[i];
                         let q = a * (1.0 - b.x - b.y) + bb * b.x + c * b.y;
+                        if let Some(t) = texture {
+                            uv = t.uv_at(i, b);
+                        }
                         let n = (bb - a).cross(c - a).normalize();
                         (q, n, LightPdf::Area(1.0 / area))
                     }
@@ -1062,7 +1074,10 @@ impl Light {
                     dist,
                     p_light: q,
                     n_light: n,
-                    radiance: radiance.eval(wl),
+                    radiance: match texture {
+                        Some(t) => t.radiance(uv, wl),
+                        None => radiance.eval(wl),
+                    },
                     pdf,
                     delta: false,
                 })
@@ -1137,6 +1152,8 @@ pub struct LightSet {
     pub shape_light: Vec<Option<u32>>,
     /// Indices of infinite lights (seen when a ray escapes).
     pub infinite: Vec<u32>,
+    /// Some material has alpha cut-outs that shadow rays pass ([`shadow_transmittance`]).
+    pub see_through: bool,
 }
 
 impl LightSet {
@@ -1246,6 +1263,7 @@ impl LightSet {
             lights.push(Light::Area {
                 shape: si as u32,
                 radiance: Spectrum::illuminant(radiance),
+                texture: TexturedEmission::of_shape(scene, accel, si, radiance),
                 geometry,
             });
         }
@@ -1259,6 +1277,10 @@ impl LightSet {
             lights,
             shape_light,
             infinite,
+            see_through: scene
+                .bsdfs
+                .iter()
+                .any(|b| alpha_coverage(b, Vec2::ZERO).is_some()),
         })
     }
 
@@ -1286,6 +1308,128 @@ impl LightSet {
             1.0 / self.lights.len() as f32
         }
     }
+}
+
+// ---- Textured emission (glTF `emissiveTexture`; gltf branch, additive) ----
+
+/// Per-texel emission of an area light on a triangle mesh: radiance = the emissive texture
+/// (linear RGB, sRGB-decoded) × `scale` (glTF `emissiveFactor` × `emissiveStrength`) at the
+/// surface's texture coordinates, upsampled as an illuminant (Mitsuba's `srgb_d65`, as every
+/// RGB emitter). The light's points are still drawn uniformly by area, so the pdf of a point
+/// (and of the direction a BSDF-sampled ray hits it from) stays the untextured one and MIS
+/// stays exact; only the radiance is looked up at the point (sampled or hit).
+#[derive(Debug, Clone)]
+pub struct TexturedEmission {
+    texture: std::sync::Arc<crate::scene::BitmapTexture>,
+    scale: [f32; 3],
+    /// Texture coordinates of each triangle's corners (the mesh's triangle order).
+    uvs: Vec<[Vec2; 3]>,
+}
+
+impl TexturedEmission {
+    /// The textured emission of shape `si` (emitting `radiance`), if its BSDF is a glTF
+    /// material with an emissive texture and its mesh has texture coordinates.
+    fn of_shape(
+        scene: &Scene,
+        accel: &Accel,
+        si: usize,
+        radiance: &crate::scene::SpectrumDesc,
+    ) -> Option<Box<Self>> {
+        let shape = &scene.shapes[si];
+        let super::bsdf::Bsdf::GltfPbr(pbr) = scene.bsdfs.get(shape.bsdf)? else {
+            return None;
+        };
+        let texture = pbr.material.emissive_texture.clone()?;
+        let crate::scene::SpectrumDesc::Rgb(scale) = radiance else {
+            return None;
+        };
+        let mesh = accel.mesh(si as u32)?;
+        // Without texture coordinates every point reads texel (0, 0), as the BSDF's lookups.
+        let uv = |k: u32| mesh.uvs.get(k as usize).copied().unwrap_or(Vec2::ZERO);
+        let uvs = mesh.indices.iter().map(|t| t.map(uv)).collect();
+        Some(Box::new(TexturedEmission {
+            texture,
+            scale: *scale,
+            uvs,
+        }))
+    }
+
+    /// Texture coordinates at barycentrics `b` (of corners 1 and 2) of triangle `tri`.
+    #[inline]
+    fn uv_at(&self, tri: usize, b: Vec2) -> Vec2 {
+        let [t0, t1, t2] = self.uvs[tri];
+        t0 * (1.0 - b.x - b.y) + t1 * b.x + t2 * b.y
+    }
+
+    /// Emitted radiance at texture coordinates `uv`.
+    #[inline]
+    fn radiance(&self, uv: Vec2, wl: &SampledWavelengths) -> Spec {
+        let v = self.texture.eval(uv);
+        let rgb = [0, 1, 2].map(|c| (self.scale[c] * v[c]).max(0.0));
+        if rgb == [0.0; 3] {
+            return Spec::ZERO;
+        }
+        let s = RgbIlluminantSpectrum::new(rgb);
+        Spec::from_array(wl.lambda.map(|l| s.eval(l)))
+    }
+}
+
+// ---- Shadow rays through alpha cut-outs (glTF alphaMode MASK/BLEND; gltf branch) ----
+
+/// Most cut-out surfaces a shadow ray passes before it counts as blocked.
+const MAX_ALPHA_CROSSINGS: u32 = 32;
+
+/// The coverage (alpha) of `bsdf` at `uv` if it has alpha cut-outs (glTF MASK or BLEND),
+/// None for every opaque model.
+#[inline]
+fn alpha_coverage(bsdf: &super::bsdf::Bsdf, uv: Vec2) -> Option<f32> {
+    match bsdf {
+        super::bsdf::Bsdf::GltfPbr(p) => p.coverage(uv),
+        _ => None,
+    }
+}
+
+/// Whether shadow rays pass (partly) through shape `shape` (its material has alpha
+/// cut-outs): a path crossing it by the null lobe then keeps the MIS state of the vertex
+/// before it, since light sampling from that vertex sees through it too.
+#[inline]
+pub(crate) fn passes_shadow_rays(scene: &super::PreparedScene, shape: u32) -> bool {
+    let bsdf = &scene.bsdfs[scene.shape_bsdf[shape as usize] as usize];
+    scene.lights().see_through && alpha_coverage(bsdf, Vec2::ZERO).is_some()
+}
+
+/// The fraction of light a shadow ray carries to its end: 1 if nothing is in the way, the
+/// product of (1 − coverage) over the alpha-cut-out surfaces it crosses otherwise (0 at an
+/// opaque one). A MASK surface is absent where alpha < cutoff and BLEND is stochastic
+/// opacity, which the BSDF samples as a null lobe of weight 1 − coverage: the light
+/// sample's (1 − coverage) is that lobe's expected value, so light sampling and BSDF
+/// sampling see the same light through holes (the integrator keeps the MIS state of the
+/// vertex before a null interaction). The common case costs one any-hit query as before.
+pub(crate) fn shadow_transmittance(scene: &super::PreparedScene, ray: &Ray) -> f32 {
+    if !scene.occluded(ray) {
+        return 1.0;
+    }
+    if !scene.lights().see_through {
+        return 0.0;
+    }
+    let mut r = *ray;
+    let mut t = 1.0f32;
+    for _ in 0..MAX_ALPHA_CROSSINGS {
+        let Some(hit) = scene.intersect(&r, None) else {
+            return t;
+        };
+        let si = scene.interaction(&r, &hit);
+        match alpha_coverage(si.bsdf(), si.uv) {
+            Some(c) if c < 1.0 => t *= 1.0 - c.max(0.0),
+            _ => return 0.0,
+        }
+        // Past this hit (relative step: the ray's origin stays fixed).
+        r.tmin = hit.t + 1e-5 * (1.0 + hit.t);
+        if r.tmin >= r.tmax {
+            return t;
+        }
+    }
+    0.0
 }
 
 #[cfg(test)]

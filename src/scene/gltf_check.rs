@@ -294,14 +294,15 @@ fn check_meshes(root: &Root, file: &str) -> Result<()> {
                 &[(Type::Vec3, &[F32])],
                 file,
             )?;
-            let vertex_attrs: [(Semantic, &str, &[(Type, &[ComponentType])]); 2] = [
-                (Semantic::Normals, "NORMAL", &[(Type::Vec3, &[F32])]),
-                (
-                    Semantic::TexCoords(0),
-                    "TEXCOORD_0",
-                    &[(Type::Vec2, &[F32, U8, U16])],
-                ),
-            ];
+            // NORMAL and every TEXCOORD_n (a material may read any set).
+            let mut vertex_attrs: Vec<(Semantic, String, &[(Type, &[ComponentType])])> =
+                vec![(Semantic::Normals, "NORMAL".into(), &[(Type::Vec3, &[F32])])];
+            for sem in p.attributes.keys() {
+                if let Checked::Valid(Semantic::TexCoords(k)) = sem {
+                    let types: &[(Type, &[ComponentType])] = &[(Type::Vec2, &[F32, U8, U16])];
+                    vertex_attrs.push((Semantic::TexCoords(*k), format!("TEXCOORD_{k}"), types));
+                }
+            }
             for (sem, name, types) in vertex_attrs {
                 if let Some(i) = get(sem) {
                     let c = check_use(root, i, &format!("{at} {name}"), types, file)?;

@@ -95,6 +95,8 @@ pub(super) struct MaterialReader<'a> {
     pub images: &'a [gltf::image::Data],
     /// "file: material NAME" for messages.
     pub what: String,
+    /// The `texCoord` set of every texture read so far, with its key.
+    pub tex_coords: std::cell::RefCell<Vec<(u64, String)>>,
 }
 
 impl MaterialReader<'_> {
@@ -160,11 +162,9 @@ impl MaterialReader<'_> {
             b.to_uv = m;
             tex_coord = tc.unwrap_or(tex_coord);
         }
-        if tex_coord != 0 {
-            eprintln!(
-                "warning: {key}: texCoord {tex_coord} is read as TEXCOORD_0 (only set 0 is loaded)"
-            );
-        }
+        self.tex_coords
+            .borrow_mut()
+            .push((tex_coord, t.key.clone()));
         Ok(Some(Arc::new(b)))
     }
 
@@ -324,8 +324,8 @@ impl MaterialReader<'_> {
     }
 
     /// The BSDF and the emitted radiance (linear RGB, `emissiveFactor` ×
-    /// `emissiveStrength` × the emissive texture's mean) of material `m`.
-    pub fn read(&self, m: &gltf::Material) -> Result<(Bsdf, Option<SpectrumDesc>)> {
+    /// `emissiveStrength`; the emissive texture rides on the BSDF) of material `m`.
+    pub fn read(&self, m: &gltf::Material) -> Result<(Bsdf, Option<SpectrumDesc>, u32)> {
         let pbr = m.pbr_metallic_roughness();
         let mut out = GltfMaterial {
             base_color: pbr.base_color_factor(),
@@ -343,18 +343,40 @@ impl MaterialReader<'_> {
         self.core(m, &mut out)?;
         self.extensions(m, &mut out)?;
         out.iridescence = self.iridescence(m)?;
+        let emission = self.emission(m, &mut out)?;
         let bsdf = GltfPbr::new(out).with_context(|| self.what.clone())?;
-        Ok((bsdf.into(), self.emission(m)?))
+        Ok((bsdf.into(), emission, self.uv_set()?))
     }
 
-    /// `emissiveFactor` × `KHR_materials_emissive_strength` × the emissive texture's mean
-    /// colour (area lights here have one radiance per shape).
-    fn emission(&self, m: &gltf::Material) -> Result<Option<SpectrumDesc>> {
+    /// The `TEXCOORD_n` set the material's textures read (0 without textures). A mesh has
+    /// one set of texture coordinates here: textures on different sets get the first
+    /// texture's set, with a warning naming the others.
+    fn uv_set(&self) -> Result<u32> {
+        let sets = self.tex_coords.borrow();
+        let Some((first, _)) = sets.first() else {
+            return Ok(0);
+        };
+        let Ok(set) = u32::try_from(*first) else {
+            bail!("{}: texCoord {first} is out of range", self.what);
+        };
+        for (s, key) in sets.iter().filter(|(s, _)| s != first) {
+            eprintln!(
+                "warning: {}: {key} reads TEXCOORD_{s}; TEXCOORD_{first} is used (one set per material)",
+                self.what
+            );
+        }
+        Ok(set)
+    }
+
+    /// `emissiveFactor` × `KHR_materials_emissive_strength` (the emitted radiance, linear
+    /// RGB); an `emissiveTexture` goes to `out.emissive_texture`, which the area light
+    /// multiplies in per texel.
+    fn emission(&self, m: &gltf::Material, out: &mut GltfMaterial) -> Result<Option<SpectrumDesc>> {
         let strength = m.emissive_strength().unwrap_or(1.0);
         if !(strength.is_finite() && strength >= 0.0) {
             bail!("{}: KHR_materials_emissive_strength.emissiveStrength = {strength} must be finite and ≥ 0", self.what);
         }
-        let mut e = m.emissive_factor().map(|c| c * strength);
+        let e = m.emissive_factor().map(|c| c * strength);
         if !e.iter().all(|c| c.is_finite() && *c >= 0.0) {
             bail!(
                 "{}: emissiveFactor {:?} must be finite and ≥ 0",
@@ -369,13 +391,7 @@ impl MaterialReader<'_> {
                 i.extensions(),
                 "emissiveTexture",
             );
-            if let Some(b) = self.texture(&t, &[0, 1, 2], true)? {
-                let n = (b.width * b.height) as f32;
-                for (c, v) in e.iter_mut().enumerate() {
-                    *v *= b.data.iter().skip(c).step_by(3).sum::<f32>() / n;
-                }
-                eprintln!("warning: {}: emissiveTexture is applied as its mean colour (area lights have one radiance)", self.what);
-            }
+            out.emissive_texture = self.texture(&t, &[0, 1, 2], true)?;
         }
         Ok(e.iter().any(|&c| c > 0.0).then_some(SpectrumDesc::Rgb(e)))
     }

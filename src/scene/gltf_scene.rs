@@ -3,9 +3,9 @@
 //! What is read and how it maps onto [`Scene`]:
 //! - **Meshes**: every triangle primitive of every node of the default scene (or the first
 //!   scene), with node transforms composed down the hierarchy; positions, normals (inverse
-//!   transpose; computed smooth if absent), `TEXCOORD_0` (glTF's v runs down the image, the
-//!   same as Mitsuba's bitmap convention, so no flip). Point/line primitives are skipped
-//!   with a warning.
+//!   transpose; computed smooth if absent), the `TEXCOORD_n` set its material's textures
+//!   read (glTF's v runs down the image, the same as Mitsuba's bitmap convention, so no
+//!   flip). Point/line primitives are skipped with a warning.
 //! - **Materials**: every material becomes a [`GltfPbr`](crate::render::bsdf::gltf_pbr::GltfPbr),
 //!   the glTF 2.0 metallic-roughness BRDF with its extensions (ior, specular, transmission,
 //!   volume, iridescence, emissive strength, texture transform), built by
@@ -88,8 +88,10 @@ fn filter_of(t: &gltf::Texture) -> TextureFilter {
 struct Loader<'a> {
     doc: &'a gltf::Document,
     images: &'a [gltf::image::Data],
+    buffers: &'a [gltf::buffer::Data],
     file: String,
-    materials: HashMap<Option<usize>, (usize, Option<SpectrumDesc>)>,
+    /// Per material: its BSDF index, emission and the texture coordinate set it reads.
+    materials: HashMap<Option<usize>, (usize, Option<SpectrumDesc>, u32)>,
     bsdfs: Vec<Bsdf>,
 }
 
@@ -180,7 +182,7 @@ pub(crate) fn iridescent_film(
 impl Loader<'_> {
     /// Material `m` as a [`GltfPbr`](crate::render::bsdf::gltf_pbr::GltfPbr) (see
     /// [`super::gltf_material`]) and its emission, built once per material.
-    fn material(&mut self, m: &gltf::Material) -> Result<(usize, Option<SpectrumDesc>)> {
+    fn material(&mut self, m: &gltf::Material) -> Result<(usize, Option<SpectrumDesc>, u32)> {
         if let Some(v) = self.materials.get(&m.index()) {
             return Ok(v.clone());
         }
@@ -197,12 +199,91 @@ impl Loader<'_> {
             doc: self.doc,
             images: self.images,
             what,
+            tex_coords: Default::default(),
         };
-        let (bsdf, emission) = reader.read(m)?;
+        let (bsdf, emission, uv_set) = reader.read(m)?;
         self.bsdfs.push(bsdf);
-        let entry = (self.bsdfs.len() - 1, emission);
+        let entry = (self.bsdfs.len() - 1, emission, uv_set);
         self.materials.insert(m.index(), entry.clone());
         Ok(entry)
+    }
+
+    /// Triangle primitive `prim` of `mesh` placed by `world` as a shape (None, with a
+    /// warning, for points and lines): positions, normals, the texture coordinate set its
+    /// material reads (`TEXCOORD_n`), indices.
+    fn primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        world: Mat4,
+    ) -> Result<Option<Shape>> {
+        let file = &self.file;
+        let what = format!(
+            "{file}: mesh {} primitive {}",
+            mesh.name()
+                .map(str::to_string)
+                .unwrap_or_else(|| mesh.index().to_string()),
+            prim.index()
+        );
+        if prim.mode() != gltf::mesh::Mode::Triangles {
+            eprintln!(
+                "warning: {what}: mode {:?} is not triangles; skipped",
+                prim.mode()
+            );
+            return Ok(None);
+        }
+        let (bsdf, emission, uv_set) = self.material(&prim.material())?;
+        let buffers = self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .with_context(|| format!("{what}: no POSITION"))?
+            .map(Vec3::from)
+            .collect();
+        let normals: Vec<Vec3> = reader
+            .read_normals()
+            .map(|n| n.map(Vec3::from).collect())
+            .unwrap_or_default();
+        let uvs: Vec<Vec2> = reader
+            .read_tex_coords(uv_set)
+            .map(|t| t.into_f32().map(Vec2::from).collect())
+            .unwrap_or_default();
+        if uv_set > 0 && uvs.is_empty() {
+            eprintln!("warning: {what}: its material reads TEXCOORD_{uv_set}, which it lacks");
+        }
+        let flat: Vec<u32> = match reader.read_indices() {
+            Some(i) => i.into_u32().collect(),
+            None => (0..positions.len() as u32).collect(),
+        };
+        if flat.len() % 3 != 0 {
+            bail!("{what}: index count {} is not a multiple of 3", flat.len());
+        }
+        let n = positions.len();
+        let mut m = TriangleMesh {
+            normals: if normals.len() == n {
+                normals
+            } else {
+                Vec::new()
+            },
+            uvs: if uvs.len() == n { uvs } else { Vec::new() },
+            positions,
+            indices: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        };
+        m.validate(&what)?;
+        m.ensure_normals();
+        m.transform(&world);
+        if world.determinant() < 0.0 {
+            // A mirroring node transform flips the winding; glTF says to reverse it.
+            for t in &mut m.indices {
+                t.swap(1, 2);
+            }
+        }
+        Ok(Some(Shape {
+            geometry: Geometry::Mesh(m),
+            bsdf,
+            emission,
+            name: mesh.name().map(str::to_string),
+        }))
     }
 }
 
@@ -217,6 +298,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
     let mut loader = Loader {
         doc: &doc,
         images: &images,
+        buffers: &buffers,
         file: file.clone(),
         materials: HashMap::new(),
         bsdfs: Vec::new(),
@@ -250,73 +332,10 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         {
             emitters.push(gltf_lights::emitter(&lights[i], world));
         }
-        let Some(mesh) = node.mesh() else { continue };
-        for prim in mesh.primitives() {
-            let what = format!(
-                "{file}: mesh {} primitive {}",
-                mesh.name()
-                    .map(str::to_string)
-                    .unwrap_or_else(|| mesh.index().to_string()),
-                prim.index()
-            );
-            if prim.mode() != gltf::mesh::Mode::Triangles {
-                eprintln!(
-                    "warning: {what}: mode {:?} is not triangles; skipped",
-                    prim.mode()
-                );
-                continue;
+        if let Some(mesh) = node.mesh() {
+            for prim in mesh.primitives() {
+                shapes.extend(loader.primitive(&mesh, &prim, world)?);
             }
-            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let positions: Vec<Vec3> = reader
-                .read_positions()
-                .with_context(|| format!("{what}: no POSITION"))?
-                .map(Vec3::from)
-                .collect();
-            let normals: Vec<Vec3> = reader
-                .read_normals()
-                .map(|n| n.map(Vec3::from).collect())
-                .unwrap_or_default();
-            let uvs: Vec<Vec2> = reader
-                .read_tex_coords(0)
-                .map(|t| t.into_f32().map(Vec2::from).collect())
-                .unwrap_or_default();
-            let flat: Vec<u32> = match reader.read_indices() {
-                Some(i) => i.into_u32().collect(),
-                None => (0..positions.len() as u32).collect(),
-            };
-            if flat.len() % 3 != 0 {
-                bail!("{what}: index count {} is not a multiple of 3", flat.len());
-            }
-            let mut m = TriangleMesh {
-                normals: if normals.len() == positions.len() {
-                    normals
-                } else {
-                    Vec::new()
-                },
-                uvs: if uvs.len() == positions.len() {
-                    uvs
-                } else {
-                    Vec::new()
-                },
-                positions,
-                indices: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-            };
-            m.validate(&what)?;
-            m.ensure_normals();
-            m.transform(&world);
-            if world.determinant() < 0.0 {
-                // A mirroring node transform flips the winding; glTF says to reverse it.
-                for t in &mut m.indices {
-                    t.swap(1, 2);
-                }
-            }
-            let (bsdf, emission) = loader.material(&prim.material())?;
-            shapes.push(Shape {
-                geometry: Geometry::Mesh(m),
-                bsdf,
-                emission,
-                name: mesh.name().map(str::to_string),
-            });
         }
     }
     if shapes.is_empty() {
@@ -326,39 +345,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
     if bsdfs.is_empty() {
         bsdfs.push(Bsdf::default_diffuse());
     }
-    let (camera, film) = match camera {
-        Some((c, aspect)) => {
-            let h = DEFAULT_RESOLUTION.1;
-            let w = aspect
-                .filter(|a| a.is_finite() && *a > 0.0)
-                .map_or(DEFAULT_RESOLUTION.0, |a| {
-                    ((h as f32 * a).round() as u32).max(1)
-                });
-            (
-                c,
-                FilmSettings {
-                    width: w,
-                    height: h,
-                    filter: ReconstructionFilter::Box,
-                },
-            )
-        }
-        None => {
-            let film = FilmSettings::default();
-            let vertices: Vec<Vec3> = shapes
-                .iter()
-                .filter_map(|s| match &s.geometry {
-                    Geometry::Mesh(m) => Some(m.positions.iter().copied()),
-                    Geometry::Sphere { .. } => None,
-                })
-                .flatten()
-                .collect();
-            let aspect = film.width as f32 / film.height as f32;
-            let camera = gltf_lights::model_viewer_camera(&vertices, aspect)
-                .with_context(|| format!("{file}: the meshes have no finite vertices"))?;
-            (camera, film)
-        }
-    };
+    let (camera, film) = camera_and_film(camera, &shapes, &file)?;
     Ok(Scene {
         camera,
         film,
@@ -372,4 +359,40 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         polarizer: None,
         source: Some(path.to_path_buf()),
     })
+}
+
+/// The file's camera with a film of its aspect ratio (512 high), or, without one, the
+/// `<model-viewer>` framing of every vertex on the default film.
+fn camera_and_film(
+    camera: Option<(Camera, Option<f32>)>,
+    shapes: &[Shape],
+    file: &str,
+) -> Result<(Camera, FilmSettings)> {
+    if let Some((c, aspect)) = camera {
+        let h = DEFAULT_RESOLUTION.1;
+        let w = aspect
+            .filter(|a| a.is_finite() && *a > 0.0)
+            .map_or(DEFAULT_RESOLUTION.0, |a| {
+                ((h as f32 * a).round() as u32).max(1)
+            });
+        let film = FilmSettings {
+            width: w,
+            height: h,
+            filter: ReconstructionFilter::Box,
+        };
+        return Ok((c, film));
+    }
+    let film = FilmSettings::default();
+    let vertices: Vec<Vec3> = shapes
+        .iter()
+        .filter_map(|s| match &s.geometry {
+            Geometry::Mesh(m) => Some(m.positions.iter().copied()),
+            Geometry::Sphere { .. } => None,
+        })
+        .flatten()
+        .collect();
+    let aspect = film.width as f32 / film.height as f32;
+    let camera = gltf_lights::model_viewer_camera(&vertices, aspect)
+        .with_context(|| format!("{file}: the meshes have no finite vertices"))?;
+    Ok((camera, film))
 }

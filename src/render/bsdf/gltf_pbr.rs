@@ -87,6 +87,9 @@ pub struct GltfMaterial {
     pub volume: Option<Volume>,
     pub iridescence: Option<Iridescence>,
     pub double_sided: bool,
+    /// `emissiveTexture` (linear RGB, sRGB-decoded): the shape's area light reads it per
+    /// texel ([`crate::render::lights::TexturedEmission`]); not used by the BSDF itself.
+    pub emissive_texture: Option<Arc<BitmapTexture>>,
 }
 
 impl Default for GltfMaterial {
@@ -112,6 +115,7 @@ impl Default for GltfMaterial {
             volume: None,
             iridescence: None,
             double_sided: false,
+            emissive_texture: None,
         }
     }
 }
@@ -201,6 +205,18 @@ impl GltfPbr {
         })
     }
 
+    /// The alpha coverage at `uv` (`baseColorFactor` A × texture A; MASK: 1 at or above
+    /// `alphaCutoff`, else 0; BLEND: alpha), None for OPAQUE materials.
+    pub fn coverage(&self, uv: Vec2) -> Option<f32> {
+        let m = &self.material;
+        let alpha = || m.base_color[3] * m.alpha_texture.as_ref().map_or(1.0, |t| t.eval(uv)[0]);
+        match m.alpha_mode {
+            AlphaMode::Opaque => None,
+            AlphaMode::Mask(cut) => Some(if alpha() >= cut { 1.0 } else { 0.0 }),
+            AlphaMode::Blend => Some(alpha().clamp(0.0, 1.0)),
+        }
+    }
+
     /// Whether light can pass through (transmission or alpha).
     fn transmissive(&self) -> bool {
         self.material.transmission > 0.0 || self.material.alpha_mode != AlphaMode::Opaque
@@ -249,7 +265,7 @@ impl GltfPbr {
             }
             if let Some(ggx) = p.ggx {
                 if let Some((_, w)) = ggx.reflection(wi, wo) {
-                    v += p.mix_metal(f_d, f_m) * w;
+                    v += p.mix_metal(f_d, f_m) * p.energy_compensation(wi.z) * w;
                 }
             }
             v * p.coverage

@@ -132,6 +132,67 @@ pub fn gulbrandsen_index(r: f32, g: f32) -> Complex32 {
     Complex32::new(n, k2.max(0.0).sqrt())
 }
 
+/// Grid of the single-scattering albedo table [`ggx_albedo`]: α and cos θ, each sampled at
+/// `ALBEDO_N` points over [0, 1].
+const ALBEDO_N: usize = 32;
+
+/// E(μ, α) = ∫ D G / (4 μ) dωo, the directional albedo of the GGX reflection lobe with
+/// F = 1 (what one scattering off the microfacets keeps; 1 − E is lost to the multiple
+/// scattering a single-scattering model leaves out), tabulated once on a 32 × 32 grid of
+/// (α, μ) by a 24 × 24 midpoint rule over the visible-normal sampling square
+/// (E = ∫ G1(wo) over the visible normals, Heitz 2018), and bilinearly interpolated.
+pub(super) fn ggx_albedo(alpha: f32, mu: f32) -> f32 {
+    static TABLE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
+    let t = TABLE.get_or_init(|| {
+        let q = 24;
+        let mut t = Vec::with_capacity(ALBEDO_N * ALBEDO_N);
+        for ia in 0..ALBEDO_N {
+            let a = (ia as f32 / (ALBEDO_N - 1) as f32).max(1e-3);
+            let ggx = Ggx::new(a, a);
+            for im in 0..ALBEDO_N {
+                let mu = (im as f32 / (ALBEDO_N - 1) as f32).max(1e-3);
+                let wi = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                let mut sum = 0.0f64;
+                for i in 0..q * q {
+                    let u = glam::Vec2::new(
+                        ((i % q) as f32 + 0.5) / q as f32,
+                        ((i / q) as f32 + 0.5) / q as f32,
+                    );
+                    let m = ggx.sample_visible(wi, u);
+                    let wo = 2.0 * wi.dot(m) * m - wi;
+                    if wo.z > 0.0 {
+                        sum += ggx.g1(wo, m) as f64;
+                    }
+                }
+                t.push((sum / (q * q) as f64) as f32);
+            }
+        }
+        t
+    });
+    let fa = alpha.clamp(0.0, 1.0) * (ALBEDO_N - 1) as f32;
+    let fm = mu.clamp(0.0, 1.0) * (ALBEDO_N - 1) as f32;
+    let (ia, im) = ((fa as usize).min(ALBEDO_N - 2), (fm as usize).min(ALBEDO_N - 2));
+    let (da, dm) = (fa - ia as f32, fm - im as f32);
+    let at = |a: usize, m: usize| t[a * ALBEDO_N + m];
+    let lo = at(ia, im) * (1.0 - dm) + at(ia, im + 1) * dm;
+    let hi = at(ia + 1, im) * (1.0 - dm) + at(ia + 1, im + 1) * dm;
+    lo * (1.0 - da) + hi * da
+}
+
+/// The index the iridescence extension puts under a film on a metal: the real index whose
+/// normal-incidence reflectance is the base colour F0(λ), n = (1 + √F0)/(1 − √F0), F0 kept
+/// below 0.9999 (KHR_materials_iridescence, "Thin-film Fresnel": `Fresnel0ToIor(baseF0)`,
+/// the phase shift of a dielectric). The metal's complex index (Gulbrandsen) has |r₁₂| ≈ 1
+/// under a film of index ~1.3, which washes the interference colours out; the viewers'
+/// (and the specification's) coloured metals come from this real base.
+#[inline]
+fn metal_film_base(f0: Spec) -> [Complex32; 4] {
+    f0.to_array().map(|f| {
+        let s = f.clamp(0.0, 0.9999).sqrt();
+        Complex32::new((1.0 + s) / (1.0 - s), 0.0)
+    })
+}
+
 /// A reflectance spectrum at the path's wavelengths.
 #[inline]
 fn spectrum(p: &RgbSigmoidPolynomial, ctx: &ShadingCtx) -> Spec {
@@ -188,25 +249,16 @@ pub(super) struct Point {
     pub metal: [Complex32; 4],
     /// Beer–Lambert transmittance of the segment that arrived from inside a volume.
     pub absorption: Spec,
+    /// GGX roughness α (0 for smooth surfaces), for the energy compensation.
+    pub alpha: f32,
 }
 
 impl Point {
     pub fn at(pbr: &GltfPbr, ctx: &ShadingCtx, inside: bool) -> Point {
         let m = &pbr.material;
-        let [r, g, b, a] = m.base_color;
+        let [r, g, b, _] = m.base_color;
         let base = rgb_spectrum([r, g, b], &m.base_color_texture, &pbr.base_poly, ctx);
-        let alpha = a * channel(&m.alpha_texture, ctx, 0);
-        let coverage = match m.alpha_mode {
-            AlphaMode::Opaque => 1.0,
-            AlphaMode::Mask(cut) => {
-                if alpha >= cut {
-                    1.0
-                } else {
-                    0.0
-                }
-            }
-            AlphaMode::Blend => alpha.clamp(0.0, 1.0),
-        };
+        let coverage = pbr.coverage(ctx.uv).unwrap_or(1.0);
         let (roughness, metallic) = match &m.metallic_roughness_texture {
             Some(t) => {
                 let v = t.eval(ctx.uv);
@@ -214,10 +266,8 @@ impl Point {
             }
             None => (m.roughness, m.metallic),
         };
-        let ggx = (m.roughness > 0.0).then(|| {
-            let alpha = (roughness * roughness).clamp(1e-3, 1.0);
-            Ggx::new(alpha, alpha)
-        });
+        let alpha = (roughness * roughness).clamp(1e-3, 1.0);
+        let ggx = (m.roughness > 0.0).then(|| Ggx::new(alpha, alpha));
         let specular = m.specular * m.specular_texture.as_ref().map_or(1.0, |t| t.eval(ctx.uv)[0]);
         let specular_color = (m.specular_color != [1.0; 3] || m.specular_color_texture.is_some())
             .then(|| {
@@ -280,7 +330,26 @@ impl Point {
             film,
             metal,
             absorption,
+            alpha: if m.roughness > 0.0 { alpha } else { 0.0 },
         }
+    }
+
+    /// Multiple-scattering energy compensation of the specular reflection lobe (Turquin
+    /// 2019, "Practical multiple scattering compensation for microfacet models", eq. 11):
+    /// the single-scattering lobe times 1 + F0 (1 − E(μ))/E(μ), with E the lobe's albedo
+    /// for F = 1 ([`ggx_albedo`]) at the incident angle and F0 the layer's normal-incidence
+    /// reflectance (the dielectric's exact F(1) × specular, the metal's base colour, mixed
+    /// by metallic; the film is left out of F0). With F ≡ 1 the lobe's albedo is then 1 at
+    /// every roughness (white furnace); smooth lobes are unchanged.
+    #[inline]
+    pub fn energy_compensation(&self, mu: f32) -> Spec {
+        if self.alpha <= 0.0 {
+            return Spec::ONE;
+        }
+        let e = ggx_albedo(self.alpha, mu).max(1e-3);
+        let f0_d = fresnel_dielectric(1.0, self.eta).0 * self.specular;
+        let f0 = Spec::splat(f0_d) * (1.0 - self.metallic) + self.base * self.metallic;
+        Spec::ONE + f0 * ((1.0 - e) / e)
     }
 
     /// The Airy reflectance of the film on `substrate` at cos θ (exact, s and p averaged).
@@ -323,7 +392,7 @@ impl Point {
                 f_d = f_d * (1.0 - factor) + r * factor;
             }
             if self.metallic > 0.0 {
-                let r = self.film_r(ctx, d, n, self.metal, c);
+                let r = self.film_r(ctx, d, n, metal_film_base(self.base), c);
                 f_m = f_m * (1.0 - factor) + r * factor;
             }
         }

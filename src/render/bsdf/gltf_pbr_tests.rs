@@ -154,9 +154,27 @@ fn film_limits_are_the_bare_base() {
         for c in [1.0, 0.7, 0.3, 0.05] {
             let bare = fresnel_of(&base(None), c);
             for f in [film(1.33, 0.0, 1.0), film(1.33, 400.0, 0.0)] {
+                let zero_thickness = f.as_ref().is_some_and(|f| f.factor > 0.0);
                 let with = fresnel_of(&base(f), c);
                 assert!((with.0 - bare.0).abs().max_element() < 1e-4, "{with:?} {bare:?}");
-                assert!((with.1 - bare.1).abs().max_element() < 1e-4, "{with:?} {bare:?}");
+                // Under a film the metal is the specification's dielectric of reflectance F0
+                // (`metal_film_base`): at zero thickness its exact Fresnel curve, which meets
+                // the bare metal's at normal incidence.
+                let expect = if zero_thickness && metallic > 0.0 {
+                    let Bsdf::GltfPbr(p) = &base(None) else { unreachable!() };
+                    let wl = wl();
+                    let f0 = Point::at(p, &ctx_of(&wl), false).base.to_array();
+                    Spec::from_array(f0.map(|f| {
+                        let s = f.sqrt();
+                        fresnel_dielectric(c, (1.0 + s) / (1.0 - s)).0
+                    }))
+                } else {
+                    bare.1
+                };
+                assert!((with.1 - expect).abs().max_element() < 1e-4, "{with:?} {expect:?}");
+                if c == 1.0 {
+                    assert!((with.1 - bare.1).abs().max_element() < 2e-3, "{with:?} {bare:?}");
+                }
             }
             // A real film changes the reflectance; half the factor is half the change.
             let full = fresnel_of(&base(film(1.33, 400.0, 1.0)), c);
@@ -170,6 +188,31 @@ fn film_limits_are_the_bare_base() {
             let h = if metallic > 0.0 { half.1 } else { half.0 };
             assert!(((h - b) * 2.0 - (a - b)).abs().max_element() < 1e-4);
         }
+    }
+}
+
+/// A film on a glTF metal sits on the real index the extension derives from F0: at normal
+/// incidence the reflectance is the closed-form Airy sum |(r01 + r12 e^{iφ})/(1 + r01 r12
+/// e^{iφ})|², φ = 4π n d/λ, with n_base = (1 + √F0)/(1 − √F0).
+#[test]
+fn film_on_a_metal_uses_the_specifications_base_index() {
+    let b = mat(|m| {
+        m.base_color = [0.8, 0.8, 0.8, 1.0];
+        m.roughness = 0.3;
+        m.iridescence = film(1.3, 600.0, 1.0);
+    });
+    let Bsdf::GltfPbr(p) = &b else { unreachable!() };
+    let wl = wl();
+    let f0 = Point::at(p, &ctx_of(&wl), false).base.to_array();
+    let (_, f_m) = fresnel_of(&b, 1.0);
+    for i in 0..4 {
+        let s = (f0[i] as f64).sqrt();
+        let nb = (1.0 + s) / (1.0 - s);
+        let (r01, r12) = ((1.0 - 1.3) / 2.3, (1.3 - nb) / (1.3 + nb));
+        let phi = 4.0 * std::f64::consts::PI * 1.3 * 600.0 / wl.lambda[i] as f64;
+        let e = num_complex::Complex64::from_polar(1.0, phi);
+        let r = ((e * r12 + r01) / (e * (r01 * r12) + 1.0)).norm_sqr();
+        assert!((f_m[i] as f64 - r).abs() < 2e-3, "lane {i}: {} vs {r}", f_m[i]);
     }
 }
 
@@ -243,6 +286,37 @@ fn rough_glass_albedo_is_nearly_one() {
     }
     let a = sum / n as f32;
     assert!(a.min_element() > 0.93 && a.max_element() < 1.01, "{a}");
+}
+
+/// White furnace of a white rough metal (F ≈ 1): with the Turquin energy compensation its
+/// directional albedo is 1 at every angle and roughness; the single-scattering lobe alone
+/// keeps E(μ, α) only, well below 1 at these roughnesses.
+#[test]
+fn white_rough_metal_keeps_all_energy_with_compensation() {
+    let wl = wl();
+    let ctx = ctx_of(&wl);
+    for roughness in [0.5f32, 1.0] {
+        let b = mat(|m| {
+            m.base_color = [1.0; 4];
+            m.metallic = 1.0;
+            m.roughness = roughness;
+        });
+        for theta in [0.0f32, 45.0, 75.0] {
+            let mut s = crate::render::sampler::Sampler::from_seed(9);
+            let n = 100_000;
+            let mut sum = Spec::ZERO;
+            for _ in 0..n {
+                let wi = dir(theta, 0.0);
+                if let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) {
+                    sum += smp.weight;
+                }
+            }
+            let a = sum / n as f32;
+            assert!((a - Spec::ONE).abs().max_element() < 0.02, "r={roughness} θ={theta}: {a}");
+            let e = layers::ggx_albedo(roughness * roughness, theta.to_radians().cos());
+            assert!(e < 0.97, "r={roughness} θ={theta}: single scattering keeps {e}");
+        }
+    }
 }
 
 #[test]

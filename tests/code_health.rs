@@ -7,11 +7,6 @@ use std::path::{Path, PathBuf};
 
 const MAX_FN_LINES: usize = 150;
 
-/// Functions being split on other branches right now (file, function): tolerated until
-/// those branches are merged. Remove the list then — the test fails on an entry that is no
-/// longer too long, so it cannot go stale.
-const TOLERATED: &[(&str, &str)] = &[("src/scene/gltf_scene.rs", "load_gltf")];
-
 /// `src` with comments, string and character literals replaced by spaces (newlines kept,
 /// so line numbers still hold).
 fn blank_literals(src: &str) -> String {
@@ -184,7 +179,6 @@ fn no_function_in_src_is_longer_than_the_limit() {
     rust_files(&root.join("src"), &mut files);
     files.sort();
     let mut too_long = Vec::new();
-    let mut tolerated_seen = Vec::new();
     let mut count = 0;
     for f in &files {
         let rel = f
@@ -198,11 +192,7 @@ fn no_function_in_src_is_longer_than_the_limit() {
             if len <= MAX_FN_LINES {
                 continue;
             }
-            if TOLERATED.contains(&(rel.as_str(), name.as_str())) {
-                tolerated_seen.push((rel.clone(), name));
-            } else {
-                too_long.push(format!("{rel}:{line} fn {name}: {len} lines"));
-            }
+            too_long.push(format!("{rel}:{line} fn {name}: {len} lines"));
         }
     }
     // The scan saw the crate (a broken scanner finding nothing would pass otherwise).
@@ -212,12 +202,6 @@ fn no_function_in_src_is_longer_than_the_limit() {
         "functions over {MAX_FN_LINES} lines (split them by meaning):\n{}",
         too_long.join("\n")
     );
-    for (file, name) in TOLERATED {
-        assert!(
-            tolerated_seen.iter().any(|(f, n)| f == file && n == name),
-            "{file} fn {name} is no longer over {MAX_FN_LINES} lines: remove it from TOLERATED"
-        );
-    }
 }
 
 /// Braces inside comments, strings, raw strings and character literals do not count, and

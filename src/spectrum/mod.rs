@@ -21,7 +21,7 @@ pub use rgb2spec::{
 };
 pub use sampled::{
     spectrum_at, spectrum_to_linear_srgb, spectrum_to_xyz, visible_wavelengths_pdf,
-    SampledWavelengths, Spec, N_SPECTRUM_SAMPLES,
+    SampledWavelengths, Spec,
 };
 
 mod tables {

@@ -121,8 +121,6 @@ pub struct JointFit {
     pub cov: Option<Vec<f64>>,
     /// Per pixel: 1σ of d from the shared parameters alone.
     pub d_sigma_global: Vec<f64>,
-    /// Per pixel: noise-only 1σ of d with θ fixed (1/√H_dd, whitened units).
-    pub d_sigma_local: Vec<f64>,
 }
 
 impl JointFit {
@@ -731,17 +729,6 @@ impl Problem<'_> {
             residual_correlation: rho,
             cov: None,
             d_sigma_global: vec![0.0; npx],
-            d_sigma_local: ev
-                .pixels
-                .iter()
-                .map(|p| {
-                    if p.hdd > 0.0 {
-                        1.0 / p.hdd.sqrt()
-                    } else {
-                        f64::INFINITY
-                    }
-                })
-                .collect(),
             state: st,
         };
         if g == 0 {

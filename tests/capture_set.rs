@@ -226,3 +226,45 @@ fn malformed_sets_are_clear_errors() {
     let e = err(p);
     assert!(e.contains("nowl.hdr") && e.contains("wavelength"), "{e}");
 }
+
+/// A float32 BIP cube is read in place (its samples are the file's mapping, no decoding
+/// pass); masking a sample writes NaN into the loaded set, never into the file; the same
+/// data as BSQ (decoded and transposed) loads to the same samples and mask.
+#[test]
+fn float_bip_cubes_are_read_in_place_and_equal_their_bsq_twins() {
+    let d = tempfile::tempdir().unwrap();
+    let (w, h) = (3, 2);
+    let mut data: Vec<f32> = (0..w * h * 3).map(|i| 0.1 + i as f32 * 0.01).collect();
+    data[4] = f32::INFINITY; // pixel 1
+    data[9] = -1.0; // pixel 3: the ignore value
+    for (name, il) in [
+        ("bip", envi::Interleave::Bip),
+        ("bsq", envi::Interleave::Bsq),
+    ] {
+        let mut o = WriteOptions::new(w, h, 3);
+        o.wavelengths_nm = Some(WL.to_vec());
+        o.ignore_value = Some(-1.0);
+        o.interleave = il;
+        envi::write_cube(&d.path().join(format!("{name}.hdr")), &data, &o).unwrap();
+    }
+    let bytes_before = std::fs::read(d.path().join("bip.img")).unwrap();
+    json(
+        d.path(),
+        r#"{"format": "thinfilm-capture/1", "polarization": "s", "substrate": 1.64,
+            "angles": [{"incident_deg": 10, "cube": "bip.hdr"}, {"incident_deg": 20, "cube": "bsq.hdr"}]}"#,
+    );
+    let set = load_capture_set(d.path()).unwrap();
+    let (bip, bsq) = (&set.angles[0], &set.angles[1]);
+    assert!(bip.reflectance.is_mapped() && !bsq.reflectance.is_mapped());
+    let bits = |s: &[f32]| s.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&bip.reflectance), bits(&bsq.reflectance));
+    assert!(bip.reflectance[9].is_nan() && bip.reflectance[10] == data[10]);
+    assert_eq!(bip.valid, vec![true, false, true, false, true, true]);
+    assert_eq!(bip.valid, bsq.valid);
+    assert_eq!(set.invalid.non_finite, 2);
+    assert_eq!(set.invalid.ignore_value, 2);
+    assert_eq!(
+        std::fs::read(d.path().join("bip.img")).unwrap(),
+        bytes_before
+    );
+}

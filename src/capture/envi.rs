@@ -13,6 +13,7 @@
 //! Writer: any interleave, float32/float64/uint16/int16/uint8, header + binary written
 //! through temporary files and renamed into place (see [`write_cube`]).
 
+use super::Samples;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -545,7 +546,9 @@ pub fn find_binary(header: &Path) -> Result<PathBuf> {
 pub struct EnviFile {
     pub header: EnviHeader,
     pub binary_path: PathBuf,
-    map: memmap2::Mmap,
+    /// Private (copy-on-write): a cube already in the model's layout becomes the samples
+    /// themselves ([`EnviFile::into_bip_rows`]), and masking a sample never writes the file.
+    map: memmap2::MmapMut,
 }
 
 impl fmt::Debug for EnviFile {
@@ -589,8 +592,12 @@ pub fn open(path: &Path) -> Result<EnviFile> {
     // truncates the file while we read it, the OS may signal; that is the usual contract
     // of read-only memory maps and cheaper than reading gigabytes into a buffer. Only the
     // bytes the header describes are mapped (a file may carry trailing data).
-    let map = unsafe { memmap2::MmapOptions::new().len(needed as usize).map(&file) }
-        .with_context(|| format!("memory-mapping {}", binary_path.display()))?;
+    let map = unsafe {
+        memmap2::MmapOptions::new()
+            .len(needed as usize)
+            .map_copy(&file)
+    }
+    .with_context(|| format!("memory-mapping {}", binary_path.display()))?;
     Ok(EnviFile {
         header,
         binary_path,
@@ -706,6 +713,48 @@ impl EnviFile {
             DataType::U32 => self.decode_rows(&DecU32 { big }, per_row),
             DataType::I64 => self.decode_rows(&DecI64 { big }, per_row),
             DataType::U64 => self.decode_rows(&DecU64 { big }, per_row),
+        }
+    }
+
+    /// As [`EnviFile::decode_bip_rows`], consuming the file: when the binary already is
+    /// BIP f32 in this machine's byte order, `per_row` runs on the mapping itself — no
+    /// decoding pass and no copy of the cube (a 1 Mpx × 81-band angle is 324 MB that need
+    /// not be allocated, zeroed by the kernel and written); else the rows are decoded.
+    pub fn into_bip_rows<T: Send>(
+        self,
+        per_row: impl Fn(usize, &mut [f32]) -> T + Sync,
+    ) -> (Samples, Vec<T>) {
+        let h = &self.header;
+        let native = h.data_type == DataType::F32 && h.big_endian == cfg!(target_endian = "big");
+        // One band: every interleave is the BIP layout.
+        if !(native && (h.interleave == Interleave::Bip || h.bands == 1)) {
+            let (data, rows) = self.decode_bip_rows(per_row);
+            return (data.into(), rows);
+        }
+        let (row_len, offset, len) = (h.samples * h.bands, h.header_offset, h.len());
+        let EnviFile {
+            header,
+            binary_path,
+            map,
+        } = self;
+        match Samples::mapped(map, offset, len) {
+            Ok(mut samples) => {
+                let rows = samples
+                    .par_chunks_mut(row_len.max(1))
+                    .enumerate()
+                    .map(|(y, row)| per_row(y, row))
+                    .collect();
+                (samples, rows)
+            }
+            Err(map) => {
+                let file = EnviFile {
+                    header,
+                    binary_path,
+                    map,
+                };
+                let (data, rows) = file.decode_bip_rows(per_row);
+                (data.into(), rows)
+            }
         }
     }
 

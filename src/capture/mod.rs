@@ -12,10 +12,12 @@ use std::path::Path;
 
 pub mod envi;
 mod rng;
+mod samples;
 mod set;
 pub mod simulate;
 pub mod spectra;
 
+pub use samples::Samples;
 pub use set::{ior_from_json, ior_to_json, CaptureFile, CAPTURE_FORMAT, GROUND_TRUTH_FORMAT};
 
 /// Polarisation state the camera observed.
@@ -62,7 +64,8 @@ pub struct AngleCapture {
     /// Per-pixel incident angle in degrees (row-major; NaN = unknown), when the capture
     /// gives an angle map or the geometry.
     pub incident_deg_map: Option<Vec<f32>>,
-    pub reflectance: Vec<f32>,
+    /// In memory, or the cube file itself when it has this layout ([`Samples`]).
+    pub reflectance: Samples,
     /// Per pixel: every band finite and usable.
     pub valid: Vec<bool>,
 }
@@ -78,7 +81,7 @@ impl AngleCapture {
         AngleCapture {
             incident_deg,
             incident_deg_map: None,
-            reflectance,
+            reflectance: reflectance.into(),
             valid,
         }
     }
@@ -172,7 +175,7 @@ impl CaptureSet {
                     .incident_deg_map
                     .as_ref()
                     .map(|m| m[px.clone()].to_vec()),
-                reflectance: ang.reflectance[px.start * nb..px.end * nb].to_vec(),
+                reflectance: ang.reflectance[px.start * nb..px.end * nb].to_vec().into(),
                 valid: ang.valid[px.clone()].to_vec(),
             })
             .collect();

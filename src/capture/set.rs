@@ -7,7 +7,7 @@
 //! cause in [`InvalidCounts`]; they are never an error.
 
 use super::envi::{self, EnviFile};
-use super::{AngleCapture, CaptureSet, GroundTruth, InvalidCounts, Polarization};
+use super::{AngleCapture, CaptureSet, GroundTruth, InvalidCounts, Polarization, Samples};
 use crate::optics::{Complex64, Ior};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -224,12 +224,14 @@ fn reference_means(
     Ok(file.band_means().0)
 }
 
-/// Reflectance and masking for one angle's cube, in place on its BIP f32 decoding.
+/// Reflectance and masking for one angle's cube, in place on its BIP f32 samples: without
+/// references a float32 BIP cube is its own samples (mapped, no decoding pass), else each
+/// row is calibrated as it is decoded.
 fn reflectance(
-    file: &EnviFile,
+    file: EnviFile,
     white: Option<&[f64]>,
     dark: Option<&[f64]>,
-) -> (Vec<f32>, Vec<bool>, InvalidCounts) {
+) -> (Samples, Vec<bool>, InvalidCounts) {
     let h = &file.header;
     let (w, nb) = (h.samples, h.bands);
     let ignore = h.ignore_value.map(|v| v as f32);
@@ -255,8 +257,9 @@ fn reflectance(
     let scale: Vec<f64> = band_map.iter().map(|m| m.map_or(1.0, |m| m.1)).collect();
     let ignore_v = ignore.unwrap_or(f32::NAN); // NaN never compares equal
     let sat_v = sat.unwrap_or(f32::INFINITY); // inf is caught as non-finite anyway
-                                              // Calibrated and masked row by row as each row is decoded (still in cache).
-    let (data, rows) = file.decode_bip_rows(|_, row| {
+    let lines = h.lines;
+    // Calibrated and masked row by row as each row is decoded (still in cache).
+    let per_row = |_, row: &mut [f32]| {
         let mut c = InvalidCounts::default();
         let mut valid_row = vec![true; w];
         let mut cal = vec![0f32; nb];
@@ -307,8 +310,15 @@ fn reflectance(
             }
         }
         (valid_row, c)
-    });
-    let mut valid = Vec::with_capacity(w * h.lines);
+    };
+    let (data, rows) = if identity {
+        file.into_bip_rows(per_row)
+    } else {
+        // Calibration writes every sample: decode (a mapping would copy every page).
+        let (data, rows) = file.decode_bip_rows(per_row);
+        (data.into(), rows)
+    };
+    let mut valid = Vec::with_capacity(w * lines);
     let mut counts = InvalidCounts::default();
     for (valid_row, c) in rows {
         valid.extend_from_slice(&valid_row);
@@ -497,18 +507,16 @@ fn load_angle(
     dir: &Path,
     field: &str,
     a: &AngleEntry,
-    file: &EnviFile,
+    file: EnviFile,
 ) -> Result<(AngleCapture, InvalidCounts)> {
-    let (white, dark) = references(json, dir, field, a, file)?;
-    let (data, mut valid, counts) = reflectance(file, white.as_deref(), dark.as_deref());
+    let (white, dark) = references(json, dir, field, a, &file)?;
+    let size = (file.header.samples, file.header.lines);
     let map = a
         .incident_deg_map
         .as_deref()
-        .map(|name| {
-            let size = (file.header.samples, file.header.lines);
-            angle_map(json, dir, &format!("{field}.incident_deg_map"), name, size)
-        })
+        .map(|name| angle_map(json, dir, &format!("{field}.incident_deg_map"), name, size))
         .transpose()?;
+    let (data, mut valid, counts) = reflectance(file, white.as_deref(), dark.as_deref());
     if let Some(m) = &map {
         // Pixels of unknown incidence are not used at this angle.
         for (v, th) in valid.iter_mut().zip(m) {
@@ -537,7 +545,8 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
     let spec = read_spec(&json)?;
     // Decoded bytes of the angles loaded so far, against the memory budget.
     let mut decoded = 0u64;
-    // Only the first header is kept (its mapping is dropped as soon as it is decoded).
+    // Only the first header is kept (a mapping is dropped as soon as it is decoded, or
+    // kept as the samples of a cube already in their layout).
     let mut first: Option<envi::EnviHeader> = None;
     let mut angles = Vec::with_capacity(spec.file.angles.len());
     let mut invalid = InvalidCounts::default();
@@ -556,13 +565,12 @@ pub(super) fn load_capture_set(path: &Path) -> Result<CaptureSet> {
         }
         if let Some(fh) = &first {
             check_same_cube(&j, fh, h)?;
+        } else {
+            first = Some(h.clone());
         }
-        let (angle, counts) = load_angle(&json, &dir, &field, a, &file)?;
+        let (angle, counts) = load_angle(&json, &dir, &field, a, file)?;
         angles.push(angle);
         invalid.add(&counts);
-        if first.is_none() {
-            first = Some(file.header);
-        }
     }
     let Some(h) = first else {
         bail!("{j}: 'angles' is empty");

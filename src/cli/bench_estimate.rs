@@ -47,6 +47,10 @@ pub struct Args {
     /// the same index and checking the stitched thickness is bit-identical.
     #[arg(long, default_value_t = 0)]
     pub bands: usize,
+    /// ENVI interleave of the 1-megapixel capture's cubes (float32 `bip` is read in place,
+    /// without a decoding pass; `bsq` and `bil` are transposed as they are read).
+    #[arg(long, default_value = "bsq")]
+    pub interleave: thinfilm::capture::envi::Interleave,
 }
 
 struct Row {
@@ -598,7 +602,8 @@ fn realistic(args: &Args, md: &mut String) -> Result<()> {
 fn large(args: &Args, md: &mut String) -> Result<()> {
     let mut cfg = seed_config(1, 1024, 1024, 4.0)?;
     cfg.seed = 9;
-    let dir = args.out.join("large_capture");
+    cfg.interleave = args.interleave;
+    let dir = args.out.join(format!("large_capture_{}", args.interleave));
     let gt_json = dir.join("ground_truth").join("ground_truth.json");
     let cached = std::fs::read_to_string(&gt_json)
         .ok()
@@ -648,8 +653,9 @@ fn large(args: &Args, md: &mut String) -> Result<()> {
     let (na, nb) = (cfg.angles_deg.len(), cfg.wavelengths_nm.len());
     let _ = writeln!(
         md,
-        "### 1-megapixel speed run (full, {w}×{h} × {na} angles × {nb} bands = {:.2} GB float32 ENVI on disk, {} threads, load average {})\n",
+        "### 1-megapixel speed run (full, {w}×{h} × {na} angles × {nb} bands = {:.2} GB float32 {} ENVI on disk, {} threads, load average {})\n",
         (w * h * na * nb * 4) as f64 / 1e9,
+        args.interleave,
         rayon::current_num_threads(),
         load_average()
     );

@@ -17,7 +17,7 @@
 //! pixels (phase one of the two-phase recipe for huge captures: the index from a band, then
 //! every band with that index).
 //!
-//! Cost (`thinfilm bench estimate --bands 4`, 1024×1024 × 5 angles × 81 bands): see
+//! Cost (`thinfilm bench estimate --large-only --bands 4`, 1024×1024 × 5 angles × 81 bands): see
 //! `docs/scale-out.md`.
 //!
 //! Every thickness EXR carries its provenance (text attributes `thinfilm.kind` = `fit`,

@@ -19,14 +19,27 @@ use std::f32::consts::PI;
 /// Piecewise-constant 1-D distribution on [0, 1) (pbrt-v4 `PiecewiseConstant1D`).
 #[derive(Debug, Clone)]
 pub struct Distribution1D {
-    func: Vec<f32>,
-    cdf: Vec<f32>,
+    /// n + 1 cells: the CDF at each cell's start, the cell's pdf and the guide entry, side by
+    /// side so that a sample's guide entry, CDF values and pdf are mostly one cache line
+    /// (three separate arrays cost the envmap's samples three dependent cache misses: its
+    /// 257 × 513-entry rows, with the texels and the BVH, exceed L2). Cell n holds only
+    /// cdf = 1.
+    cells: Vec<Cell>,
     integral: f32,
-    /// Guide table (Chen & Asau 1974, "cutpoint" search): `guide[k]` is the first `j` with
-    /// `cdf[j] > k/n`, so a sample starts its search next to its answer instead of bisecting
-    /// the whole CDF. Same cell as a binary search, ~1 probe on average instead of log₂ n
-    /// dependent cache misses (the envmap's 257 × 513-entry CDFs exceed L2).
-    guide: Vec<u32>,
+}
+
+/// One cell of a [`Distribution1D`].
+#[derive(Debug, Clone, Copy)]
+#[repr(C)]
+struct Cell {
+    /// CDF at the cell's start.
+    cdf: f32,
+    /// func / integral (1 when the integral is 0): the density in the cell.
+    pdf: f32,
+    /// Guide table (Chen & Asau 1974, "cutpoint" search): for cell k, the first `j` with
+    /// `cdf[j] > k/n`, so a sample starts its search next to its answer instead of
+    /// bisecting the whole CDF. Same cell as a binary search, ~1 probe on average.
+    guide: u32,
 }
 
 impl Distribution1D {
@@ -49,51 +62,58 @@ impl Distribution1D {
         } else {
             (0..=n).map(|i| i as f32 / n as f32).collect()
         };
-        let mut guide = vec![0u32; n];
-        for (k, g) in guide.iter_mut().enumerate().skip(1) {
-            let t = k as f32 / n as f32;
-            *g = cdf.partition_point(|&c| c <= t) as u32;
-        }
-        Distribution1D {
-            func,
-            cdf,
-            integral: integral as f32,
-            guide,
-        }
+        let integral = integral as f32;
+        let cells = (0..=n)
+            .map(|k| Cell {
+                cdf: cdf[k],
+                pdf: match (k < n, integral > 0.0) {
+                    (false, _) => 0.0,
+                    (true, true) => func[k] / integral,
+                    (true, false) => 1.0,
+                },
+                guide: if k == 0 || k == n {
+                    0
+                } else {
+                    cdf.partition_point(|&c| c <= k as f32 / n as f32) as u32
+                },
+            })
+            .collect();
+        Distribution1D { cells, integral }
     }
 
-    /// `self.cdf.partition_point(|&c| c <= u)`, started from the guide table. The CDF is
+    /// The CDF's `partition_point(|&c| c <= u)`, started from the guide table. The CDF is
     /// non-decreasing, so walking from any start to the boundary finds the same index.
     #[inline]
     fn search(&self, u: f32) -> usize {
-        let n = self.guide.len();
+        let n = self.len();
         let k = ((u * n as f32) as usize).min(n - 1);
-        let mut j = self.guide[k] as usize;
-        while j > 0 && self.cdf[j - 1] > u {
+        let mut j = self.cells[k].guide as usize;
+        while j > 0 && self.cells[j - 1].cdf > u {
             j -= 1;
         }
-        while j < self.cdf.len() && self.cdf[j] <= u {
+        while j < self.cells.len() && self.cells[j].cdf <= u {
             j += 1;
         }
         j
     }
 
     pub fn len(&self) -> usize {
-        self.func.len()
+        self.cells.len() - 1
     }
 
     pub fn is_empty(&self) -> bool {
-        self.func.is_empty()
+        self.len() == 0
     }
 
     /// Returns (x ∈ [0,1), pdf(x), cell index).
     #[inline]
     pub fn sample(&self, u: f32) -> (f32, f32, usize) {
-        let n = self.func.len();
+        let n = self.len();
         let i = (self.search(u).max(1) - 1).min(n - 1);
-        let width = self.cdf[i + 1] - self.cdf[i];
+        let (c0, c1) = (self.cells[i].cdf, self.cells[i + 1].cdf);
+        let width = c1 - c0;
         let du = if width > 0.0 {
-            ((u - self.cdf[i]) / width).clamp(0.0, 1.0)
+            ((u - c0) / width).clamp(0.0, 1.0)
         } else {
             0.5
         };
@@ -103,16 +123,12 @@ impl Distribution1D {
 
     #[inline]
     pub fn pdf_cell(&self, i: usize) -> f32 {
-        if self.integral > 0.0 {
-            self.func[i] / self.integral
-        } else {
-            1.0
-        }
+        self.cells[i].pdf
     }
 
     #[inline]
     pub fn pdf(&self, x: f32) -> f32 {
-        let n = self.func.len();
+        let n = self.len();
         let i = ((x * n as f32) as usize).min(n - 1);
         self.pdf_cell(i)
     }
@@ -294,9 +310,9 @@ fn atan2_lanes<const N: usize>(y: &[f32; N], x: &[f32; N]) -> ([f32; N], [bool; 
 pub struct EnvMap {
     width: usize,
     height: usize,
-    texels: Vec<RgbIlluminantSpectrum>,
-    /// The texels again as (c0, c1, c2, scale) rows: one 16-byte load per corner in the
-    /// batched lookups.
+    /// The texels' sigmoid coefficients and scale (`RgbIlluminantSpectrum`) as
+    /// (c0, c1, c2, scale) rows: one 16-byte load per corner (one copy only: the 512 × 256
+    /// studio map is 2 MB, the size of L2).
     texel_rows: Vec<[f32; 4]>,
     scale: f32,
     to_world: Mat3,
@@ -361,7 +377,6 @@ impl EnvMap {
         Ok(EnvMap {
             width: w,
             height: h,
-            texels,
             texel_rows,
             scale,
             to_world,
@@ -649,9 +664,10 @@ impl EnvMap {
         let lambda = Spec::from_array(wl.lambda);
         let mut out = Spec::ZERO;
         for (index, wgt) in self.bilinear_texels(uv.x, uv.y) {
-            let t = &self.texels[index];
-            if wgt > 0.0 && t.scale > 0.0 {
-                out += sigmoid_poly4(&t.poly, lambda) * (wgt * t.scale);
+            let [c0, c1, c2, scale] = self.texel_rows[index];
+            if wgt > 0.0 && scale > 0.0 {
+                let poly = crate::spectrum::RgbSigmoidPolynomial { c: [c0, c1, c2] };
+                out += sigmoid_poly4(&poly, lambda) * (wgt * scale);
             }
         }
         out *= d65;
@@ -1534,10 +1550,11 @@ mod tests {
         for f in funcs {
             let d = Distribution1D::new(&f);
             let mut us: Vec<f32> = (0..=4096).map(|i| i as f32 / 4096.0).collect();
-            us.extend(d.cdf.iter().copied());
+            let cdf: Vec<f32> = d.cells.iter().map(|c| c.cdf).collect();
+            us.extend(cdf.iter().copied());
             us.extend([1.0 - f32::EPSILON, -0.0, 1.5, -1.0, f32::NAN]);
             for u in us {
-                let expected = d.cdf.partition_point(|&c| c <= u);
+                let expected = cdf.partition_point(|&c| c <= u);
                 assert_eq!(d.search(u), expected, "len {} u {u}", f.len());
             }
         }

@@ -1,5 +1,5 @@
-//! glTF textures that light and shadows read: per-texel emission (`emissiveTexture`) and
-//! alpha cut-outs (MASK / BLEND) in shadow rays.
+//! glTF textures that light and shadows read: per-texel emission (`emissiveTexture`), the
+//! `TEXCOORD_n` set a material names, and alpha cut-outs (MASK / BLEND) in shadow rays.
 //!
 //! - Textured emission: a 2 × 2 quad whose texture is white on its left half and black on
 //!   its right is seen directly (radiance = factor × strength on the left, 0 on the right)
@@ -81,6 +81,23 @@ impl Doc {
             "indices": a + 2, "material": material}]}),
         );
         self.meshes.len() - 1
+    }
+
+    /// Moves the last quad's UVs to `TEXCOORD_1` and gives it a `TEXCOORD_0` that reads the
+    /// right half of every texture everywhere.
+    fn uvs_to_set_1(&mut self) {
+        let uv0: Vec<u8> = [0.75f32, 0.5]
+            .repeat(4)
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let uvv = self.view(uv0);
+        self.accessors
+            .push(json!({"bufferView": uvv, "componentType": 5126, "count": 4, "type": "VEC2"}));
+        let a = self.accessors.len() - 1;
+        let attrs = &mut self.meshes.last_mut().unwrap()["primitives"][0]["attributes"];
+        attrs["TEXCOORD_1"] = attrs["TEXCOORD_0"].clone();
+        attrs["TEXCOORD_0"] = json!(a);
     }
 
     /// Writes `name`.gltf (+ .bin) in `dir` with every mesh on a root node, `extra_nodes`
@@ -223,6 +240,37 @@ fn textured_emission_is_read_per_texel() {
     assert!(
         right.iter().all(|&v| v.abs() < 1e-4),
         "right half emits {right:?}"
+    );
+}
+
+/// A material whose textures read `texCoord` 1 gets the mesh's `TEXCOORD_1`: the emitter's
+/// left half (white texel by set 1) emits although set 0 points at the black texel.
+#[test]
+fn textures_read_the_texcoord_set_their_material_names() {
+    let dir = tempfile::tempdir().unwrap();
+    png(dir.path(), "e.png", [255, 255, 255, 255], [0, 0, 0, 255]);
+    let look_up = |set: u32| {
+        let mut d = Doc::new();
+        d.quad(2.0, [-1.0, 1.0], [-1.0, 1.0], true, 0);
+        d.uvs_to_set_1();
+        let h = (90.0f64).to_radians() / 2.0;
+        let cam = json!({"camera": 0, "translation": [-0.5, 0.5, 0.0], "rotation": [h.sin(), 0.0, 0.0, h.cos()]});
+        let top = merge(texture_table("e.png"), narrow_camera());
+        let mut m = emitter_material();
+        m["emissiveTexture"]["texCoord"] = json!(set);
+        let p = d.write(dir.path(), &format!("set{set}"), json!([m]), vec![cam], top);
+        mean_radiance(&p, 4)
+    };
+    close(
+        "left half by TEXCOORD_1",
+        look_up(1),
+        [3.0, 1.5, 0.75],
+        0.02,
+    );
+    let set0 = look_up(0);
+    assert!(
+        set0.iter().all(|&v| v.abs() < 1e-4),
+        "TEXCOORD_0 reads black: {set0:?}"
     );
 }
 

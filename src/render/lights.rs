@@ -1360,9 +1360,14 @@ impl TexturedEmission {
             return None;
         };
         let mesh = accel.mesh(si as u32)?;
-        // Without texture coordinates every point reads texel (0, 0), as the BSDF's lookups.
-        let uv = |k: u32| mesh.uvs.get(k as usize).copied().unwrap_or(Vec2::ZERO);
-        let uvs = mesh.indices.iter().map(|t| t.map(uv)).collect();
+        // Without texture coordinates a hit's UV is its barycentrics (Mitsuba's default
+        // parameterisation, `Accel::interaction`): corners (0, 0), (1, 0), (0, 1).
+        let uvs = if mesh.uvs.len() == mesh.positions.len() {
+            let uv = |k: u32| mesh.uvs[k as usize];
+            mesh.indices.iter().map(|t| t.map(uv)).collect()
+        } else {
+            vec![[Vec2::ZERO, Vec2::X, Vec2::Y]; mesh.indices.len()]
+        };
         Some(Box::new(TexturedEmission {
             texture,
             scale: *scale,

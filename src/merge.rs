@@ -348,21 +348,38 @@ pub struct MergedFit {
 /// Stitches the output folders of `thinfilm estimate --rows` (or `--part`) runs of one fit
 /// into a complete fit folder `out`: `thickness.exr` (stitched, with its provenance),
 /// `thickness.png`, `material.xml`, `material.gltf` and a `fit.json` whose numbers cover the
-/// whole map — thickness statistics recomputed from it, pixel and sample counts and stage
-/// times summed, residual RMSE and ΔE pooled over the bands by their fitted pixels. The
-/// bands' `residual.png` maps are not stitched.
+/// whole map — thickness and σ statistics recomputed from the stitched maps (and
+/// `thickness_sigma.exr` written), pixel and not-identifiable counts and stage times summed,
+/// residual RMSE, χ²/dof and ΔE pooled over the bands by their fitted pixels. The bands'
+/// `residual.png` maps are not stitched.
 pub fn merge_fit_dirs(dirs: &[PathBuf], out: &Path) -> Result<MergedFit> {
     let mut tiles = Vec::with_capacity(dirs.len());
     let mut fits = Vec::with_capacity(dirs.len());
+    // Each band's σ map, by its first row (stitched when every band has one).
+    let mut sigmas: Vec<(usize, Option<Vec<f32>>)> = Vec::with_capacity(dirs.len());
     for dir in dirs {
         let fit = FitFile::read(&dir.join(FIT_JSON))?;
         let path = dir.join(THICKNESS_EXR);
         let exr = crate::image_io::read_exr(&path)?;
         let info = TileInfo::from_attributes(&exr.attributes, &path.display().to_string())?;
+        let sigma = fit
+            .thickness_sigma_file
+            .as_ref()
+            .map(|f| crate::image_io::read_exr(&dir.join(f)))
+            .transpose()?
+            .and_then(|e| e.channel(SIGMA_CHANNEL).map(<[f32]>::to_vec));
+        sigmas.push((info.rows.0, sigma));
         tiles.push(TilePiece { path, info, exr });
         fits.push(fit);
     }
     let stitched = stitch_tiles(tiles)?;
+    sigmas.sort_by_key(|s| s.0);
+    let sigma: Option<Vec<f32>> = sigmas
+        .into_iter()
+        .map(|s| s.1)
+        .collect::<Option<Vec<_>>>()
+        .map(|s| s.concat())
+        .filter(|s| s.len() == stitched.width * stitched.height);
     let (_, thickness) = stitched
         .channels
         .iter()
@@ -395,13 +412,33 @@ pub fn merge_fit_dirs(dirs: &[PathBuf], out: &Path) -> Result<MergedFit> {
         stitched.height,
         "thickness (nm)",
     )?;
-    let fit = pooled_fit_file(&fits, thickness, stitched.width, stitched.height);
+    let mut fit = pooled_fit_file(&fits, thickness, stitched.width, stitched.height);
+    fit.thickness_sigma_nm = None;
+    fit.thickness_sigma_file = None;
+    if let Some(sigma) = &sigma {
+        let name = fits[0]
+            .thickness_sigma_file
+            .clone()
+            .unwrap_or_else(|| "thickness_sigma.exr".into());
+        crate::image_io::write_exr_channels(
+            &out.join(&name),
+            stitched.width,
+            stitched.height,
+            &[(SIGMA_CHANNEL, sigma)],
+        )
+        .with_context(|| format!("writing {name}"))?;
+        fit.thickness_sigma_nm = Some(MapStats::from(Summary::of_finite(sigma)));
+        fit.thickness_sigma_file = Some(name);
+    }
     fit.write(&out.join(FIT_JSON))?;
     Ok(MergedFit {
         fit,
         bands: fits.len(),
     })
 }
+
+/// The channel of a fit's σ map (`thickness_sigma.exr`).
+const SIGMA_CHANNEL: &str = "thickness_sigma";
 
 /// One `fit.json` for bands of one fit (see [`merge_fit_dirs`]).
 fn pooled_fit_file(fits: &[FitFile], thickness: &[f32], width: usize, height: usize) -> FitFile {
@@ -432,13 +469,16 @@ fn pooled_fit_file(fits: &[FitFile], thickness: &[f32], width: usize, height: us
         .mean
         .is_none()
         .then(|| "no pixel was fitted".into());
+    // Per band: χ²/dof, identifiability (the checks run on the band's pixels).
+    fit.chi2_per_dof = pool(|f| f.chi2_per_dof, false);
+    fit.not_identifiable_pixels = fits.iter().map(|f| f.not_identifiable_pixels).sum();
     fit.pixels = PixelCounts {
         valid: fits.iter().map(|f| f.pixels.valid).sum(),
         invalid: fits.iter().map(|f| f.pixels.invalid).sum(),
         unfitted: fits.iter().map(|f| f.pixels.unfitted).sum(),
     };
+    // `invalid_samples` counts the whole capture's masked samples in every band's fit.json.
     for f in &fits[1..] {
-        fit.invalid_samples.add(&f.invalid_samples);
         for (stage, s) in &f.seconds {
             let e = fit.seconds.entry(stage.clone()).or_insert(Some(0.0));
             *e = e.zip(*s).map(|(a, b)| a + b);

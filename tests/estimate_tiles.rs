@@ -126,6 +126,15 @@ fn stitched_row_bands_equal_the_whole_fit() {
     assert_eq!(m.film_ior, w.film_ior);
     let rel = |a: Option<f64>, b: Option<f64>| (a.unwrap() - b.unwrap()).abs() / b.unwrap();
     assert!(rel(m.residual_rmse, w.residual_rmse) < 0.02, "{m:?}");
+    // The bands' checks ran on their own pixels; pooled they describe the whole fit.
+    assert!(rel(m.chi2_per_dof, w.chi2_per_dof) < 0.02, "{m:?}");
+    assert_eq!(m.not_identifiable_pixels, w.not_identifiable_pixels);
+    assert_eq!(m.invalid_samples, w.invalid_samples);
+    assert_eq!(sigma(&merged), sigma(&whole));
+    assert_eq!(
+        format!("{:?}", m.thickness_sigma_nm),
+        format!("{:?}", w.thickness_sigma_nm)
+    );
     let material = thinfilm::material::FilmMaterial::from_fit_dir(&merged).unwrap();
     assert_eq!((material.width, material.height), (60, 44));
     for f in ["material.xml", "material.gltf", "thickness.png"] {

@@ -92,9 +92,10 @@ pub struct Args {
     #[arg(long)]
     pub no_band_integration: bool,
     /// Fit only rows START:END of the capture (a band of a capture too large for one job).
-    /// The index, noise and nuisance terms come from pixel samples of the whole capture,
-    /// so the band's thickness equals the same rows of the whole fit, bit for bit, and
-    /// `thinfilm merge` stitches the bands' thickness.exr.
+    /// With --film-ior, the noise and nuisance terms come from pixel samples of the whole
+    /// capture and only the band and 4 rows around it are fitted, so the band's thickness
+    /// equals the same rows of the whole fit, bit for bit, and `thinfilm merge` stitches the
+    /// bands' thickness.exr. Without it the band is fitted on its own (its own index).
     #[arg(long, value_parser = parse_rows, value_name = "START:END")]
     pub rows: Option<(usize, usize)>,
     /// Fit band K of N equal row bands (K from 0; e.g. a job array's task index and count):

@@ -3,9 +3,14 @@
 //! --references tests/scenes_real`, 4096 spp, 64 px wide).
 //!
 //! Each scene is loaded unchanged (with the manifest's `-D` parameters), rendered at the
-//! reference's size, and both images are box-downsampled 4× — averaging out most of the
-//! Monte Carlo noise — before comparing: mean ΔE00 ≤ 1 and every channel's mean within 2 % of
-//! Mitsuba's. A scene the manifest marks `expect_error` must fail to load with that message
+//! reference's size (512 spp, or the manifest's `test_spp` for a scene whose small bright
+//! lights make 512 spp too noisy), and both images are box-downsampled 4× — averaging out
+//! most of the Monte Carlo noise — before comparing: mean ΔE00 ≤ 1 and every channel's mean
+//! within 2 % of Mitsuba's — or the manifest's `max_bias` / `max_delta_e` where Mitsuba's own
+//! renders at the test's spp miss its reference by about as much (the entry says so in
+//! `why`): Veach's MIS scene, whose tiny bright lights in near-mirror plates leave Mitsuba's
+//! 512-spp renders −7 % … +4 % off its 65536-spp reference, and Veach's bidirectional room,
+//! lit indirectly, whose 512-spp renders by Mitsuba are ΔE00 2.1–2.3 from its reference. A scene the manifest marks `expect_error` must fail to load with that message
 //! (it uses something not rendered yet). A deliberately darkened light must fail the check.
 //!
 //! The wider survey over 140 real scenes is `tools/mitsuba/scene_coverage.py`
@@ -30,6 +35,9 @@ struct Entry {
     params: Vec<(String, String)>,
     reference: PathBuf,
     expect_error: Option<String>,
+    spp: u32,
+    max_bias: f64,
+    max_delta_e: f64,
 }
 
 fn root() -> PathBuf {
@@ -55,14 +63,17 @@ fn entries() -> Vec<Entry> {
                 .unwrap_or_default(),
             reference: root().join(e["reference"].as_str().unwrap()),
             expect_error: e["expect_error"].as_str().map(str::to_string),
+            spp: e["test_spp"].as_u64().map_or(SPP, |n| n as u32),
+            max_bias: e["max_bias"].as_f64().unwrap_or(MAX_ABS_BIAS),
+            max_delta_e: e["max_delta_e"].as_f64().unwrap_or(MAX_MEAN_DELTA_E00),
             name,
         })
         .collect()
 }
 
-fn render_at(scene: &Scene, reference: &RgbImage) -> RgbImage {
+fn render_at(scene: &Scene, reference: &RgbImage, spp: u32) -> RgbImage {
     let options = RenderOptions {
-        spp: Some(SPP),
+        spp: Some(spp),
         seed: Some(3),
         resolution: Some((reference.width as u32, reference.height as u32)),
         ..Default::default()
@@ -78,8 +89,8 @@ fn metrics(ours: &RgbImage, reference: &RgbImage) -> ImageMetrics {
     .unwrap()
 }
 
-fn passes(m: &ImageMetrics) -> bool {
-    m.delta_e00_mean <= MAX_MEAN_DELTA_E00 && m.max_abs_bias() < MAX_ABS_BIAS
+fn passes(m: &ImageMetrics, e: &Entry) -> bool {
+    m.delta_e00_mean <= e.max_delta_e && m.max_abs_bias() < e.max_bias
 }
 
 fn describe(m: &ImageMetrics) -> String {
@@ -117,9 +128,9 @@ fn real_scenes_render_as_mitsuba_renders_them() {
             (None, Err(err)) => failures.push(format!("{}: {err:#}", e.name)),
             (None, Ok(scene)) => {
                 let reference = read_exr_rgb(&e.reference).unwrap();
-                let m = metrics(&render_at(&scene, &reference), &reference);
+                let m = metrics(&render_at(&scene, &reference, e.spp), &reference);
                 eprintln!("{:26} {}", e.name, describe(&m));
-                if !passes(&m) {
+                if !passes(&m, e) {
                     failures.push(format!("{}: {}", e.name, describe(&m)));
                 }
             }
@@ -144,10 +155,10 @@ fn a_light_five_percent_too_dim_fails_the_check() {
     }
     assert_eq!(dimmed, 1);
     let reference = read_exr_rgb(&e.reference).unwrap();
-    let m = metrics(&render_at(&scene, &reference), &reference);
+    let m = metrics(&render_at(&scene, &reference, e.spp), &reference);
     eprintln!("cornell_box with its light at 95 %: {}", describe(&m));
     assert!(
-        !passes(&m),
+        !passes(&m, &e),
         "a 5 % dimmer light went unnoticed: {}",
         describe(&m)
     );

@@ -3,6 +3,7 @@
 use glam::{Mat4, Vec2, Vec3};
 use std::path::Path;
 use thinfilm::optics::{Complex64, Ior};
+use thinfilm::render::bsdf::roughness::Roughness;
 use thinfilm::render::bsdf::Bsdf;
 use thinfilm::render::camera::fov_x_deg;
 use thinfilm::scene::mitsuba::load_str;
@@ -414,11 +415,16 @@ fn film(b: Bsdf) -> (Ior, TextureDesc, Ior, f32) {
 /// The (index, α_u, α_v) of a conductor.
 fn conductor(b: Bsdf) -> (Ior, f32, f32) {
     match b {
-        Bsdf::Conductor(c) => (
-            c.eta,
-            c.ggx.map_or(0.0, |g| g.alpha_u),
-            c.ggx.map_or(0.0, |g| g.alpha_v),
-        ),
+        Bsdf::Conductor(c) => {
+            let Roughness::Constant(g) = c.roughness else {
+                panic!("textured roughness: {:?}", c.roughness)
+            };
+            (
+                c.eta,
+                g.map_or(0.0, |g| g.alpha_u),
+                g.map_or(0.0, |g| g.alpha_v),
+            )
+        }
         b => panic!("not a conductor: {b:?}"),
     }
 }
@@ -448,7 +454,10 @@ fn bsdfs() {
     match bsdf(r#"<bsdf type="roughdielectric"/>"#) {
         Bsdf::RoughDielectric(d) => {
             assert!((d.eta - 1.5046 / 1.000277).abs() < 1e-6, "{}", d.eta);
-            assert_eq!((d.mf.alpha_u, d.mf.alpha_v), (0.1, 0.1));
+            let Roughness::Constant(Some(mf)) = d.roughness else {
+                panic!("{:?}", d.roughness)
+            };
+            assert_eq!((mf.alpha_u, mf.alpha_v), (0.1, 0.1));
         }
         b => panic!("{b:?}"),
     }
@@ -494,7 +503,11 @@ fn bsdfs() {
         (c.re - 1.64).abs() < 1e-6 && (c.im - 0.2).abs() < 1e-6,
         "{c}"
     );
-    assert!(err(r#"<shape type="cube"><bsdf type="conductor"><rgb name="eta" value="0.2, 0.3, 0.4"/></bsdf></shape>"#).contains("RGB-valued indices are not supported"));
+    // An RGB index is upsampled as Mitsuba does (like a reflectance).
+    let (eta, _, _) = conductor(bsdf(
+        r#"<bsdf type="conductor"><rgb name="eta" value="0.2, 0.3, 0.4"/></bsdf>"#,
+    ));
+    assert!((0.15..0.45).contains(&eta.at(550.0).re), "{eta}");
     assert!(err(r#"<shape type="cube"><bsdf type="thinfilm"><string name="substrate_ior" value="bk7"/><float name="substrate_k" value="0.1"/></bsdf></shape>"#).contains("named substrate"));
     assert!(err(
         r#"<shape type="cube"><bsdf type="conductor"><float name="eta" value="-1"/></bsdf></shape>"#

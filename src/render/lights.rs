@@ -738,6 +738,10 @@ pub enum Light {
         /// Per-texel emission (glTF `emissiveTexture`), replacing `radiance` where set.
         texture: Option<Box<TexturedEmission>>,
     },
+    Projector(Box<ProjectorLight>),
+    /// A spot light whose value is also multiplied by a texture ([`EmitterDesc::TexturedSpot`]):
+    /// the texture and tan(cutoff), Mitsuba's `m_uv_factor`.
+    TexturedSpot(Box<(SpotLight, super::texture::Texture, f32)>),
 }
 
 /// A spot light ([`EmitterDesc::Spot`]) prepared for shading.
@@ -791,6 +795,53 @@ impl SpotLight {
             }
             SpotCone::Omni => 1.0,
         }
+    }
+}
+
+/// A projector ([`EmitterDesc::Projector`]) prepared for shading: Mitsuba 3.9's
+/// `projector.cpp` `sample_direction`. A point p with light-local coordinates (x, y, z), z > 0,
+/// sees texel uv = (½ − ½·x/(z·t), ½ − ½·aspect·y/(z·t)), t = tan(fov_x/2) (Mitsuba's
+/// `perspective_projection`: u grows to local −x, v downwards), and receives the value
+/// π·scale·E(uv) / (z²·cos θ), θ between the projector's axis and the ray — the irradiance
+/// E·scale on the plane z = 1 facing the projector, falling as a pinhole's.
+#[derive(Debug, Clone)]
+pub struct ProjectorLight {
+    position: Vec3,
+    /// `to_world` applied to local +Z (not normalised, as Mitsuba's `ds.n`).
+    axis: Vec3,
+    to_local: Mat4,
+    irradiance: super::texture::Texture,
+    /// The image is a bitmap (upsampled as a reflectance), not an emission spectrum.
+    is_bitmap: bool,
+    irradiance_value: Spectrum,
+    scale: f32,
+    tan_half_fov_x: f32,
+    aspect: f32,
+}
+
+impl ProjectorLight {
+    /// The incident direction, distance and value at `p`; None outside the frustum.
+    fn incident(&self, p: Vec3, wl: &SampledWavelengths) -> Option<(Vec3, f32, Spec)> {
+        let local = self.to_local.transform_point3(p);
+        if local.z.is_nan() || local.z <= 0.0 {
+            return None;
+        }
+        let k = 0.5 / (local.z * self.tan_half_fov_x);
+        let uv = Vec2::new(0.5 - k * local.x, 0.5 - self.aspect * k * local.y);
+        if !(uv.cmpge(Vec2::ZERO).all() && uv.cmple(Vec2::ONE).all()) {
+            return None;
+        }
+        let d = self.position - p;
+        let dist = d.length();
+        let wi = d / dist;
+        let cos = -self.axis.dot(wi);
+        let e = if self.is_bitmap {
+            self.irradiance.eval(uv, wl)
+        } else {
+            self.irradiance_value.eval(wl)
+        };
+        let v = e * (PI * self.scale / (local.z * local.z * cos));
+        (cos > 0.0 && dist > 0.0 && v.is_finite()).then_some((wi, dist, v))
     }
 }
 
@@ -934,7 +985,11 @@ impl Light {
         match self {
             Light::Env(e) => e.pdf_direction(dir),
             Light::Constant(_) => 1.0 / (4.0 * PI),
-            Light::Point { .. } | Light::Spot(_) | Light::Directional { .. } => 0.0,
+            Light::Point { .. }
+            | Light::Spot(_)
+            | Light::Directional { .. }
+            | Light::Projector(_)
+            | Light::TexturedSpot(_) => 0.0,
             Light::Area { geometry, .. } => {
                 let pdf_area = match geometry {
                     AreaGeometry::Triangles { area, .. } => 1.0 / area,
@@ -1003,6 +1058,37 @@ impl Light {
                     p_light: *position,
                     n_light: Vec3::ZERO,
                     radiance: intensity.eval(wl) / dist2,
+                    pdf: 1.0,
+                    delta: true,
+                })
+            }
+            Light::TexturedSpot(ts) => {
+                let (spot, texture, uv_factor) = ts.as_ref();
+                let d = spot.position - p;
+                let (dist2, local) = (d.length_squared(), spot.to_local * -d);
+                let f = spot.profile(local);
+                // Mitsuba's `direction_to_uv` of the light-local direction towards p.
+                let k = 0.5 / (local.z * uv_factor);
+                let uv = Vec2::new(0.5 + k * local.x, 0.5 + k * local.y);
+                let radiance = spot.intensity.eval(wl) * texture.eval(uv, wl) * (f / dist2);
+                (f > 0.0 && dist2 > 0.0 && radiance.is_finite()).then(|| LightSample {
+                    wi: d / dist2.sqrt(),
+                    dist: dist2.sqrt(),
+                    p_light: spot.position,
+                    n_light: Vec3::ZERO,
+                    radiance,
+                    pdf: 1.0,
+                    delta: true,
+                })
+            }
+            Light::Projector(pr) => {
+                let (wi, dist, radiance) = pr.incident(p, wl)?;
+                Some(LightSample {
+                    wi,
+                    dist,
+                    p_light: pr.position,
+                    n_light: Vec3::ZERO,
+                    radiance,
                     pdf: 1.0,
                     delta: true,
                 })
@@ -1219,6 +1305,52 @@ impl LightSet {
                         *cone,
                         *range,
                     )))
+                }
+                EmitterDesc::TexturedSpot {
+                    to_world,
+                    intensity,
+                    cone,
+                    texture,
+                } => {
+                    let m = Mat3::from_mat4(*to_world);
+                    if !(to_world.is_finite() && m.determinant().abs() > 1e-12) {
+                        anyhow::bail!("emitter {i} (spot): to_world is singular or not finite");
+                    }
+                    let SpotCone::Linear { cutoff, .. } = *cone else {
+                        anyhow::bail!("emitter {i} (spot): a texture needs Mitsuba's cone");
+                    };
+                    let spot =
+                        SpotLight::new(*to_world, Spectrum::illuminant(intensity), *cone, None);
+                    let texture = super::texture::Texture::new(texture);
+                    Light::TexturedSpot(Box::new((spot, texture, cutoff.tan())))
+                }
+                EmitterDesc::Projector {
+                    to_world,
+                    irradiance,
+                    scale,
+                    tan_half_fov_x,
+                    aspect,
+                } => {
+                    if !(to_world.is_finite() && to_world.determinant().abs() > 1e-12) {
+                        anyhow::bail!(
+                            "emitter {i} (projector): to_world is singular or not finite"
+                        );
+                    }
+                    let value = match irradiance {
+                        crate::scene::TextureDesc::Value(v) => Spectrum::illuminant(v),
+                        _ => Spectrum::Constant(0.0),
+                    };
+                    Light::Projector(Box::new(ProjectorLight {
+                        position: to_world.transform_point3(Vec3::ZERO),
+                        axis: to_world.transform_vector3(Vec3::Z),
+                        to_local: to_world.inverse(),
+                        irradiance: super::texture::Texture::new(irradiance),
+                        is_bitmap: !matches!(irradiance, crate::scene::TextureDesc::Value(_)),
+                        irradiance_value: value,
+                        scale: *scale,
+                        tan_half_fov_x: *tan_half_fov_x,
+                        aspect: *aspect,
+                    }))
                 }
                 EmitterDesc::Directional {
                     direction,

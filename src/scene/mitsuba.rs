@@ -892,6 +892,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 EmitterDesc::Point { .. }
                     | EmitterDesc::Spot { .. }
                     | EmitterDesc::Directional { .. }
+                    | EmitterDesc::Projector { .. }
+                    | EmitterDesc::TexturedSpot { .. }
             )
         };
         let has_point = self.emitters.iter().any(is_delta);
@@ -902,12 +904,15 @@ impl<'a, 'i> Ctx<'a, 'i> {
             );
             for e in &mut self.emitters {
                 match e {
-                    EmitterDesc::Point { intensity, .. } | EmitterDesc::Spot { intensity, .. } => {
+                    EmitterDesc::Point { intensity, .. }
+                    | EmitterDesc::Spot { intensity, .. }
+                    | EmitterDesc::TexturedSpot { intensity, .. } => {
                         *intensity = scaled_spectrum(intensity, emitter_samples as f32)
                     }
                     EmitterDesc::Directional { irradiance, .. } => {
                         *irradiance = scaled_spectrum(irradiance, emitter_samples as f32)
                     }
+                    EmitterDesc::Projector { scale, .. } => *scale *= emitter_samples as f32,
                     _ => {}
                 }
             }
@@ -1592,12 +1597,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
             "spot" => self.spot_emitter(p)?.into(),
             "directional" => {
                 let direction = match (p.take("direction"), p.take("to_world")) {
-                    (Some(_), Some(t)) => {
-                        return Err(self.err(
-                            t.node,
-                            "give either 'direction' or 'to_world' for a directional light, not both",
-                        ))
-                    }
+                    (Some(_), Some(t)) => return Err(self.err(
+                        t.node,
+                        "give either 'direction' or 'to_world' for a directional light, not both",
+                    )),
                     (
                         Some(Prop {
                             val: Val::Vector(v) | Val::Point(v),
@@ -1625,18 +1628,57 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 }
                 .into()
             }
-            "projector" => {
-                return Err(self.err(
-                    p.node,
-                    "emitter \"projector\" is not supported (a textured spot light); use \"spot\" without a texture",
-                ))
-            }
+            "projector" => self.projector_emitter(p)?.into(),
             _ => {
                 return Err(self.unknown_plugin(
                     p,
-                    &["area", "constant", "point", "envmap", "spot", "directional"],
+                    &[
+                        "area",
+                        "constant",
+                        "point",
+                        "envmap",
+                        "spot",
+                        "directional",
+                        "projector",
+                    ],
                 ))
             }
+        })
+    }
+
+    /// Mitsuba's `projector` (`projector.cpp`): `irradiance` (a bitmap texture, or an
+    /// emission value: 1 = D65), `scale` (1), `fov` / `fov_axis` / `focal_length` as a
+    /// perspective sensor's with the image's aspect ratio, `to_world`.
+    fn projector_emitter(&mut self, p: &mut Props<'a, 'i>) -> Result<EmitterDesc> {
+        let irradiance = match p.list.iter().position(|q| q.name == "irradiance") {
+            Some(i) if matches!(p.list[i].val, Val::Texture(_)) => match p.list.remove(i).val {
+                Val::Texture(t @ TextureDesc::Bitmap(_)) => t,
+                _ => {
+                    return Err(self.err(
+                        p.node,
+                        "projector: 'irradiance' must be a bitmap texture or a value",
+                    ))
+                }
+            },
+            _ => TextureDesc::Value(p.emission(self, "irradiance")?),
+        };
+        let aspect = match &irradiance {
+            TextureDesc::Bitmap(b) => b.width as f32 / b.height as f32,
+            _ => 1.0,
+        };
+        let (fov, axis) = self.sensor_fov(p)?;
+        let fov_x = crate::render::camera::fov_x_deg(fov, axis, aspect);
+        let scale = p.float(self, "scale", 1.0)? as f32;
+        let to_world = p.transform(self, "to_world")?;
+        if !(scale.is_finite() && scale >= 0.0 && fov_x > 0.0 && fov_x < 180.0) {
+            return Err(self.err(p.node, "projector: scale must be ≥ 0 and fov in (0, 180)"));
+        }
+        Ok(EmitterDesc::Projector {
+            to_world,
+            irradiance,
+            scale,
+            tan_half_fov_x: (fov_x.to_radians() * 0.5).tan(),
+            aspect,
         })
     }
 
@@ -1644,12 +1686,17 @@ impl<'a, 'i> Ctx<'a, 'i> {
     /// `beam_width`, falling linearly in angle to zero at `cutoff_angle` (degrees; defaults
     /// 20 and ¾ of the cutoff).
     fn spot_emitter(&mut self, p: &mut Props<'a, 'i>) -> Result<EmitterDesc> {
-        if let Some(q) = p.take("texture") {
-            return Err(self.err(
-                q.node,
-                "a spot light 'texture' (projected image) is not supported",
-            ));
-        }
+        let texture = match p.take("texture") {
+            None => None,
+            Some(Prop {
+                val: Val::Texture(t @ TextureDesc::Bitmap(_)),
+                ..
+            }) => Some(t),
+            Some(q) => {
+                // Mitsuba: "The parameter 'texture' must be spatially varying".
+                return Err(self.err(q.node, "a spot light 'texture' must be a bitmap texture"));
+            }
+        };
         let cutoff = p.float(self, "cutoff_angle", 20.0)?;
         let beam = p.float(self, "beam_width", cutoff * 0.75)?;
         if !(cutoff > 0.0 && cutoff <= 180.0 && beam >= 0.0 && beam <= cutoff) {
@@ -1659,14 +1706,24 @@ impl<'a, 'i> Ctx<'a, 'i> {
             ));
         }
         let to_world = p.transform(self, "to_world")?;
-        Ok(EmitterDesc::Spot {
-            to_world,
-            intensity: p.emission(self, "intensity")?,
-            cone: SpotCone::Linear {
-                cutoff: (cutoff as f32).to_radians(),
-                beam_width: (beam as f32).to_radians(),
+        let intensity = p.emission(self, "intensity")?;
+        let cone = SpotCone::Linear {
+            cutoff: (cutoff as f32).to_radians(),
+            beam_width: (beam as f32).to_radians(),
+        };
+        Ok(match texture {
+            Some(texture) => EmitterDesc::TexturedSpot {
+                to_world,
+                intensity,
+                cone,
+                texture,
             },
-            range: None,
+            None => EmitterDesc::Spot {
+                to_world,
+                intensity,
+                cone,
+                range: None,
+            },
         })
     }
 
@@ -2373,17 +2430,6 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 }
 
-/// A specular reflectance/transmittance factor of 1 (Mitsuba's default), however written.
-fn is_unit(v: &Val) -> bool {
-    match v {
-        Val::Float(x) => *x == 1.0,
-        Val::Int(x) => *x == 1,
-        Val::Rgb(c) => c.iter().all(|&x| x == 1.0),
-        Val::Spectrum(SpectrumDesc::Constant(x)) => *x == 1.0,
-        _ => false,
-    }
-}
-
 /// The sensor Mitsuba 3 (up to 3.8; 3.9 refuses to render without one) creates for a scene
 /// without a sensor: a 45° (horizontal) perspective camera looking along +z at the centre of
 /// the shapes' bounding box from `distance = max extent / (2·tan 22.5°)` in front of its
@@ -2636,17 +2682,6 @@ impl<'a, 'i> Props<'a, 'i> {
     /// Removes the named parameters if present, checking their type with `ok`.
     fn accept(&mut self, names: &[&str], ctx: &Ctx, ok: impl Fn(&Val) -> bool) -> Result<()> {
         self.accept_or(names, ctx, ok, "")
-    }
-
-    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
-    /// default, 1, is supported — a scaled or textured lobe is refused, not dropped.
-    fn unit_factors(&mut self, names: &[&str], ctx: &Ctx) -> Result<()> {
-        self.accept_or(
-            names,
-            ctx,
-            is_unit,
-            ": only 1 (Mitsuba's default) is supported, not a scaled or textured lobe",
-        )
     }
 
     /// [`Self::accept`] with `why` appended to the error message.

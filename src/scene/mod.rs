@@ -318,6 +318,26 @@ pub enum EmitterDesc {
         direction: Vec3,
         irradiance: SpectrumDesc,
     },
+    /// Mitsuba's `projector`: a pinhole at the origin of `to_world` projecting `irradiance`
+    /// (a bitmap, upsampled like a reflectance as Mitsuba's bitmap texture is, or a constant
+    /// emission spectrum) along local +Z through a frustum of horizontal half-angle tangent
+    /// `tan_half_fov_x` and width/height `aspect` (the image's); `scale` multiplies it.
+    Projector {
+        to_world: Mat4,
+        irradiance: TextureDesc,
+        scale: f32,
+        tan_half_fov_x: f32,
+        aspect: f32,
+    },
+    /// Mitsuba's `spot` with a `texture`: the spot light of `intensity` and Mitsuba's linear
+    /// `cone`, its value also multiplied by `texture` at uv = ½ + ½·(x, y)/(z·tan cutoff) of
+    /// the light-local direction (Mitsuba's `direction_to_uv`).
+    TexturedSpot {
+        to_world: Mat4,
+        intensity: SpectrumDesc,
+        cone: SpotCone,
+        texture: TextureDesc,
+    },
 }
 
 /// The angular profile of a [`EmitterDesc::Spot`] (θ: angle from the axis).

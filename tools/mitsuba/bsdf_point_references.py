@@ -10,6 +10,13 @@ parameters to tests/references/bsdf_points.json:
 
 Mitsuba's Beckmann G1 is a rational fit of the exact form thinfilm uses (≤ 0.35 % apart), so
 the test allows 1 %.
+
+It also writes tests/references/bsdf_spectral_points.json for tests/scene_bsdf_points.rs:
+BSDFs given as XML text (RGB `eta`/`k` of conductors, `specular_reflectance` /
+`specular_transmittance` ≠ 1), loaded by Mitsuba's `scalar_spectral` variant and evaluated at
+four fixed wavelengths, so that the test can load the very same XML into thinfilm and compare
+per wavelength — the check of Mitsuba's spectral upsampling of RGB indices (clamped to [0, 1])
+and of where the factors apply.
 """
 
 import json
@@ -18,10 +25,32 @@ import os
 
 import mitsuba as mi
 
-mi.set_variant("scalar_rgb")
+mi.set_variant("scalar_rgb", "scalar_spectral")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "..", "..", "tests", "references", "bsdf_points.json")
+OUT_SPECTRAL = os.path.join(HERE, "..", "..", "tests", "references", "bsdf_spectral_points.json")
+WAVELENGTHS = [420.0, 500.0, 580.0, 660.0]
+
+# Veach's MIS scene (as converted for Mitsuba 3 by users): RGB indices with components > 1,
+# which Mitsuba clamps to [0, 1] before upsampling.
+VEACH_ETA = '<rgb name="eta" value="0.200438, 0.924033, 1.10221"/><rgb name="k" value="3.91295, 2.45285, 2.14219"/>'
+SPECTRAL_CASES = [
+    ('<bsdf type="roughconductor"><float name="alpha" value="0.1"/>'
+     '<string name="distribution" value="beckmann"/><rgb name="specular_reflectance" value="0.3, 0.3, 0.3"/>'
+     + VEACH_ETA + '</bsdf>'),
+    ('<bsdf type="roughconductor"><float name="alpha" value="0.25"/><string name="distribution" value="ggx"/>'
+     '<rgb name="eta" value="0.2, 0.6, 0.9"/><rgb name="k" value="0.9, 0.5, 0.3"/>'
+     '<rgb name="specular_reflectance" value="0.9, 0.6, 0.3"/></bsdf>'),
+    ('<bsdf type="roughdielectric"><float name="alpha" value="0.2"/><float name="int_ior" value="1.5"/>'
+     '<float name="ext_ior" value="1.0"/><float name="specular_reflectance" value="0.5"/>'
+     '<rgb name="specular_transmittance" value="0.2, 0.5, 0.8"/></bsdf>'),
+    ('<bsdf type="roughplastic"><float name="alpha" value="0.2"/><rgb name="diffuse_reflectance" value="0.2, 0.4, 0.6"/>'
+     '<float name="specular_reflectance" value="0.4"/></bsdf>'),
+    # Conductor materials from Mitsuba's own tables (thinfilm's library lacks them).
+    '<bsdf type="roughconductor"><float name="alpha" value="0.2"/><string name="material" value="a-C"/></bsdf>',
+    '<bsdf type="roughconductor"><float name="alpha" value="0.15"/><string name="material" value="Cr"/></bsdf>',
+]
 
 
 def direction(theta_deg, phi_deg):
@@ -84,7 +113,43 @@ def pairs(case):
     return out
 
 
+def spectral_points():
+    """Per-wavelength eval and pdf of the XML cases (scalar_spectral)."""
+    mi.set_variant("scalar_spectral")
+    ctx = mi.BSDFContext()
+    rows = []
+    for xml in SPECTRAL_CASES:
+        bsdf = mi.load_string(xml.replace("<bsdf ", '<bsdf version="3.0.0" ', 1))
+        eta = 1.5 if "roughdielectric" in xml else None
+        for theta_i, phi_i in [(20.0, 30.0), (60.0, 200.0)]:
+            wi = direction(theta_i, phi_i)
+            targets = [[-wi[0], -wi[1], wi[2]]]
+            if eta:
+                targets.append(refract_dir(wi, eta))
+            for t in targets:
+                for dt, dp in [(0.0, 0.0), (6.0, 10.0)]:
+                    wo = perturb(t, dt, dp)
+                    si = mi.SurfaceInteraction3f()
+                    si.n = [0, 0, 1]
+                    si.sh_frame = mi.Frame3f([1, 0, 0], [0, 1, 0], [0, 0, 1])
+                    si.wi = wi
+                    si.wavelengths = WAVELENGTHS
+                    value = [float(v) for v in bsdf.eval(ctx, si, mi.Vector3f(wo))]
+                    pdf = float(bsdf.pdf(ctx, si, mi.Vector3f(wo)))
+                    rows.append({"xml": xml, "wi": wi, "wo": wo, "eval": value, "pdf": pdf})
+    doc = {
+        "about": "Mitsuba 3 scalar_spectral eval (f·cos θo at `wavelengths`) and pdf of BSDFs given as XML, at local direction pairs; made by tools/mitsuba/bsdf_point_references.py",
+        "mitsuba": mi.__version__,
+        "wavelengths": WAVELENGTHS,
+        "points": rows,
+    }
+    with open(OUT_SPECTRAL, "w") as f:
+        json.dump(doc, f, indent=1)
+    print(f"{len(rows)} points -> {OUT_SPECTRAL}")
+
+
 def main():
+    mi.set_variant("scalar_rgb")
     ctx = mi.BSDFContext()
     rows = []
     for case in CASES:
@@ -109,3 +174,4 @@ def main():
 
 if __name__ == "__main__":
     main()
+    spectral_points()

@@ -12,6 +12,7 @@ Regenerate (from the repository root):
     python3 tools/mitsuba/render_light_references.py --spp 4096
 
 Only some scenes:  --only spot --only thinlens
+Another directory of scenes (with its own manifest): --dir tests/references/projector
 """
 
 import argparse
@@ -29,18 +30,20 @@ def main():
     ap.add_argument("--spp", type=int, default=4096)
     ap.add_argument("--variant", default="llvm_ad_spectral")
     ap.add_argument("--only", action="append", default=[])
+    ap.add_argument("--dir", default=DIR, help="directory of NAME.xml scenes")
     args = ap.parse_args()
+    scene_dir = os.path.abspath(args.dir)
 
     import mitsuba as mi
     import numpy as np
 
     mi.set_variant(args.variant)
-    manifest_path = os.path.join(DIR, "manifest.json")
+    manifest_path = os.path.join(scene_dir, "manifest.json")
     manifest = {}
     if os.path.exists(manifest_path):
         with open(manifest_path) as f:
             manifest = json.load(f)
-    for xml in sorted(glob.glob(os.path.join(DIR, "*.xml"))):
+    for xml in sorted(glob.glob(os.path.join(scene_dir, "*.xml"))):
         name = os.path.splitext(os.path.basename(xml))[0]
         if args.only and name not in args.only:
             continue
@@ -54,7 +57,7 @@ def main():
             img = np.array(mi.render(scene, spp=n, seed=17 + i), dtype=np.float64) * n
             acc = img if acc is None else acc + img
         arr = (acc / args.spp).astype(np.float32)
-        out = os.path.join(DIR, name + ".exr")
+        out = os.path.join(scene_dir, name + ".exr")
         mi.Bitmap(np.ascontiguousarray(arr), mi.Bitmap.PixelFormat.RGB).write(out + ".partial.exr")
         os.replace(out + ".partial.exr", out)
         secs = time.perf_counter() - t0
@@ -63,7 +66,8 @@ def main():
             "spp": args.spp,
             "variant": args.variant,
             "mitsuba": mi.__version__,
-            "command": "python3 tools/mitsuba/render_light_references.py --spp %d" % args.spp,
+            "command": "python3 tools/mitsuba/render_light_references.py --spp %d%s" % (
+                args.spp, "" if scene_dir == DIR else " --dir " + os.path.relpath(scene_dir, REPO)),
         }
     with open(manifest_path, "w") as f:
         json.dump(manifest, f, indent=2, sort_keys=True)

@@ -2,12 +2,16 @@
 //! `conductor`, `roughconductor`), one-sided. Anisotropic roughness is oriented as Mitsuba
 //! orients it: α_u along the shading tangent dp/du ([`super::normal_map::dpdu_frame`]).
 //! The complex index comes from [`crate::optics::Ior`] (constant, a named metal, or `eta`/`k`
-//! spectra). Polarised: Mitsuba's `specular_reflection` Mueller matrix of the complex
-//! Fresnel amplitudes at the (micro)facet.
+//! spectra, or RGB upsampled as Mitsuba does: [`PluginParams::conductor_spectrum`]). The
+//! roughness may be textured ([`Roughness`]) and the lobe scaled by `specular_reflectance`
+//! ([`LobeFactor`]). Polarised: Mitsuba's `specular_reflection` Mueller matrix of the complex
+//! Fresnel amplitudes at the (micro)facet, times `specular_reflectance`.
 
+use super::lobe_factor::LobeFactor;
 use super::microfacet::{
-    opaque_reflector_methods, reflection_lobe, Distribution, Microfacet, OpaqueReflector,
+    opaque_reflector_methods, Distribution, Microfacet, OpaqueReflector,
 };
+use super::roughness::Roughness;
 use super::{fresnel::fresnel_conductor, BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
 use crate::optics::Ior;
 use crate::render::geometry::{Frame, SurfaceInteraction};
@@ -19,8 +23,10 @@ use num_complex::Complex32;
 #[derive(Debug, Clone)]
 pub struct Conductor {
     pub eta: Ior,
-    /// None = smooth (a delta lobe).
-    pub ggx: Option<Microfacet>,
+    /// Constant None = smooth (a delta lobe).
+    pub roughness: Roughness,
+    /// Mitsuba's `specular_reflectance`.
+    pub specular: LobeFactor,
 }
 
 /// Roughness must be finite and ≥ 0 (0: smooth).
@@ -49,14 +55,17 @@ impl Conductor {
         check_alpha(alpha_v, "conductor alpha_v")?;
         Ok(Conductor {
             eta,
-            ggx: (alpha_u > 0.0 || alpha_v > 0.0).then(|| Microfacet::of(kind, alpha_u, alpha_v)),
+            roughness: Roughness::Constant(
+                (alpha_u > 0.0 || alpha_v > 0.0).then(|| Microfacet::of(kind, alpha_u, alpha_v)),
+            ),
+            specular: LobeFactor::default(),
         })
     }
 }
 
 impl OpaqueReflector for Conductor {
-    fn ggx(&self) -> Option<Microfacet> {
-        self.ggx
+    fn ggx(&self, ctx: &ShadingCtx) -> Option<Microfacet> {
+        self.roughness.at(ctx)
     }
 
     #[inline]
@@ -64,15 +73,16 @@ impl OpaqueReflector for Conductor {
         Spec::from_array(ctx.wl.lambda.map(|l| {
             let n = self.eta.at(l as f64);
             fresnel_conductor(cos_i, n.re as f32, n.im as f32)
-        }))
+        })) * self.specular.eval(ctx)
     }
 
     #[inline]
     fn reflectance_mueller(&self, ctx: &ShadingCtx, cos_i: f32) -> [Mueller; 4] {
-        ctx.wl.lambda.map(|l| {
+        let m = ctx.wl.lambda.map(|l| {
             let n = self.eta.at(l as f64);
             specular_reflection_conductor(cos_i, Complex32::new(n.re as f32, n.im as f32))
-        })
+        });
+        self.specular.scale_mueller(ctx, m)
     }
 }
 
@@ -83,16 +93,16 @@ impl BsdfPlugin for Conductor {
     /// perfect mirror) or `eta`/`k` (numbers or spectra; Mitsuba's defaults 0 and 1), and for
     /// `roughconductor` the microfacet roughness.
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
-        let (kind, au, av) = if p.plugin() == "roughconductor" {
-            p.microfacet()?
+        let roughness = if p.plugin() == "roughconductor" {
+            Roughness::read(p, false)?
         } else {
-            (Distribution::Ggx, 0.0, 0.0)
+            Roughness::Constant(None)
         };
         let material = p.string("material")?;
         let plugin = p.plugin().to_string();
-        let eta = p.real_spectrum_as("eta", &format!("'eta' of bsdf \"{plugin}\""))?;
-        let k = p.real_spectrum_as("k", &format!("'k' of bsdf \"{plugin}\""))?;
-        p.unit_factors(&["specular_reflectance"])?;
+        let eta = p.conductor_spectrum("eta", &format!("'eta' of bsdf \"{plugin}\""))?;
+        let k = p.conductor_spectrum("k", &format!("'k' of bsdf \"{plugin}\""))?;
+        let specular = LobeFactor::read(p, "specular_reflectance")?;
         let ior = match (material, eta, k) {
             (Some(_), Some(_), _) | (Some(_), None, Some(_)) => {
                 return Err(p.error("give either 'material' or 'eta'/'k', not both"))
@@ -108,28 +118,40 @@ impl BsdfPlugin for Conductor {
                 p.complex_index(&n, &k, "eta/k")
             }
         };
-        Conductor::with_distribution(ior, kind, au, av).map_err(|e| p.error(e))
+        Ok(Conductor {
+            eta: ior,
+            roughness,
+            specular,
+        })
     }
 }
 
 impl BsdfModel for Conductor {
     fn flags(&self) -> BsdfFlags {
-        reflection_lobe(self.ggx)
+        if self.roughness.is_rough() {
+            BsdfFlags::GLOSSY_REFLECTION
+        } else {
+            BsdfFlags::DELTA_REFLECTION
+        }
     }
 
     fn describe(&self) -> String {
-        match self.ggx {
-            None => format!("conductor {}", self.eta),
-            Some(g) => format!("roughconductor {} {}", self.eta, g.describe()),
+        let spec = self.specular.describe("specular_reflectance");
+        if self.roughness.is_rough() {
+            let r = self.roughness.describe();
+            format!("roughconductor {} {r}{spec}", self.eta)
+        } else {
+            format!("conductor {}{spec}", self.eta)
         }
     }
 
     /// Mitsuba's frame (s along dp/du) when the roughness is anisotropic; an isotropic lobe
     /// does not depend on the tangent.
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
-        match self.ggx {
-            Some(g) if g.is_anisotropic() => super::normal_map::dpdu_frame(si),
-            _ => si.shading,
+        if self.roughness.is_anisotropic() {
+            super::normal_map::dpdu_frame(si)
+        } else {
+            si.shading
         }
     }
 

@@ -3,8 +3,11 @@
 //! direction differs per wavelength, so the sample uses the hero wavelength's index and asks
 //! the integrator to terminate the secondary wavelengths (Wilkie et al. 2014; pbrt-v4).
 //! Polarised: Mitsuba's `specular_reflection` / `specular_transmission` Mueller matrices.
+//! `specular_reflectance` / `specular_transmittance` scale the lobes' weights, not their
+//! selection probabilities, as in Mitsuba ([`SpecularFactors`]).
 
 use super::fresnel::{fresnel_dielectric, reflect_local};
+use super::lobe_factor::SpecularFactors;
 use super::{
     BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, MuellerValue, PolarizedBsdf, ShadingCtx,
 };
@@ -20,6 +23,7 @@ pub struct Dielectric {
     pub ext_ior: Ior,
     /// Either index depends on wavelength.
     pub dispersive: bool,
+    pub factors: SpecularFactors,
 }
 
 impl Dielectric {
@@ -28,6 +32,7 @@ impl Dielectric {
             dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
             int_ior,
             ext_ior,
+            factors: SpecularFactors::default(),
         }
     }
 
@@ -74,6 +79,7 @@ impl Dielectric {
         };
         // pbrt-v4 terminates on either branch: the choice itself used the hero index.
         s.terminate_secondary = self.dispersive;
+        let s = self.factors.scale_sample(ctx, s);
         s.wo.is_finite().then_some((s, eta_ti))
     }
 }
@@ -86,8 +92,9 @@ impl BsdfPlugin for Dielectric {
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
         let int_ior = p.dielectric_ior("int_ior", 1.5046)?;
         let ext_ior = p.dielectric_ior("ext_ior", 1.000277)?;
-        p.unit_factors(&["specular_reflectance", "specular_transmittance"])?;
-        Ok(Dielectric::new(int_ior, ext_ior))
+        let mut d = Dielectric::new(int_ior, ext_ior);
+        d.factors = SpecularFactors::read(p)?;
+        Ok(d)
     }
 }
 
@@ -98,7 +105,12 @@ impl BsdfModel for Dielectric {
     }
 
     fn describe(&self) -> String {
-        format!("dielectric {}/{}", self.int_ior, self.ext_ior)
+        format!(
+            "dielectric {}/{}{}",
+            self.int_ior,
+            self.ext_ior,
+            self.factors.describe()
+        )
     }
 
     super::delta_lobes_only!();
@@ -148,6 +160,12 @@ impl PolarizedBsdf for Dielectric {
             };
             m.scale(scale)
         });
+        let factor = if reflected {
+            &self.factors.reflection
+        } else {
+            &self.factors.transmission
+        };
+        let m = factor.scale_mueller(ctx, m);
         Some((s, MuellerValue::specular(m, Vec3::Z, wi, wo)))
     }
 }

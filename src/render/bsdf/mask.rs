@@ -17,17 +17,11 @@ pub struct Mask {
 }
 
 impl Mask {
-    /// Opacity at the shading point, in [0, 1]: a bitmap's luminance (Mitsuba's `eval_1` of
-    /// an RGB bitmap), else the value.
+    /// Opacity at the shading point, in [0, 1]: Mitsuba's `eval_1`
+    /// ([`super::roughness::eval_1`]: an RGB bitmap's luminance, a checkerboard's squares
+    /// swapped).
     fn opacity(&self, uv: Vec2) -> f32 {
-        let v = match &self.opacity {
-            Texture::Bitmap(b) if b.channels >= 3 => {
-                let c = b.eval(uv);
-                0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
-            }
-            t => t.eval_scalar(uv),
-        };
-        v.clamp(0.0, 1.0)
+        super::roughness::eval_1(&self.opacity, uv).clamp(0.0, 1.0)
     }
 }
 

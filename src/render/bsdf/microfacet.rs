@@ -519,8 +519,8 @@ pub fn reflection_lobe(ggx: Option<Ggx>) -> BsdfFlags {
 /// [`opaque_reflector_methods!`] in its `BsdfModel` impl; its polarised form is the impl
 /// below.
 pub trait OpaqueReflector {
-    /// The roughness (None: a mirror).
-    fn ggx(&self) -> Option<Ggx>;
+    /// The roughness at the shading point (None: a mirror).
+    fn ggx(&self, ctx: &ShadingCtx) -> Option<Ggx>;
     /// Reflectance at the path's wavelengths for cos θ at the (micro)facet.
     fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32) -> Spec;
     /// The same as Mueller matrices (Mitsuba's conventions).
@@ -529,7 +529,7 @@ pub trait OpaqueReflector {
 
 impl<T: OpaqueReflector> PolarizedBsdf for T {
     fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
-        reflection_eval_mueller(self.ggx(), wi, wo, |c| self.reflectance_mueller(ctx, c))
+        reflection_eval_mueller(self.ggx(ctx), wi, wo, |c| self.reflectance_mueller(ctx, c))
     }
 
     fn sample_mueller(
@@ -543,7 +543,7 @@ impl<T: OpaqueReflector> PolarizedBsdf for T {
         if !lobes.reflection() {
             return None;
         }
-        reflection_sample_mueller(self.ggx(), wi, u2, |c| self.reflectance_mueller(ctx, c))
+        reflection_sample_mueller(self.ggx(ctx), wi, u2, |c| self.reflectance_mueller(ctx, c))
     }
 }
 
@@ -551,7 +551,7 @@ impl<T: OpaqueReflector> PolarizedBsdf for T {
 #[inline]
 pub fn opaque_eval(r: &impl OpaqueReflector, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
     let fresnel = |c| r.reflectance(ctx, c);
-    reflection_eval(r.ggx(), wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
+    reflection_eval(r.ggx(ctx), wi, wo, fresnel, |f, w| f * w).map_or(Spec::ZERO, |(_, v)| v)
 }
 
 /// `BsdfModel::sample` of an [`OpaqueReflector`] (`u2` picks the direction).
@@ -566,8 +566,9 @@ pub fn opaque_sample(
     if !lobes.reflection() {
         return None;
     }
-    let s = reflection_sample(r.ggx(), wi, u2, |c| r.reflectance(ctx, c), |f, g| f * g)?;
-    Some(s.into_sample(r.ggx()))
+    let ggx = r.ggx(ctx);
+    let s = reflection_sample(ggx, wi, u2, |c| r.reflectance(ctx, c), |f, g| f * g)?;
+    Some(s.into_sample(ggx))
 }
 
 /// The `eval`, `pdf`, `sample` and `polarized` methods of an [`OpaqueReflector`]'s
@@ -585,12 +586,12 @@ macro_rules! opaque_reflector_methods {
 
         fn pdf(
             &self,
-            _ctx: &$crate::render::bsdf::ShadingCtx,
+            ctx: &$crate::render::bsdf::ShadingCtx,
             wi: ::glam::Vec3,
             wo: ::glam::Vec3,
         ) -> f32 {
             use $crate::render::bsdf::microfacet::OpaqueReflector;
-            $crate::render::bsdf::microfacet::reflection_lobe_pdf(self.ggx(), wi, wo)
+            $crate::render::bsdf::microfacet::reflection_lobe_pdf(self.ggx(ctx), wi, wo)
         }
 
         fn sample(

@@ -18,8 +18,10 @@
 
 mod flags;
 pub mod fresnel;
+pub mod lobe_factor;
 pub mod microfacet;
 mod mueller;
+pub mod roughness;
 
 pub use flags::{BsdfFlags, Lobes};
 pub use mueller::{MuellerValue, PolarizedLobe};

@@ -13,6 +13,7 @@
 //! lobe is the dielectric reflection Mueller matrix at the (micro)facet.
 
 use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance, reflect, reflect_local};
+use super::lobe_factor::LobeFactor;
 use super::microfacet::{Distribution, Microfacet};
 use super::{
     BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, MuellerValue, PolarizedBsdf, ShadingCtx,
@@ -65,8 +66,12 @@ pub struct Plastic {
     pub ggx: Option<Microfacet>,
     /// The rough coating's transmittance at 64 cosines (Mitsuba's table); empty when smooth.
     transmittance: Arc<[f32]>,
-    /// Mitsuba's specular sampling weight s/(s + d_mean) with specular reflectance s = 1.
+    /// Mitsuba's specular sampling weight s_mean/(s_mean + d_mean), s_mean the mean of
+    /// `specular_reflectance`.
     pub specular_sampling_weight: f32,
+    /// Mitsuba's `specular_reflectance`: scales the coating's reflection (not the light
+    /// it transmits to the base).
+    pub specular: LobeFactor,
     /// Internal diffuse reflectance of the coating: F_dr(1/η) smooth, Mitsuba's quadrature
     /// when rough.
     pub fdr_int: f32,
@@ -107,10 +112,7 @@ impl Plastic {
             );
         }
         let diffuse_reflectance = Texture::new(diffuse_reflectance);
-        let d_mean = match &diffuse_reflectance {
-            Texture::Value(s) => s.mean_hint(),
-            _ => 0.5,
-        };
+        let d_mean = super::lobe_factor::texture_mean(&diffuse_reflectance);
         let ggx = (alpha > 0.0).then(|| Microfacet::of(kind, alpha, alpha));
         let (transmittance, fdr_int) = match ggx {
             None => (Arc::from(Vec::new()), fresnel_diffuse_reflectance(1.0 / eta)),
@@ -124,6 +126,7 @@ impl Plastic {
             transmittance,
             specular_sampling_weight: 1.0 / (1.0 + d_mean.max(0.0)),
             fdr_int,
+            specular: LobeFactor::default(),
         })
     }
 
@@ -194,9 +197,16 @@ impl BsdfPlugin for Plastic {
         let int_ior = p.ior_number("int_ior", 1.49)? as f32;
         let ext_ior = p.ior_number("ext_ior", 1.000277)? as f32;
         let nonlinear = p.bool("nonlinear", false)?;
-        p.unit_factors(&["specular_reflectance"])?;
-        Plastic::with_distribution(&diffuse, (int_ior, ext_ior), nonlinear, kind, alpha)
-            .map_err(|e| p.error(e))
+        let specular = LobeFactor::read(p, "specular_reflectance")?;
+        let mut b =
+            Plastic::with_distribution(&diffuse, (int_ior, ext_ior), nonlinear, kind, alpha)
+                .map_err(|e| p.error(e))?;
+        // Mitsuba: s_mean / (d_mean + s_mean); d_mean recovered from the weight for s = 1.
+        let (s_mean, w) = (specular.mean(), b.specular_sampling_weight);
+        let d_mean = (1.0 - w) / w;
+        b.specular_sampling_weight = s_mean / (s_mean + d_mean);
+        b.specular = specular;
+        Ok(b)
     }
 }
 
@@ -221,7 +231,8 @@ impl BsdfModel for Plastic {
             return Spec::ZERO;
         }
         let t_i = self.coat_transmittance(wi.z);
-        self.diffuse_value(ctx, t_i, wo) + Spec::splat(self.specular_value(wi, wo))
+        self.diffuse_value(ctx, t_i, wo)
+            + self.specular.eval(ctx) * self.specular_value(wi, wo)
     }
 
     fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
@@ -260,7 +271,7 @@ impl BsdfModel for Plastic {
                 if u1 < ps {
                     Some(BsdfSample::delta(
                         reflect_local(wi),
-                        Spec::splat(f_i / ps),
+                        self.specular.eval(ctx) * (f_i / ps),
                         ps,
                         BsdfFlags::DELTA_REFLECTION,
                     ))
@@ -320,8 +331,9 @@ impl PolarizedBsdf for Plastic {
                 let m = (wi + wo).normalize();
                 let scale = ggx.d(m) * ggx.g(wi, wo, m) / (4.0 * wi.z);
                 let f = specular_reflection(wi.dot(m), self.eta).scale(scale);
-                let mut value = MuellerValue::specular([f; 4], m, wi, wo);
-                value.depolarized = total - Spec::splat(f.0[0][0]);
+                let f = self.specular.scale_mueller(ctx, [f; 4]);
+                let mut value = MuellerValue::specular(f, m, wi, wo);
+                value.depolarized = total - Spec::from_array(f.map(|f| f.0[0][0]));
                 value
             }
             _ => MuellerValue::depolarizing(total),
@@ -339,7 +351,8 @@ impl PolarizedBsdf for Plastic {
         let s = self.sample(ctx, wi, u1, u2, lobes)?;
         let value = if s.is_delta() {
             let f = specular_reflection(wi.z, self.eta).scale(1.0 / s.pdf);
-            MuellerValue::specular([f; 4], Vec3::Z, wi, s.wo)
+            let f = self.specular.scale_mueller(ctx, [f; 4]);
+            MuellerValue::specular(f, Vec3::Z, wi, s.wo)
         } else if self.ggx.is_some() {
             self.eval_mueller(ctx, wi, s.wo).scaled(1.0 / s.pdf)
         } else {

@@ -4,10 +4,15 @@
 //! normal sampled from the side wi is on, chosen with probability F and 1 − F, the generalised
 //! half vector m ∝ wi + η wo for transmission (Walter et al. eq. 16), the half-vector Jacobians
 //! (eqs. 14 and 17) and radiance compressed by 1/η² on entering the denser side. The index is
-//! a constant, as Mitsuba's (a dispersive index is refused when the scene is read).
+//! a constant, as Mitsuba's (a dispersive index is refused when the scene is read). The
+//! roughness may be textured ([`Roughness`]); `specular_reflectance` /
+//! `specular_transmittance` scale the two lobes' values, not their probabilities
+//! ([`SpecularFactors`]).
 
 use super::fresnel::{fresnel_dielectric, reflect};
-use super::microfacet::Microfacet;
+use super::lobe_factor::SpecularFactors;
+use super::microfacet::{Distribution, Microfacet};
+use super::roughness::Roughness;
 use super::{
     BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, PolarizedBsdf, ShadingCtx,
 };
@@ -20,7 +25,8 @@ use glam::{Vec2, Vec3};
 pub struct RoughDielectric {
     /// n_int / n_ext.
     pub eta: f32,
-    pub mf: Microfacet,
+    pub roughness: Roughness,
+    pub factors: SpecularFactors,
 }
 
 /// A direction pair's microfacet normal (z ≥ 0), whether it is a reflection, and for
@@ -34,10 +40,27 @@ struct Pair {
 impl RoughDielectric {
     /// Interface of relative index `eta` = n_int/n_ext > 0, ≠ 1.
     pub fn new(eta: f32, mf: Microfacet) -> anyhow::Result<Self> {
+        Self::with_roughness(eta, Roughness::Constant(Some(mf)))
+    }
+
+    /// [`Self::new`] with a constant or textured roughness.
+    pub fn with_roughness(eta: f32, roughness: Roughness) -> anyhow::Result<Self> {
         if !(eta.is_finite() && eta > 0.0 && eta != 1.0) {
             anyhow::bail!("roughdielectric: int_ior/ext_ior must be positive, finite and ≠ 1, got {eta}");
         }
-        Ok(RoughDielectric { eta, mf })
+        Ok(RoughDielectric {
+            eta,
+            roughness,
+            factors: SpecularFactors::default(),
+        })
+    }
+
+    /// The distribution at the shading point (always rough: α is floored at 1e-4).
+    #[inline]
+    fn mf(&self, ctx: &ShadingCtx) -> Microfacet {
+        self.roughness
+            .at(ctx)
+            .unwrap_or_else(|| Microfacet::of(Distribution::Beckmann, 0.0, 0.0))
     }
 
     /// The half vector of (wi, wo) (Mitsuba: wi + η wo for transmission, flipped up).
@@ -66,9 +89,9 @@ impl RoughDielectric {
     }
 
     /// Density of the visible normal m seen from wi's side.
-    fn pdf_m(&self, wi: Vec3, m: Vec3) -> f32 {
+    fn pdf_m(mf: &Microfacet, wi: Vec3, m: Vec3) -> f32 {
         let wi_up = if wi.z < 0.0 { -wi } else { wi };
-        self.mf.pdf_visible(wi_up, m)
+        mf.pdf_visible(wi_up, m)
     }
 }
 
@@ -78,7 +101,7 @@ impl BsdfPlugin for RoughDielectric {
     /// `int_ior` (BK7, 1.5046), `ext_ior` (air, 1.000277), `distribution` (beckmann), `alpha`
     /// or `alpha_u`/`alpha_v` (0.1), `sample_visible`.
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
-        let (kind, au, av) = p.microfacet()?;
+        let roughness = Roughness::read(p, false)?;
         let int_ior = p.dielectric_ior("int_ior", 1.5046)?;
         let ext_ior = p.dielectric_ior("ext_ior", 1.000277)?;
         if int_ior.is_dispersive() || ext_ior.is_dispersive() {
@@ -86,10 +109,11 @@ impl BsdfPlugin for RoughDielectric {
                 "roughdielectric: a dispersive (wavelength-dependent) index is not supported; give a number or a Mitsuba IOR name, as Mitsuba does",
             ));
         }
-        p.unit_factors(&["specular_reflectance", "specular_transmittance"])?;
+        let factors = SpecularFactors::read(p)?;
         let eta = (int_ior.at(550.0).re / ext_ior.at(550.0).re) as f32;
-        RoughDielectric::new(eta, Microfacet::of(kind, au.max(0.0), av.max(0.0)))
-            .map_err(|e| p.error(e))
+        let mut d = RoughDielectric::with_roughness(eta, roughness).map_err(|e| p.error(e))?;
+        d.factors = factors;
+        Ok(d)
     }
 }
 
@@ -99,16 +123,22 @@ impl BsdfModel for RoughDielectric {
     }
 
     fn describe(&self) -> String {
-        format!("roughdielectric η={} {}", self.eta, self.mf.describe())
+        format!(
+            "roughdielectric η={} {}{}",
+            self.eta,
+            self.roughness.describe(),
+            self.factors.describe()
+        )
     }
 
-    fn eval(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
+    fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
         let Some(p) = self.pair(wi, wo) else {
             return Spec::ZERO;
         };
-        let d = self.mf.d(p.m);
+        let mf = self.mf(ctx);
+        let d = mf.d(p.m);
         let f = fresnel_dielectric(wi.dot(p.m), self.eta).0;
-        let g = self.mf.g1(wi, p.m) * self.mf.g1(wo, p.m);
+        let g = mf.g1(wi, p.m) * mf.g1(wo, p.m);
         let v = if p.reflect {
             f * d * g / (4.0 * wi.z.abs())
         } else {
@@ -117,13 +147,13 @@ impl BsdfModel for RoughDielectric {
             ((1.0 - f) * d * g * wi.dot(p.m) * wo.dot(p.m) / (wi.z * denom * denom)).abs()
         };
         if v.is_finite() {
-            Spec::splat(v)
+            Spec::splat(v) * self.factors.for_pair(ctx, wi, wo)
         } else {
             Spec::ZERO
         }
     }
 
-    fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
+    fn pdf(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
         let Some(p) = self.pair(wi, wo) else {
             return 0.0;
         };
@@ -133,7 +163,7 @@ impl BsdfModel for RoughDielectric {
         }
         let f = fresnel_dielectric(wi.dot(p.m), self.eta).0;
         let lobe = if p.reflect { f } else { 1.0 - f };
-        let v = self.pdf_m(wi, p.m) * lobe * Self::jacobian(wi, wo, &p);
+        let v = Self::pdf_m(&self.mf(ctx), wi, p.m) * lobe * Self::jacobian(wi, wo, &p);
         if v.is_finite() {
             v
         } else {
@@ -153,7 +183,7 @@ impl BsdfModel for RoughDielectric {
             return None;
         }
         let wi_up = if wi.z < 0.0 { -wi } else { wi };
-        let m = self.mf.sample_visible(wi_up, u2);
+        let m = self.mf(ctx).sample_visible(wi_up, u2);
         let (f, cos_t, eta_it, eta_ti) = fresnel_dielectric(wi.dot(m), self.eta);
         let reflect_lobe = match (lobes.reflection(), lobes.transmission()) {
             (true, true) => u1 <= f,
@@ -201,7 +231,7 @@ impl BsdfModel for RoughDielectric {
 
     /// Mitsuba's frame (s along dp/du) when the roughness is anisotropic.
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
-        if self.mf.is_anisotropic() {
+        if self.roughness.is_anisotropic() {
             super::normal_map::dpdu_frame(si)
         } else {
             si.shading

@@ -69,7 +69,7 @@ impl StackBsdf {
 }
 
 impl OpaqueReflector for StackBsdf {
-    fn ggx(&self) -> Option<Ggx> {
+    fn ggx(&self, _ctx: &ShadingCtx) -> Option<Ggx> {
         self.ggx
     }
 

@@ -1231,7 +1231,11 @@ fn microfacet_models_match_mitsuba_points() {
 /// lobes sum to 1 (lossless).
 #[test]
 fn thin_dielectric_reflectance_and_pass_through() {
-    let b: Bsdf = thindielectric::ThinDielectric { eta: 1.5 }.into();
+    let b: Bsdf = thindielectric::ThinDielectric {
+        eta: 1.5,
+        factors: Default::default(),
+    }
+    .into();
     let wl = wl();
     let ctx = ctx_of(&wl);
     for wi in [dir(10.0, 0.0), dir(70.0, 40.0), -dir(45.0, 10.0)] {

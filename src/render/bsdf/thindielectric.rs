@@ -4,8 +4,11 @@
 //! interface's Fresnel reflectance, T = 1 − R) or passes straight through (wo = −wi, no
 //! refraction, no radiance scaling) with 1 − R'. Two-sided, both lobes Dirac deltas.
 //! Polarised form: none (Mitsuba's polarised thin dielectric is not reproduced).
+//! `specular_reflectance` / `specular_transmittance` scale the lobes' weights
+//! ([`SpecularFactors`]).
 
 use super::fresnel::{fresnel_dielectric, reflect_local};
+use super::lobe_factor::SpecularFactors;
 use super::{BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, PolarizedBsdf, ShadingCtx};
 use crate::scene::mitsuba::PluginParams;
 use glam::{Vec2, Vec3};
@@ -14,6 +17,7 @@ use glam::{Vec2, Vec3};
 pub struct ThinDielectric {
     /// n_int / n_ext.
     pub eta: f32,
+    pub factors: SpecularFactors,
 }
 
 impl ThinDielectric {
@@ -41,12 +45,12 @@ impl BsdfPlugin for ThinDielectric {
                 "thindielectric: a dispersive (wavelength-dependent) index is not supported; give a number or a Mitsuba IOR name, as Mitsuba does",
             ));
         }
-        p.unit_factors(&["specular_reflectance", "specular_transmittance"])?;
+        let factors = SpecularFactors::read(p)?;
         let eta = (int_ior.at(550.0).re / ext_ior.at(550.0).re) as f32;
         if !(eta.is_finite() && eta > 0.0) {
             return Err(p.error("thindielectric: int_ior/ext_ior must be positive"));
         }
-        Ok(ThinDielectric { eta })
+        Ok(ThinDielectric { eta, factors })
     }
 }
 
@@ -56,14 +60,14 @@ impl BsdfModel for ThinDielectric {
     }
 
     fn describe(&self) -> String {
-        format!("thindielectric η={}", self.eta)
+        format!("thindielectric η={}{}", self.eta, self.factors.describe())
     }
 
     super::delta_lobes_only!();
 
     fn sample(
         &self,
-        _ctx: &ShadingCtx,
+        ctx: &ShadingCtx,
         wi: Vec3,
         u1: f32,
         _u2: Vec2,
@@ -76,13 +80,14 @@ impl BsdfModel for ThinDielectric {
         let transmit = |w: f32, pdf| {
             BsdfSample::delta(-wi, crate::render::texture::Spec::splat(w), pdf, BsdfFlags::DELTA_TRANSMISSION)
         };
-        match (lobes.reflection(), lobes.transmission()) {
-            (true, true) if u1 <= r => Some(reflect(1.0, r)),
-            (true, true) => Some(transmit(1.0, 1.0 - r)),
-            (true, false) if r > 0.0 => Some(reflect(r, 1.0)),
-            (false, true) if r < 1.0 => Some(transmit(1.0 - r, 1.0)),
-            _ => None,
-        }
+        let s = match (lobes.reflection(), lobes.transmission()) {
+            (true, true) if u1 <= r => reflect(1.0, r),
+            (true, true) => transmit(1.0, 1.0 - r),
+            (true, false) if r > 0.0 => reflect(r, 1.0),
+            (false, true) if r < 1.0 => transmit(1.0 - r, 1.0),
+            _ => return None,
+        };
+        Some(self.factors.scale_sample(ctx, s))
     }
 
     fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {

@@ -89,7 +89,7 @@ impl ThinFilmBsdf {
 }
 
 impl OpaqueReflector for ThinFilmBsdf {
-    fn ggx(&self) -> Option<Ggx> {
+    fn ggx(&self, _ctx: &ShadingCtx) -> Option<Ggx> {
         self.ggx
     }
 

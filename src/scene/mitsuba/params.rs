@@ -126,13 +126,6 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         self.props.texture(self.ctx, name, default)
     }
 
-    /// Mitsuba's `specular_reflectance`/`specular_transmittance` factors: only their
-    /// default, 1 (however written), is supported — a scaled or textured lobe is refused, not
-    /// dropped.
-    pub fn unit_factors(&mut self, names: &[&str]) -> Result<()> {
-        self.props.unit_factors(names, self.ctx)
-    }
-
     /// Accepts a `<boolean>` parameter Mitsuba has and this renderer ignores, if `ok(value)`.
     pub fn accept_bool(&mut self, name: &str, ok: impl Fn(bool) -> bool) -> Result<()> {
         self.props
@@ -290,18 +283,7 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
     /// tangent dp/du, as in Mitsuba ([`crate::render::bsdf::normal_map::dpdu_frame`]).
     /// `sample_visible` changes only the noise (the renderer always samples visible normals).
     pub fn microfacet(&mut self) -> Result<(Distribution, f32, f32)> {
-        let dist = self.string("distribution")?;
-        let kind = match dist.as_deref() {
-            Some("ggx") => Distribution::Ggx,
-            Some("beckmann") | None => Distribution::Beckmann,
-            Some(other) => {
-                return Err(self.ctx.err(
-                    self.props.node,
-                    format!("unknown distribution \"{other}\" (ggx, beckmann)"),
-                ))
-            }
-        };
-        self.accept_bool("sample_visible", |_| true)?;
+        let kind = self.distribution()?;
         let alpha = self.float_opt("alpha")?;
         let au = self.float_opt("alpha_u")?;
         let av = self.float_opt("alpha_v")?;
@@ -322,20 +304,80 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         Ok((kind, u as f32, v as f32))
     }
 
-    /// A conductor `material`: a metal of the dispersion library, or Mitsuba's `none`.
+    /// `distribution` (Mitsuba's default `beckmann`, or `ggx`); takes `sample_visible` too
+    /// (it changes only the noise: visible normals are always sampled).
+    pub fn distribution(&mut self) -> Result<Distribution> {
+        let dist = self.string("distribution")?;
+        let kind = match dist.as_deref() {
+            Some("ggx") => Distribution::Ggx,
+            Some("beckmann") | None => Distribution::Beckmann,
+            Some(other) => {
+                return Err(self.ctx.err(
+                    self.props.node,
+                    format!("unknown distribution \"{other}\" (ggx, beckmann)"),
+                ))
+            }
+        };
+        self.accept_bool("sample_visible", |_| true)?;
+        Ok(kind)
+    }
+
+    /// Whether parameter `name` is given as a plain number (not a texture, RGB or spectrum).
+    pub fn is_number(&self, name: &str) -> bool {
+        self.props.list.iter().any(|q| {
+            q.name == name
+                && matches!(
+                    q.val,
+                    Val::Float(_) | Val::Int(_) | Val::Spectrum(SpectrumDesc::Constant(_))
+                )
+        })
+    }
+
+    /// A conductor's `eta` or `k`: a number, a tabulated `<spectrum>`, or an `<rgb>` —
+    /// upsampled as Mitsuba 3's spectral variants do (`get_unbounded_texture` → its `srgb`
+    /// plugin: each component clamped to [0, 1] by `rgb2spec_fetch`, then the Jakob–Hanika
+    /// sigmoid polynomial), tabulated here at 1 nm over the visible range.
+    pub fn conductor_spectrum(&mut self, name: &str, what: &str) -> Result<Option<RealSpectrum>> {
+        match self.take(name) {
+            Some(q) => match q.val {
+                Val::Rgb(c) => {
+                    let poly = crate::spectrum::srgb_reflectance(c);
+                    let table = (360..=830)
+                        .map(|l| (l as f32, poly.eval(l as f32)))
+                        .collect();
+                    Ok(Some(RealSpectrum::Table(table)))
+                }
+                _ => self.spectral_of(&q, what).map(Some),
+            },
+            None => Ok(None),
+        }
+    }
+
+    /// A conductor `material`: Mitsuba's `none`, a metal of the dispersion library, or one
+    /// of Mitsuba's own conductor tables ([`mitsuba_conductor`]) — used for the names the
+    /// library lacks (`a-C`, `Cr`, …) and for those it has only as a transparent dielectric
+    /// (`TiO2`), where Mitsuba's `conductor` means its absorbing table.
     pub fn conductor_material(&self, name: &str) -> Result<Ior> {
         if name == "none" {
             // Mitsuba's "none": a perfect mirror, eta = 0, k = 1 (|r| = 1 at every angle).
             return Ok(Ior::Constant(Complex64::new(0.0, 1.0)));
         }
-        dispersion::lookup(name).map(Ior::Material).ok_or_else(|| {
+        let own = dispersion::lookup(name).map(Ior::Material);
+        if let Some(ior) = own.as_ref().filter(|m| m.at(550.0).im > 0.0) {
+            return Ok(ior.clone());
+        }
+        let label = format!(
+            "{} Mitsuba conductor \"{name}\"",
+            self.ctx.loc(self.props.node)
+        );
+        mitsuba_conductor(name, &label).or(own).ok_or_else(|| {
             let names = dispersion::names();
             self.ctx.err(
                 self.props.node,
                 format!(
-                    "unknown conductor material \"{name}\" (available: none{}{})",
-                    if names.is_empty() { "" } else { ", " },
-                    names.join(", ")
+                    "unknown conductor material \"{name}\" (available: none, {}, and Mitsuba's {})",
+                    names.join(", "),
+                    mitsuba_conductor_names().join(", ")
                 ),
             )
         })
@@ -391,6 +433,45 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         }
         Ok(ior)
     }
+}
+
+/// Mitsuba 3's conductor tables (`data/ior/NAME.{eta,k}.spd`, 300–900 nm), one line per name
+/// and quantity: `NAME eta λ:v λ:v …` / `NAME k …`.
+const MITSUBA_CONDUCTORS: &str = include_str!("conductors.txt");
+
+/// The names of [`MITSUBA_CONDUCTORS`].
+fn mitsuba_conductor_names() -> Vec<&'static str> {
+    MITSUBA_CONDUCTORS
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| l.split_whitespace().next())
+        .fold(Vec::new(), |mut v, n| {
+            if v.last() != Some(&n) {
+                v.push(n);
+            }
+            v
+        })
+}
+
+/// Mitsuba's conductor `name` as n + ik (linear interpolation between its samples, as its
+/// `irregular` spectrum), or None if Mitsuba has no such table.
+fn mitsuba_conductor(name: &str, label: &str) -> Option<Ior> {
+    let table = |quantity: &str| -> Option<RealSpectrum> {
+        let line = MITSUBA_CONDUCTORS.lines().find(|l| {
+            let mut w = l.split_whitespace();
+            w.next() == Some(name) && w.next() == Some(quantity)
+        })?;
+        let rows: Option<Vec<(f32, f32)>> = line
+            .split_whitespace()
+            .skip(2)
+            .map(|pair| {
+                let (l, v) = pair.split_once(':')?;
+                Some((l.parse().ok()?, v.parse().ok()?))
+            })
+            .collect();
+        Some(RealSpectrum::Table(rows?))
+    };
+    Some(combine_ior(label, &table("eta")?, &table("k")?))
 }
 
 /// A thickness texture must be scalar: RGB images are reduced to their mean.

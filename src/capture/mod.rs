@@ -18,7 +18,6 @@ pub mod simulate;
 pub mod spectra;
 
 pub use samples::Samples;
-pub use set::{ior_from_json, ior_to_json, CaptureFile, CAPTURE_FORMAT, GROUND_TRUTH_FORMAT};
 
 /// Polarisation state the camera observed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -100,15 +99,6 @@ impl AngleCapture {
         }
         out.copy_from_slice(src);
         true
-    }
-
-    /// Incident angle of pixel `p`, degrees (the map's value when there is one).
-    #[inline]
-    pub fn incident_deg_at(&self, p: usize) -> f64 {
-        match &self.incident_deg_map {
-            Some(m) => m[p] as f64,
-            None => self.incident_deg,
-        }
     }
 }
 

@@ -103,7 +103,6 @@ impl RefineStage for NoRefine {
             sigma: cx.noise.sigma.clone(),
             thickness_rel_sigma: 0.0,
             inflation: 1.0,
-            chi2_red: f64::NAN,
             joint_pixels: Vec::new(),
             selection: Vec::new(),
         })

@@ -169,20 +169,6 @@ impl ThicknessSolver {
         out
     }
 
-    /// Gains of pixel `px` at `d`, per angle (0 where unused).
-    pub fn gains(&self, d: f64, px: &PixelData) -> Vec<f32> {
-        let s = self.stride;
-        (0..self.angles)
-            .map(|a| {
-                if !px.mask[a] {
-                    return 0.0;
-                }
-                self.sums(d * px.rho[a] as f64, a, &px.y[a * s..(a + 1) * s])
-                    .gain(self.gain)
-            })
-            .collect()
-    }
-
     /// Damped Gauss–Newton in d from `d0`: (d, objective, Hessian at d).
     pub fn refine(&self, px: &PixelData, d0: f64, iters: usize) -> (f64, f64, f64) {
         let mut d = d0.clamp(self.d_min, self.d_max);

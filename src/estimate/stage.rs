@@ -116,8 +116,6 @@ pub struct FilmSolution {
     pub thickness_rel_sigma: f64,
     /// Variance inflation for correlated residuals (≥ 1), applied to per-pixel σ(d).
     pub inflation: f64,
-    /// χ²/dof of the joint fit (≈ 1 when the model explains the data to the noise).
-    pub chi2_red: f64,
     /// Pixels of the joint fit.
     pub joint_pixels: Vec<usize>,
     /// Model selection record.

@@ -466,7 +466,6 @@ fn solution(
         sigma: cx.noise.sigma.clone(),
         thickness_rel_sigma,
         inflation: fit.inflation(),
-        chi2_red: fit.chi2_red(),
         joint_pixels: pixels,
         selection: sel.steps,
     }

@@ -1432,19 +1432,18 @@ impl LightSet {
         })
     }
 
-    /// Chooses a light uniformly ([`Self::selection_pdf`]) with one sampler dimension, which
-    /// is skipped when there is a single light so that the stream layout stays the same.
-    /// The set must not be empty.
+    /// Chooses a light (its index in `lights`) uniformly ([`Self::selection_pdf`]) with one
+    /// sampler dimension, which is skipped when there is a single light so that the stream
+    /// layout stays the same. The set must not be empty.
     #[inline]
-    pub fn pick(&self, sampler: &mut super::sampler::Sampler) -> &Light {
+    pub fn pick_index(&self, sampler: &mut super::sampler::Sampler) -> usize {
         let n = self.lights.len();
-        let i = if n == 1 {
+        if n == 1 {
             sampler.skip(1, 0);
             0
         } else {
             ((sampler.next_1d() * n as f32) as usize).min(n - 1)
-        };
-        &self.lights[i]
+        }
     }
 
     /// Probability of choosing any one light (uniform selection, as Mitsuba does).

@@ -192,8 +192,7 @@ impl<'s> Interaction<'s> {
     /// The BSDF of the shape hit.
     #[inline]
     pub fn bsdf(&self) -> &'s Bsdf {
-        let scene = self.scene;
-        &scene.bsdfs[scene.shape_bsdf[self.geometry.shape as usize] as usize]
+        self.scene.shape_bsdf_of(self.geometry.shape)
     }
 
     /// The shape's area light, if it emits.
@@ -213,6 +212,12 @@ impl std::ops::Deref for Interaction<'_> {
 }
 
 impl PreparedScene {
+    /// The BSDF of shape `shape`.
+    #[inline]
+    pub(crate) fn shape_bsdf_of(&self, shape: u32) -> &Bsdf {
+        &self.bsdfs[self.shape_bsdf[shape as usize] as usize]
+    }
+
     /// Closest hit of `ray`; camera rays (`pixel` = the pixel they were generated in) use
     /// the screen bins when there are some.
     #[inline]

@@ -872,6 +872,33 @@ pub struct LightSample {
 }
 
 impl LightSample {
+    /// A sample of a delta light at `p_light` seen along `d = p_light − p` (unit pdf: the
+    /// light-selection probability is applied by the caller).
+    fn delta_at(p_light: Vec3, wi: Vec3, dist: f32, radiance: Spec) -> Self {
+        LightSample {
+            wi,
+            dist,
+            p_light,
+            n_light: Vec3::ZERO,
+            radiance,
+            pdf: 1.0,
+            delta: true,
+        }
+    }
+
+    /// A sample of a light at infinity arriving along `wi`.
+    fn from_infinity(wi: Vec3, radiance: Spec, pdf: f32, delta: bool) -> Self {
+        LightSample {
+            wi,
+            dist: f32::INFINITY,
+            p_light: Vec3::ZERO,
+            n_light: Vec3::ZERO,
+            radiance,
+            pdf,
+            delta,
+        }
+    }
+
     /// The shadow ray from a surface point `p` (geometric normal `ng`) towards this sample.
     ///
     /// For a light at a finite distance both ends are moved off their surfaces and the ray
@@ -1020,27 +1047,16 @@ impl Light {
         match self {
             Light::Env(e) => {
                 let (wi, pdf) = e.sample_direction(u)?;
-                Some(LightSample {
-                    wi,
-                    dist: f32::INFINITY,
-                    p_light: Vec3::ZERO,
-                    n_light: Vec3::ZERO,
-                    radiance: e.eval(wi, wl),
-                    pdf,
-                    delta: false,
-                })
+                Some(LightSample::from_infinity(wi, e.eval(wi, wl), pdf, false))
             }
             Light::Constant(s) => {
                 let wi = square_to_uniform_sphere(u);
-                Some(LightSample {
+                Some(LightSample::from_infinity(
                     wi,
-                    dist: f32::INFINITY,
-                    p_light: Vec3::ZERO,
-                    n_light: Vec3::ZERO,
-                    radiance: s.eval(wl),
-                    pdf: 1.0 / (4.0 * PI),
-                    delta: false,
-                })
+                    s.eval(wl),
+                    1.0 / (4.0 * PI),
+                    false,
+                ))
             }
             Light::Point {
                 position,
@@ -1052,15 +1068,8 @@ impl Light {
                     return None;
                 }
                 let dist = dist2.sqrt();
-                Some(LightSample {
-                    wi: d / dist,
-                    dist,
-                    p_light: *position,
-                    n_light: Vec3::ZERO,
-                    radiance: intensity.eval(wl) / dist2,
-                    pdf: 1.0,
-                    delta: true,
-                })
+                let radiance = intensity.eval(wl) / dist2;
+                Some(LightSample::delta_at(*position, d / dist, dist, radiance))
             }
             Light::TexturedSpot(ts) => {
                 let (spot, texture, uv_factor) = ts.as_ref();
@@ -1071,27 +1080,13 @@ impl Light {
                 let k = 0.5 / (local.z * uv_factor);
                 let uv = Vec2::new(0.5 + k * local.x, 0.5 + k * local.y);
                 let radiance = spot.intensity.eval(wl) * texture.eval(uv, wl) * (f / dist2);
-                (f > 0.0 && dist2 > 0.0 && radiance.is_finite()).then(|| LightSample {
-                    wi: d / dist2.sqrt(),
-                    dist: dist2.sqrt(),
-                    p_light: spot.position,
-                    n_light: Vec3::ZERO,
-                    radiance,
-                    pdf: 1.0,
-                    delta: true,
+                (f > 0.0 && dist2 > 0.0 && radiance.is_finite()).then(|| {
+                    LightSample::delta_at(spot.position, d / dist2.sqrt(), dist2.sqrt(), radiance)
                 })
             }
             Light::Projector(pr) => {
                 let (wi, dist, radiance) = pr.incident(p, wl)?;
-                Some(LightSample {
-                    wi,
-                    dist,
-                    p_light: pr.position,
-                    n_light: Vec3::ZERO,
-                    radiance,
-                    pdf: 1.0,
-                    delta: true,
-                })
+                Some(LightSample::delta_at(pr.position, wi, dist, radiance))
             }
             Light::Spot(spot) => {
                 let d = spot.position - p;
@@ -1105,28 +1100,18 @@ impl Light {
                 if f.is_nan() || f <= 0.0 {
                     return None;
                 }
-                Some(LightSample {
-                    wi,
-                    dist,
-                    p_light: spot.position,
-                    n_light: Vec3::ZERO,
-                    radiance: spot.intensity.eval(wl) * (f / dist2),
-                    pdf: 1.0,
-                    delta: true,
-                })
+                let radiance = spot.intensity.eval(wl) * (f / dist2);
+                Some(LightSample::delta_at(spot.position, wi, dist, radiance))
             }
             Light::Directional {
                 direction,
                 irradiance,
-            } => Some(LightSample {
-                wi: -*direction,
-                dist: f32::INFINITY,
-                p_light: Vec3::ZERO,
-                n_light: Vec3::ZERO,
-                radiance: irradiance.eval(wl),
-                pdf: 1.0,
-                delta: true,
-            }),
+            } => Some(LightSample::from_infinity(
+                -*direction,
+                irradiance.eval(wl),
+                1.0,
+                true,
+            )),
             Light::Area {
                 radiance,
                 geometry,
@@ -1259,161 +1244,171 @@ pub struct LightSet {
 }
 
 impl LightSet {
+    /// The light of scene emitter `i` (environment, constant, point, spot, projector,
+    /// directional); errors name the emitter.
+    fn emitter_light(i: usize, e: &EmitterDesc) -> anyhow::Result<Light> {
+        Ok(match e {
+            EmitterDesc::Envmap {
+                image,
+                scale,
+                to_world,
+                path,
+            } => {
+                let m = Mat3::from_mat4(*to_world);
+                Light::Env(Box::new(EnvMap::new(image, *scale, m).map_err(|err| {
+                    anyhow::anyhow!(
+                        "emitter {i} (envmap{}): {err}",
+                        path.as_ref()
+                            .map(|p| format!(" {}", p.display()))
+                            .unwrap_or_default()
+                    )
+                })?))
+            }
+            EmitterDesc::Constant { radiance } => Light::Constant(Spectrum::illuminant(radiance)),
+            EmitterDesc::Point {
+                position,
+                intensity,
+            } => Light::Point {
+                position: *position,
+                intensity: Spectrum::illuminant(intensity),
+            },
+            EmitterDesc::Spot {
+                to_world,
+                intensity,
+                cone,
+                range,
+            } => {
+                let m = Mat3::from_mat4(*to_world);
+                if !(to_world.is_finite() && m.determinant().abs() > 1e-12) {
+                    anyhow::bail!("emitter {i} (spot): to_world is singular or not finite");
+                }
+                Light::Spot(Box::new(SpotLight::new(
+                    *to_world,
+                    Spectrum::illuminant(intensity),
+                    *cone,
+                    *range,
+                )))
+            }
+            EmitterDesc::TexturedSpot {
+                to_world,
+                intensity,
+                cone,
+                texture,
+            } => {
+                let m = Mat3::from_mat4(*to_world);
+                if !(to_world.is_finite() && m.determinant().abs() > 1e-12) {
+                    anyhow::bail!("emitter {i} (spot): to_world is singular or not finite");
+                }
+                let SpotCone::Linear { cutoff, .. } = *cone else {
+                    anyhow::bail!("emitter {i} (spot): a texture needs Mitsuba's cone");
+                };
+                let spot = SpotLight::new(*to_world, Spectrum::illuminant(intensity), *cone, None);
+                let texture = super::texture::Texture::new(texture);
+                Light::TexturedSpot(Box::new((spot, texture, cutoff.tan())))
+            }
+            EmitterDesc::Projector {
+                to_world,
+                irradiance,
+                scale,
+                tan_half_fov_x,
+                aspect,
+            } => {
+                if !(to_world.is_finite() && to_world.determinant().abs() > 1e-12) {
+                    anyhow::bail!("emitter {i} (projector): to_world is singular or not finite");
+                }
+                let value = match irradiance {
+                    crate::scene::TextureDesc::Value(v) => Spectrum::illuminant(v),
+                    _ => Spectrum::Constant(0.0),
+                };
+                Light::Projector(Box::new(ProjectorLight {
+                    position: to_world.transform_point3(Vec3::ZERO),
+                    axis: to_world.transform_vector3(Vec3::Z),
+                    to_local: to_world.inverse(),
+                    irradiance: super::texture::Texture::new(irradiance),
+                    is_bitmap: !matches!(irradiance, crate::scene::TextureDesc::Value(_)),
+                    irradiance_value: value,
+                    scale: *scale,
+                    tan_half_fov_x: *tan_half_fov_x,
+                    aspect: *aspect,
+                }))
+            }
+            EmitterDesc::Directional {
+                direction,
+                irradiance,
+            } => {
+                let d = direction.normalize_or_zero();
+                if d == Vec3::ZERO || !d.is_finite() {
+                    anyhow::bail!(
+                        "emitter {i} (directional): direction {direction} is not a direction"
+                    );
+                }
+                Light::Directional {
+                    direction: d,
+                    irradiance: Spectrum::illuminant(irradiance),
+                }
+            }
+        })
+    }
+
+    /// The area light of shape `si`, if it emits: its geometry (sphere, or the mesh's
+    /// triangles with an area-proportional sampling table) and its (textured) radiance.
+    fn area_light(scene: &Scene, accel: &Accel, si: usize) -> anyhow::Result<Option<Light>> {
+        let shape = &scene.shapes[si];
+        let Some(radiance) = &shape.emission else {
+            return Ok(None);
+        };
+        let geometry = match &shape.geometry {
+            Geometry::Sphere {
+                center,
+                radius,
+                flip_normals,
+                ..
+            } => AreaGeometry::Sphere {
+                center: *center,
+                radius: *radius,
+                flip: *flip_normals,
+            },
+            Geometry::Mesh(_) => {
+                let mesh = accel.mesh(si as u32).expect("mesh shape");
+                let tris: Vec<[Vec3; 3]> = mesh
+                    .indices
+                    .iter()
+                    .map(|i| i.map(|k| mesh.positions[k as usize]))
+                    .collect();
+                let areas: Vec<f32> = tris
+                    .iter()
+                    .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length())
+                    .collect();
+                let area: f32 = areas.iter().filter(|a| a.is_finite()).sum();
+                if area.is_nan() || area <= 0.0 {
+                    anyhow::bail!("area light on shape {si} has zero surface area");
+                }
+                AreaGeometry::Triangles {
+                    dist: Distribution1D::new(&areas),
+                    tris,
+                    area,
+                }
+            }
+        };
+        Ok(Some(Light::Area {
+            shape: si as u32,
+            radiance: Spectrum::illuminant(radiance),
+            texture: TexturedEmission::of_shape(scene, accel, si, radiance),
+            geometry,
+        }))
+    }
+
     pub fn build(scene: &Scene, accel: &Accel) -> anyhow::Result<Self> {
         let mut lights = Vec::new();
         for (i, e) in scene.emitters.iter().enumerate() {
-            lights.push(match e {
-                EmitterDesc::Envmap {
-                    image,
-                    scale,
-                    to_world,
-                    path,
-                } => {
-                    let m = Mat3::from_mat4(*to_world);
-                    Light::Env(Box::new(EnvMap::new(image, *scale, m).map_err(|err| {
-                        anyhow::anyhow!(
-                            "emitter {i} (envmap{}): {err}",
-                            path.as_ref()
-                                .map(|p| format!(" {}", p.display()))
-                                .unwrap_or_default()
-                        )
-                    })?))
-                }
-                EmitterDesc::Constant { radiance } => {
-                    Light::Constant(Spectrum::illuminant(radiance))
-                }
-                EmitterDesc::Point {
-                    position,
-                    intensity,
-                } => Light::Point {
-                    position: *position,
-                    intensity: Spectrum::illuminant(intensity),
-                },
-                EmitterDesc::Spot {
-                    to_world,
-                    intensity,
-                    cone,
-                    range,
-                } => {
-                    let m = Mat3::from_mat4(*to_world);
-                    if !(to_world.is_finite() && m.determinant().abs() > 1e-12) {
-                        anyhow::bail!("emitter {i} (spot): to_world is singular or not finite");
-                    }
-                    Light::Spot(Box::new(SpotLight::new(
-                        *to_world,
-                        Spectrum::illuminant(intensity),
-                        *cone,
-                        *range,
-                    )))
-                }
-                EmitterDesc::TexturedSpot {
-                    to_world,
-                    intensity,
-                    cone,
-                    texture,
-                } => {
-                    let m = Mat3::from_mat4(*to_world);
-                    if !(to_world.is_finite() && m.determinant().abs() > 1e-12) {
-                        anyhow::bail!("emitter {i} (spot): to_world is singular or not finite");
-                    }
-                    let SpotCone::Linear { cutoff, .. } = *cone else {
-                        anyhow::bail!("emitter {i} (spot): a texture needs Mitsuba's cone");
-                    };
-                    let spot =
-                        SpotLight::new(*to_world, Spectrum::illuminant(intensity), *cone, None);
-                    let texture = super::texture::Texture::new(texture);
-                    Light::TexturedSpot(Box::new((spot, texture, cutoff.tan())))
-                }
-                EmitterDesc::Projector {
-                    to_world,
-                    irradiance,
-                    scale,
-                    tan_half_fov_x,
-                    aspect,
-                } => {
-                    if !(to_world.is_finite() && to_world.determinant().abs() > 1e-12) {
-                        anyhow::bail!(
-                            "emitter {i} (projector): to_world is singular or not finite"
-                        );
-                    }
-                    let value = match irradiance {
-                        crate::scene::TextureDesc::Value(v) => Spectrum::illuminant(v),
-                        _ => Spectrum::Constant(0.0),
-                    };
-                    Light::Projector(Box::new(ProjectorLight {
-                        position: to_world.transform_point3(Vec3::ZERO),
-                        axis: to_world.transform_vector3(Vec3::Z),
-                        to_local: to_world.inverse(),
-                        irradiance: super::texture::Texture::new(irradiance),
-                        is_bitmap: !matches!(irradiance, crate::scene::TextureDesc::Value(_)),
-                        irradiance_value: value,
-                        scale: *scale,
-                        tan_half_fov_x: *tan_half_fov_x,
-                        aspect: *aspect,
-                    }))
-                }
-                EmitterDesc::Directional {
-                    direction,
-                    irradiance,
-                } => {
-                    let d = direction.normalize_or_zero();
-                    if d == Vec3::ZERO || !d.is_finite() {
-                        anyhow::bail!(
-                            "emitter {i} (directional): direction {direction} is not a direction"
-                        );
-                    }
-                    Light::Directional {
-                        direction: d,
-                        irradiance: Spectrum::illuminant(irradiance),
-                    }
-                }
-            });
+            lights.push(Self::emitter_light(i, e)?);
         }
         let mut shape_light = vec![None; scene.shapes.len()];
-        for (si, shape) in scene.shapes.iter().enumerate() {
-            let Some(radiance) = &shape.emission else {
-                continue;
-            };
-            let geometry = match &shape.geometry {
-                Geometry::Sphere {
-                    center,
-                    radius,
-                    flip_normals,
-                    ..
-                } => AreaGeometry::Sphere {
-                    center: *center,
-                    radius: *radius,
-                    flip: *flip_normals,
-                },
-                Geometry::Mesh(_) => {
-                    let mesh = accel.mesh(si as u32).expect("mesh shape");
-                    let tris: Vec<[Vec3; 3]> = mesh
-                        .indices
-                        .iter()
-                        .map(|i| i.map(|k| mesh.positions[k as usize]))
-                        .collect();
-                    let areas: Vec<f32> = tris
-                        .iter()
-                        .map(|t| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length())
-                        .collect();
-                    let area: f32 = areas.iter().filter(|a| a.is_finite()).sum();
-                    if area.is_nan() || area <= 0.0 {
-                        anyhow::bail!("area light on shape {si} has zero surface area");
-                    }
-                    AreaGeometry::Triangles {
-                        dist: Distribution1D::new(&areas),
-                        tris,
-                        area,
-                    }
-                }
-            };
-            shape_light[si] = Some(lights.len() as u32);
-            lights.push(Light::Area {
-                shape: si as u32,
-                radiance: Spectrum::illuminant(radiance),
-                texture: TexturedEmission::of_shape(scene, accel, si, radiance),
-                geometry,
-            });
+        for si in 0..scene.shapes.len() {
+            if let Some(light) = Self::area_light(scene, accel, si)? {
+                shape_light[si] = Some(lights.len() as u32);
+                lights.push(light);
+            }
         }
         let infinite = lights
             .iter()

@@ -416,3 +416,58 @@ fn malformed_lights_cameras_and_nodes_are_refused() {
         assert!(!err.contains("panicked"), "{name}: {err}");
     }
 }
+
+/// `COLOR_0` multiplies the base colour in glTF; thinfilm does not carry per-vertex colours
+/// to the shading point, so a file that has them renders with a warning naming the mesh —
+/// and a file without them renders without that warning.
+#[test]
+fn vertex_colours_are_reported_as_not_applied() {
+    let dir = tempfile::tempdir().unwrap();
+    let cams = vec![json!({"camera": 0, "translation": [0, 1, 0], "rotation": rot_x(-90.0)})];
+    let plain = write_gltf(
+        dir.path(),
+        "plain.gltf",
+        cams.clone(),
+        json!({"cameras": cameras()}),
+    );
+    let mut doc: Value = serde_json::from_str(&std::fs::read_to_string(&plain).unwrap()).unwrap();
+    let grey: Vec<u8> = (0..12).flat_map(|_| 0.5f32.to_le_bytes()).collect();
+    std::fs::write(dir.path().join("colors.bin"), &grey).unwrap();
+    doc["buffers"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"uri": "colors.bin", "byteLength": 48}));
+    doc["bufferViews"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"buffer": 1, "byteOffset": 0, "byteLength": 48}));
+    doc["accessors"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC3"}));
+    doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"] = json!(2);
+    let coloured = dir.path().join("coloured.gltf");
+    std::fs::write(&coloured, serde_json::to_string(&doc).unwrap()).unwrap();
+    let out = dir.path().join("out.exr");
+    let stderr_of = |path: &Path| {
+        let o = Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+            .args([
+                "render",
+                path.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .args(["--spp", "1", "--resolution", "4x4", "--max-depth", "1"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{}: {err}", path.display());
+        err
+    };
+    let err = stderr_of(&coloured);
+    assert!(
+        err.contains("coloured.gltf") && err.contains("COLOR_0") && err.contains("not applied"),
+        "{err}"
+    );
+    assert!(!stderr_of(&plain).contains("COLOR_0"));
+}

@@ -248,6 +248,13 @@ impl Loader<'_> {
             .read_tex_coords(uv_set)
             .map(|t| t.into_f32().map(Vec2::from).collect())
             .unwrap_or_default();
+        if prim.get(&gltf::Semantic::Colors(0)).is_some() {
+            // glTF multiplies the base colour by COLOR_0; a shading point carries no
+            // per-vertex data but its UV, so the colours are dropped — said, not hidden.
+            eprintln!(
+                "warning: {what}: COLOR_0 vertex colours are not applied (the base colour is used alone)"
+            );
+        }
         if uv_set > 0 && uvs.is_empty() {
             eprintln!("warning: {what}: its material reads TEXCOORD_{uv_set}, which it lacks");
         }

@@ -1404,9 +1404,9 @@ impl LightSet {
             lights.push(Self::emitter_light(i, e)?);
         }
         let mut shape_light = vec![None; scene.shapes.len()];
-        for si in 0..scene.shapes.len() {
+        for (si, slot) in shape_light.iter_mut().enumerate() {
             if let Some(light) = Self::area_light(scene, accel, si)? {
-                shape_light[si] = Some(lights.len() as u32);
+                *slot = Some(lights.len() as u32);
                 lights.push(light);
             }
         }

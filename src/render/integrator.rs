@@ -838,15 +838,7 @@ fn resolve_env_samples<C: Carrier>(
     let sel_pdf = lights.selection_pdf();
     for ((s, d), &radiance) in samples.iter().zip(drawn.iter()).zip(le.iter()) {
         let Some((wi, pdf)) = *d else { continue };
-        let ls = super::lights::LightSample {
-            wi,
-            dist: f32::INFINITY,
-            p_light: Vec3::ZERO,
-            n_light: Vec3::ZERO,
-            radiance,
-            pdf,
-            delta: false,
-        };
+        let ls = super::lights::LightSample::from_infinity(wi, radiance, pdf, false);
         let bsdf = scene.shape_bsdf_of(s.shape);
         let ctx = ShadingCtx {
             wl: &s.wl,

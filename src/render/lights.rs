@@ -887,7 +887,7 @@ impl LightSample {
     }
 
     /// A sample of a light at infinity arriving along `wi`.
-    fn from_infinity(wi: Vec3, radiance: Spec, pdf: f32, delta: bool) -> Self {
+    pub(super) fn from_infinity(wi: Vec3, radiance: Spec, pdf: f32, delta: bool) -> Self {
         LightSample {
             wi,
             dist: f32::INFINITY,

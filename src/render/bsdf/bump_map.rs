@@ -31,7 +31,9 @@ pub fn bumped_frame(si: &SurfaceInteraction, grad: Vec2) -> Frame {
 /// has no gradient) perturbs the frame of the nested model. Mitsuba also zeroes `eval`
 /// where wo lies on different sides of the unperturbed and the perturbed normal; as for
 /// [`super::normal_map::NormalMap`], this renderer's models see only the perturbed frame,
-/// so that case (grazing wo on steep slopes) is not reproduced.
+/// so that case (grazing wo on steep slopes) is not reproduced. Mitsuba 3.8+'s default
+/// `flip_invalid_normals` and `use_shadowing_function` are not implemented either: this
+/// is its `false, false` form (matters near silhouettes and terminators).
 #[derive(Debug, Clone)]
 pub struct BumpMap {
     pub inner: Box<super::Bsdf>,
@@ -46,6 +48,11 @@ impl super::BsdfPlugin for BumpMap {
     /// `bumpmap`: one nested `<texture>` (any name; a bitmap or a constant), `scale`
     /// (default 1), one nested BSDF.
     fn build(p: &mut crate::scene::mitsuba::PluginParams) -> anyhow::Result<Self> {
+        // Mitsuba 3.8+ defaults both to true (a mirrored normal where wi would fall below it,
+        // Schüssler et al. 2017; Estevez et al. 2019's terminator shadowing): only their
+        // classic `false` form is implemented.
+        p.accept_bool("flip_invalid_normals", |v| !v)?;
+        p.accept_bool("use_shadowing_function", |v| !v)?;
         let scale = p.float("scale", 1.0)? as f32;
         if !scale.is_finite() {
             return Err(p.error_at("scale", "bumpmap: 'scale' must be finite"));

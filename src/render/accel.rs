@@ -328,6 +328,7 @@ impl Accel {
                     shading: Frame::from_normal(ns),
                     uv,
                     dpdu: triangle_dpdu(e1, e2, t1 - t0, t2 - t0),
+                    dpdv: triangle_dpdv(e1, e2, t1 - t0, t2 - t0),
                     shape,
                 }
             }
@@ -347,9 +348,12 @@ impl Accel {
                 if s.flip_normals {
                     n = -n;
                 }
-                // Mitsuba's sphere: ∂p/∂u ∝ (−y, x, 0) in its local frame (zero at the
+                // Mitsuba's sphere: ∂p/∂u = 2πr (−y, x, 0) in its local frame (zero at the
                 // poles), turned with the sphere (anisotropic lobes follow it).
-                let dpdu = s.to_local.transpose() * Vec3::new(-local.y, local.x, 0.0) * s.radius;
+                let dpdu = s.to_local.transpose()
+                    * Vec3::new(-local.y, local.x, 0.0)
+                    * (s.radius * std::f32::consts::TAU);
+                let dpdv = sphere_dpdv(local, s.radius, &s.to_local);
                 SurfaceInteraction {
                     p,
                     t: hit.t,
@@ -357,6 +361,7 @@ impl Accel {
                     shading: Frame::from_normal(n),
                     uv,
                     dpdu,
+                    dpdv,
                     shape: s.shape,
                 }
             }
@@ -1197,6 +1202,27 @@ fn triangle_dpdu(e1: Vec3, e2: Vec3, duv1: Vec2, duv2: Vec2) -> Vec3 {
         return Vec3::ZERO;
     }
     (duv2.y * e1 - duv1.y * e2) / det
+}
+
+/// ∂p/∂v of a triangle (the companion of [`triangle_dpdu`], pbrt-v4 / Mitsuba).
+#[inline]
+fn triangle_dpdv(e1: Vec3, e2: Vec3, duv1: Vec2, duv2: Vec2) -> Vec3 {
+    let det = duv1.x * duv2.y - duv1.y * duv2.x;
+    if det.abs() < 1e-12 {
+        return Vec3::ZERO;
+    }
+    (duv1.x * e2 - duv2.x * e1) / det
+}
+
+/// ∂p/∂v of Mitsuba's sphere parameterisation v = θ/π at unit local direction `local`:
+/// πr (z cos φ, z sin φ, −sin θ), turned to world; zero at the poles (φ undefined).
+fn sphere_dpdv(local: Vec3, radius: f32, to_local: &glam::Mat3) -> Vec3 {
+    let rd = local.truncate().length();
+    if rd.is_nan() || rd <= 1e-7 {
+        return Vec3::ZERO;
+    }
+    let d = Vec3::new(local.z * local.x / rd, local.z * local.y / rd, -rd);
+    to_local.transpose() * d * (radius * std::f32::consts::PI)
 }
 #[cfg(test)]
 mod tests {

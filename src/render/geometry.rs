@@ -122,6 +122,9 @@ pub struct SurfaceInteraction {
     /// ∂p/∂u (world, not normalised; zero where the parameterisation degenerates): the
     /// tangent of models that need one ([`super::bsdf::BsdfModel::shading_frame`]).
     pub dpdu: Vec3,
+    /// ∂p/∂v (world, not normalised; zero where degenerate): with `dpdu`, the surface
+    /// parameterisation a bump map perturbs ([`super::bsdf::bump_map`]).
+    pub dpdv: Vec3,
     /// Index into the prepared scene's shapes.
     pub shape: u32,
 }

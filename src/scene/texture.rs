@@ -162,6 +162,49 @@ impl BitmapTexture {
         out
     }
 
+    /// Gradient (∂/∂u, ∂/∂v, with `uv` before `to_uv`) of the bilinearly filtered value,
+    /// RGB texels reduced to their luminance (Rec. 709 weights): Mitsuba's `bitmap`
+    /// `eval_1_grad`, the height slope a bump map reads. Per texel cell the value is
+    /// bilinear in (x, y) = uv·(W,H) − ½, so ∂f/∂x = (1−ty)(f10−f00) + ty(f11−f01) and
+    /// ∂f/∂y = (1−tx)(f01−f00) + tx(f11−f10); the chain rule through ·(W,H) and `to_uv`
+    /// gives ∂f/∂u, ∂f/∂v. Zero for nearest filtering (piecewise constant).
+    pub fn eval_grad(&self, uv: Vec2) -> Vec2 {
+        if self.filter == TextureFilter::Nearest {
+            return Vec2::ZERO;
+        }
+        let p = transform_uv(&self.to_uv, uv);
+        let (w, h) = (self.width, self.height);
+        let fx = p.x * w as f32 - 0.5;
+        let fy = p.y * h as f32 - 0.5;
+        if !(fx.is_finite() && fy.is_finite()) {
+            return Vec2::ZERO;
+        }
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - x0, fy - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let (xa, xb) = (self.wrap.wrap(x0, w), self.wrap.wrap(x0 + 1, w));
+        let (ya, yb) = (self.wrap.wrap(y0, h), self.wrap.wrap(y0 + 1, h));
+        let lum = |x, y| {
+            let [r, g, b] = self.texel(x, y);
+            if self.channels == 1 {
+                r
+            } else {
+                0.212671 * r + 0.715160 * g + 0.072169 * b
+            }
+        };
+        let (f00, f10, f01, f11) = (lum(xa, ya), lum(xb, ya), lum(xa, yb), lum(xb, yb));
+        let scale = self.value_range.map_or(1.0, |(lo, hi)| hi - lo);
+        // ∂f/∂(s, t) in the transformed coordinates, then through s = m00 u + m01 v + …,
+        // t = m10 u + m11 v + … (glam is column-major: x_axis = (m00, m10, m20)).
+        let ds = ((1.0 - ty) * (f10 - f00) + ty * (f11 - f01)) * w as f32 * scale;
+        let dt = ((1.0 - tx) * (f01 - f00) + tx * (f11 - f10)) * h as f32 * scale;
+        let m = &self.to_uv;
+        Vec2::new(
+            ds * m.x_axis.x + dt * m.x_axis.y,
+            ds * m.y_axis.x + dt * m.y_axis.y,
+        )
+    }
+
     /// First channel of [`eval`](Self::eval) (e.g. a thickness in nm).
     #[inline]
     pub fn eval_scalar(&self, uv: Vec2) -> f32 {
@@ -309,6 +352,52 @@ mod tests {
     fn tex2x2() -> BitmapTexture {
         // top row: 1, 2; bottom row: 3, 4
         BitmapTexture::new(2, 2, 1, vec![1.0, 2.0, 3.0, 4.0]).unwrap()
+    }
+
+    #[test]
+    fn gradient_matches_finite_differences() {
+        // A linear ramp f = 0.25·x + 0.5·y over texel indices: ∂f/∂u = 0.25·W, ∂f/∂v = 0.5·H
+        // inside (clamped edges excepted).
+        let (w, h) = (5usize, 4usize);
+        let data: Vec<f32> = (0..w * h)
+            .map(|i| 0.25 * (i % w) as f32 + 0.5 * (i / w) as f32)
+            .collect();
+        let mut t = BitmapTexture::new(w, h, 1, data).unwrap();
+        t.wrap = WrapMode::Clamp;
+        let g = t.eval_grad(Vec2::new(0.43, 0.61));
+        assert!((g.x - 0.25 * w as f32).abs() < 1e-4, "{g:?}");
+        assert!((g.y - 0.5 * h as f32).abs() < 1e-4, "{g:?}");
+        // A non-linear RGB texture under a rotated, scaled uv transform, repeat wrap:
+        // the analytic gradient equals central differences of `eval` (luminance).
+        let data: Vec<f32> = (0..w * h * 3)
+            .map(|i| ((i * 7919) % 13) as f32 / 13.0)
+            .collect();
+        let mut t = BitmapTexture::new(w, h, 3, data).unwrap();
+        t.to_uv = Mat3::from_cols_array(&[1.3, 0.4, 0.0, -0.7, 0.9, 0.0, 0.1, 0.2, 1.0]);
+        t.value_range = Some((0.5, 2.5));
+        let lum = |uv: Vec2| {
+            let [r, g, b] = t.eval(uv);
+            0.212671 * r + 0.715160 * g + 0.072169 * b
+        };
+        let e = 1e-3f32;
+        for uv in [
+            Vec2::new(0.31, 0.77),
+            Vec2::new(-0.42, 1.13),
+            Vec2::new(0.05, 0.52),
+        ] {
+            let g = t.eval_grad(uv);
+            let fd = Vec2::new(
+                (lum(uv + Vec2::X * e) - lum(uv - Vec2::X * e)) / (2.0 * e),
+                (lum(uv + Vec2::Y * e) - lum(uv - Vec2::Y * e)) / (2.0 * e),
+            );
+            assert!(
+                (g - fd).length() < 2e-2 * (1.0 + fd.length()),
+                "{uv}: {g} vs {fd}"
+            );
+            assert!(g.length() > 0.1, "{g}");
+        }
+        t.filter = TextureFilter::Nearest;
+        assert_eq!(t.eval_grad(Vec2::new(0.31, 0.77)), Vec2::ZERO);
     }
 
     #[test]

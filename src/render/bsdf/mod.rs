@@ -361,6 +361,7 @@ bsdf_models! {
     ThinDielectric(thindielectric::ThinDielectric),
     NormalMap(normal_map::NormalMap),
     Mask(mask::Mask),
+    BumpMap(bump_map::BumpMap),
 }
 
 impl Bsdf {

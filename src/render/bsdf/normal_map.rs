@@ -138,6 +138,7 @@ mod tests {
             shading: Frame::from_normal(n),
             uv: glam::Vec2::ZERO,
             dpdu,
+            dpdv: Vec3::ZERO,
             shape: 0,
         }
     }

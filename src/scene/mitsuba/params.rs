@@ -152,6 +152,21 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         Ok(out)
     }
 
+    /// The nested `<texture>` children whatever their names (Mitsuba's `bumpmap` takes its
+    /// height from any one), in document order (taken off the element).
+    pub fn nested_textures(&mut self) -> Vec<TextureDesc> {
+        let (textures, rest): (Vec<_>, Vec<_>) = std::mem::take(&mut self.props.list)
+            .into_iter()
+            .partition(|q| matches!(q.val, Val::Texture(_)));
+        self.props.list = rest;
+        (textures.into_iter())
+            .filter_map(|q| match q.val {
+                Val::Texture(t) => Some(t),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// A real value that may depend on wavelength: a number or a tabulated `<spectrum>`.
     pub fn real_spectrum(&mut self, name: &str) -> Result<Option<RealSpectrum>> {
         self.real_spectrum_as(name, name)

@@ -207,3 +207,37 @@ fn compare(name: &str) {
         }
     }
 }
+
+/// Mitsuba 3.8+ turns `flip_invalid_normals` and `use_shadowing_function` on by default;
+/// thinfilm renders their `false` form, so a scene that leaves them unset is warned (naming
+/// the file) and one that sets both `false` is not.
+#[test]
+fn unset_mitsuba_38_flags_are_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    write_ramp(dir.path(), "ramp.exr", 8, 0.075);
+    let tex =
+        r#"<texture type="bitmap" name="h"><string name="filename" value="ramp.exr"/></texture>"#;
+    let flags = r#"<boolean name="flip_invalid_normals" value="false"/>
+        <boolean name="use_shadowing_function" value="false"/>"#;
+    let stderr_of = |name: &str, inner: String| {
+        let xml = plane_scene(&format!(r#"<bsdf type="bumpmap">{inner}{{}}</bsdf>"#));
+        let path = dir.path().join(name);
+        std::fs::write(&path, xml).unwrap();
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+            .args(["render", path.to_str().unwrap(), "-o"])
+            .arg(dir.path().join("out.exr"))
+            .args(["--spp", "1", "--resolution", "4x4"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{name}: {err}");
+        err
+    };
+    let err = stderr_of("defaults.xml", tex.to_string());
+    assert!(
+        err.contains("defaults.xml") && err.contains("flip_invalid_normals"),
+        "{err}"
+    );
+    let err = stderr_of("explicit.xml", format!("{tex}{flags}"));
+    assert!(!err.contains("flip_invalid_normals"), "{err}");
+}

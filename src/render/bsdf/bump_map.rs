@@ -51,6 +51,15 @@ impl super::BsdfPlugin for BumpMap {
         // Mitsuba 3.8+ defaults both to true (a mirrored normal where wi would fall below it,
         // Schüssler et al. 2017; Estevez et al. 2019's terminator shadowing): only their
         // classic `false` form is implemented.
+        if !(p.has("flip_invalid_normals") && p.has("use_shadowing_function")) {
+            eprintln!(
+                "warning: {}: bumpmap: Mitsuba 3.8+ turns flip_invalid_normals and \
+                 use_shadowing_function on by default; thinfilm renders both off (set them to \
+                 false to silence this): a few % darker or brighter near silhouettes and \
+                 shadow terminators",
+                p.location()
+            );
+        }
         p.accept_bool("flip_invalid_normals", |v| !v)?;
         p.accept_bool("use_shadowing_function", |v| !v)?;
         let scale = p.float("scale", 1.0)? as f32;

@@ -50,6 +50,11 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
             .any(|q| q.name == name && matches!(q.val, Val::Str(_)))
     }
 
+    /// `file:line:col` of the plugin element, for notes and warnings.
+    pub fn location(&self) -> String {
+        self.ctx.loc(self.props.node)
+    }
+
     /// An error at the plugin element.
     pub fn error(&self, msg: impl std::fmt::Display) -> anyhow::Error {
         self.ctx.err(self.props.node, msg)

@@ -139,6 +139,7 @@ mod tests {
             uv: glam::Vec2::ZERO,
             dpdu,
             shape: 0,
+            color: Vec3::ONE,
         }
     }
 

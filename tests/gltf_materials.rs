@@ -131,6 +131,7 @@ fn albedo(bsdf: &Bsdf, c: f32, lambda: [f32; 4], n: u32) -> [f32; 4] {
         wl: &wl,
         uv: glam::Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     let wi = Vec3::new((1.0 - c * c).max(0.0).sqrt(), 0.0, c);
     let mut s = Sampler::from_seed(3);

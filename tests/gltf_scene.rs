@@ -417,57 +417,92 @@ fn malformed_lights_cameras_and_nodes_are_refused() {
     }
 }
 
-/// `COLOR_0` multiplies the base colour in glTF; thinfilm does not carry per-vertex colours
-/// to the shading point, so a file that has them renders with a warning naming the mesh —
-/// and a file without them renders without that warning.
-#[test]
-fn vertex_colours_are_reported_as_not_applied() {
-    let dir = tempfile::tempdir().unwrap();
-    let cams = vec![json!({"camera": 0, "translation": [0, 1, 0], "rotation": rot_x(-90.0)})];
+/// The floor as a glTF file with a non-reflecting dielectric material (its base colour is
+/// the whole reflectance: `KHR_materials_specular` factor 0) seen by the down camera, and,
+/// if `color` is given, `COLOR_0` = that linear RGB (float VEC3) on all four vertices.
+fn coloured_floor(dir: &Path, name: &str, color: Option<[f32; 3]>) -> PathBuf {
     let plain = write_gltf(
-        dir.path(),
-        "plain.gltf",
-        cams.clone(),
-        json!({"cameras": cameras()}),
+        dir,
+        name,
+        vec![down_camera(0.0, 0.0)],
+        json!({"cameras": cameras(),
+               "extensionsUsed": ["KHR_materials_specular"],
+               "materials": [{"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0},
+                              "extensions": {"KHR_materials_specular": {"specularFactor": 0.0}}}]}),
     );
     let mut doc: Value = serde_json::from_str(&std::fs::read_to_string(&plain).unwrap()).unwrap();
-    let grey: Vec<u8> = (0..12).flat_map(|_| 0.5f32.to_le_bytes()).collect();
-    std::fs::write(dir.path().join("colors.bin"), &grey).unwrap();
-    doc["buffers"]
-        .as_array_mut()
-        .unwrap()
-        .push(json!({"uri": "colors.bin", "byteLength": 48}));
-    doc["bufferViews"]
-        .as_array_mut()
-        .unwrap()
-        .push(json!({"buffer": 1, "byteOffset": 0, "byteLength": 48}));
-    doc["accessors"]
-        .as_array_mut()
-        .unwrap()
-        .push(json!({"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC3"}));
-    doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"] = json!(2);
-    let coloured = dir.path().join("coloured.gltf");
-    std::fs::write(&coloured, serde_json::to_string(&doc).unwrap()).unwrap();
-    let out = dir.path().join("out.exr");
-    let stderr_of = |path: &Path| {
-        let o = Command::new(env!("CARGO_BIN_EXE_thinfilm"))
-            .args([
-                "render",
-                path.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-            ])
-            .args(["--spp", "1", "--resolution", "4x4", "--max-depth", "1"])
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr).to_string();
-        assert!(o.status.success(), "{}: {err}", path.display());
-        err
-    };
-    let err = stderr_of(&coloured);
+    doc["meshes"][0]["primitives"][0]["material"] = json!(0);
+    if let Some(c) = color {
+        let bin: Vec<u8> = (0..4).flat_map(|_| c).flat_map(f32::to_le_bytes).collect();
+        let bin_name = format!("{name}.colors.bin");
+        std::fs::write(dir.join(&bin_name), &bin).unwrap();
+        doc["buffers"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"uri": bin_name, "byteLength": 48}));
+        doc["bufferViews"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"buffer": 1, "byteOffset": 0, "byteLength": 48}));
+        doc["accessors"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC3"}));
+        doc["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"] = json!(2);
+    }
+    std::fs::write(&plain, serde_json::to_string(&doc).unwrap()).unwrap();
+    plain
+}
+
+/// Mean RGB of the floor point under a constant white environment (radiance 1): a Lambert
+/// surface reflects its albedo.
+fn furnace_radiance(path: &Path) -> [f64; 3] {
+    let mut scene: Scene = thinfilm::scene::load(path, &[]).expect("glTF loads");
+    scene.emitters = vec![EmitterDesc::Constant {
+        radiance: SpectrumDesc::Constant(1.0),
+    }];
+    let out = render(
+        &scene,
+        &RenderOptions {
+            spp: Some(64),
+            resolution: Some((4, 4)),
+            seed: Some(1),
+            ..Default::default()
+        },
+    )
+    .expect("render");
+    let n = out.image.pixels.len() as f64;
+    let mut m = [0.0; 3];
+    for p in &out.image.pixels {
+        for c in 0..3 {
+            m[c] += p[c] as f64 / n;
+        }
+    }
+    m
+}
+
+/// glTF 2.0 §3.9.2: baseColor = baseColorFactor × baseColorTexture × `COLOR_0`. In a white
+/// furnace a grey `COLOR_0` of 0.5 halves the floor's radiance and a red one turns it red.
+#[test]
+fn vertex_colours_multiply_the_base_colour() {
+    let dir = tempfile::tempdir().unwrap();
+    let white = furnace_radiance(&coloured_floor(dir.path(), "plain.gltf", None));
+    let grey = furnace_radiance(&coloured_floor(dir.path(), "grey.gltf", Some([0.5; 3])));
+    let red = furnace_radiance(&coloured_floor(
+        dir.path(),
+        "red.gltf",
+        Some([0.8, 0.05, 0.05]),
+    ));
+    // Relative to the uncoloured floor (a flat spectrum is not RGB (1, 1, 1) on the film).
+    let rel = |c: [f64; 3]| [0, 1, 2].map(|k| c[k] / white[k]);
+    assert!(white.iter().all(|&w| w > 0.5), "no COLOR_0: {white:?}");
     assert!(
-        err.contains("coloured.gltf") && err.contains("COLOR_0") && err.contains("not applied"),
-        "{err}"
+        rel(grey).iter().all(|r| (r - 0.5).abs() < 0.01),
+        "COLOR_0 = 0.5 grey: {grey:?} vs {white:?}"
     );
-    assert!(!stderr_of(&plain).contains("COLOR_0"));
+    let r = rel(red);
+    assert!(
+        r[0] > 0.6 && r[1] < 0.2 && r[2] < 0.2,
+        "COLOR_0 red: {red:?} vs {white:?}"
+    );
 }

@@ -100,6 +100,7 @@ fn teapot_camera_rays_find_the_bvh_hit() {
 fn quad(corners: [Vec3; 4], bsdf: usize, name: &str) -> Shape {
     Shape {
         geometry: Geometry::Mesh(TriangleMesh {
+            colors: Vec::new(),
             positions: corners.to_vec(),
             normals: vec![],
             uvs: vec![],
@@ -149,6 +150,7 @@ fn room(extra: Vec<Shape>) -> Scene {
         // Edge-on from the pinhole (its plane y = 0 contains the camera): projects to a line.
         Shape {
             geometry: Geometry::Mesh(TriangleMesh {
+                colors: Vec::new(),
                 positions: vec![
                     Vec3::new(-0.5, 0.0, 3.0),
                     Vec3::new(0.5, 0.0, 3.0),
@@ -235,6 +237,7 @@ fn bins_step_aside_when_many_triangles_cross_the_camera_plane() {
     }
     let fan = Shape {
         geometry: Geometry::Mesh(TriangleMesh {
+            colors: Vec::new(),
             positions,
             normals: vec![],
             uvs: vec![],

@@ -69,6 +69,7 @@ fn sphere(bsdf: usize) -> Shape {
 /// A quad (two triangles) in the plane y = `y`, facing +Y, with UVs.
 fn floor(y: f32, half: f32, bsdf: usize) -> Shape {
     let mesh = TriangleMesh {
+        colors: Vec::new(),
         positions: vec![
             Vec3::new(-half, y, -half),
             Vec3::new(half, y, -half),
@@ -540,6 +541,7 @@ fn bad_inputs_are_errors() {
     let mut bad = film_scene(8, 4);
     bad.shapes.push(Shape {
         geometry: Geometry::Mesh(TriangleMesh {
+            colors: Vec::new(),
             positions: vec![Vec3::ZERO; 3],
             normals: vec![],
             uvs: vec![],
@@ -589,6 +591,7 @@ fn emissive_box(h: f32, bsdf: usize) -> Shape {
     }
     Shape {
         geometry: Geometry::Mesh(TriangleMesh {
+            colors: Vec::new(),
             positions,
             normals: vec![],
             uvs: vec![],

@@ -44,6 +44,7 @@ fn rgb_indices_and_specular_factors_match_mitsuba() {
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     let points = doc["points"].as_array().unwrap();
     assert!(points.len() >= 16);
@@ -82,6 +83,7 @@ fn textured_factor_and_roughness_vary_over_the_surface() {
         wl: &wl,
         uv,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     let (a, b) = (Vec2::new(0.25, 0.25), Vec2::new(0.75, 0.25));
     let wi = Vec3::new(0.3, 0.1, 0.95).normalize();

@@ -728,3 +728,123 @@ fn shapes_and_emitters() {
     assert!(err(r#"<shape type="torus"/>"#).contains("\"torus\""));
     assert!(err(r#"<shape type="cube"><emitter type="constant"/></shape>"#).contains("area"));
 }
+
+/// A 2 × 2 quad in z = 0 facing +z as a PLY with per-vertex colours: binary with `uchar`
+/// red/green/blue, or ascii with float r/g/b; vertices (−1,−1), (1,−1), (1,1), (−1,1).
+fn coloured_quad_ply(path: &Path, colors: [[f32; 3]; 4], binary_u8: bool) {
+    let xy = [[-1.0f32, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
+    let (format, ty, names) = if binary_u8 {
+        ("binary_little_endian", "uchar", ["red", "green", "blue"])
+    } else {
+        ("ascii", "float", ["r", "g", "b"])
+    };
+    let mut out = format!(
+        "ply\nformat {format} 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+    )
+    .into_bytes();
+    for n in names {
+        out.extend(format!("property {ty} {n}\n").bytes());
+    }
+    out.extend(b"element face 2\nproperty list uchar int vertex_indices\nend_header\n");
+    for (p, c) in xy.iter().zip(colors) {
+        if binary_u8 {
+            for v in [p[0], p[1], 0.0] {
+                out.extend(v.to_le_bytes());
+            }
+            out.extend(c.map(|v| (v * 255.0).round() as u8));
+        } else {
+            out.extend(format!("{} {} 0 {} {} {}\n", p[0], p[1], c[0], c[1], c[2]).bytes());
+        }
+    }
+    for f in [[0i32, 1, 2], [0, 2, 3]] {
+        if binary_u8 {
+            out.push(3);
+            for i in f {
+                out.extend(i.to_le_bytes());
+            }
+        } else {
+            out.extend(format!("3 {} {} {}\n", f[0], f[1], f[2]).bytes());
+        }
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+/// The quad of `ply` with a diffuse `mesh_attribute` reflectance, seen head-on in a white
+/// furnace (radiance 1: a Lambert surface shows its albedo), 8 × 1 pixels over x ∈ ±0.8.
+fn furnace_row(dir: &Path, ply: &str) -> Vec<[f32; 3]> {
+    let scene = load_in(
+        dir,
+        &format!(
+            r#"<sensor type="perspective"><float name="fov" value="30"/>
+                 <transform name="to_world"><lookat origin="0,0,3" target="0,0,0" up="0,1,0"/></transform>
+                 <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="1"/></film>
+               </sensor>
+               <emitter type="constant"><float name="radiance" value="1"/></emitter>
+               <shape type="ply"><string name="filename" value="{ply}"/>
+                 <bsdf type="diffuse"><texture type="mesh_attribute" name="reflectance">
+                   <string name="name" value="vertex_color"/></texture></bsdf></shape>"#
+        ),
+    )
+    .unwrap();
+    let out = thinfilm::render::render(
+        &scene,
+        &thinfilm::render::RenderOptions {
+            spp: Some(64),
+            seed: Some(1),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(out.image.width, 8);
+    out.image.pixels
+}
+
+/// Mitsuba's `mesh_attribute` texture: a PLY's vertex colours (u8 normalised by 255, floats
+/// as stored) become the diffuse albedo, interpolated across the triangles; a mesh without
+/// them, or another attribute, is refused naming the shape / the attribute.
+#[test]
+fn mesh_attribute_vertex_colors() {
+    let dir = tempfile::tempdir().unwrap();
+    let grey = [[128.0 / 255.0; 3]; 4];
+    coloured_quad_ply(&dir.path().join("grey.ply"), grey, true);
+    coloured_quad_ply(&dir.path().join("white.ply"), [[1.0; 3]; 4], false);
+    // Relative to white float colours (a flat spectrum is not RGB (1, 1, 1) on the film).
+    let white = furnace_row(dir.path(), "white.ply");
+    for (p, w) in furnace_row(dir.path(), "grey.ply").iter().zip(&white) {
+        for c in 0..3 {
+            let r = p[c] / w[c];
+            assert!(
+                (r - 128.0 / 255.0).abs() < 0.005,
+                "grey u8 128: {p:?} / {w:?}"
+            );
+        }
+    }
+    // Red on the left edge (x = −1), blue on the right (x = 1): a linear blend along x.
+    let (red, blue) = ([0.9, 0.05, 0.05], [0.05, 0.05, 0.9]);
+    coloured_quad_ply(&dir.path().join("ramp.ply"), [red, blue, blue, red], false);
+    let row = furnace_row(dir.path(), "ramp.ply");
+    assert!(row[0][0] > 3.0 * row[0][2], "left is red: {row:?}");
+    assert!(row[7][2] > 3.0 * row[7][0], "right is blue: {row:?}");
+    for w in row.windows(2) {
+        assert!(
+            w[1][0] < w[0][0] && w[1][2] > w[0][2],
+            "monotone ramp: {row:?}"
+        );
+    }
+    // Refusals: a mesh without colours, an attribute other than vertex_color, a BSDF
+    // parameter that does not read it.
+    let e = err(
+        r#"<shape type="rectangle" id="plain"><bsdf type="diffuse"><texture type="mesh_attribute" name="reflectance">
+             <string name="name" value="vertex_color"/></texture></bsdf></shape>"#,
+    );
+    assert!(e.contains("\"plain\"") && e.contains("vertex_color"), "{e}");
+    let e = err(
+        r#"<texture type="mesh_attribute" id="t"><string name="name" value="vertex_weight"/></texture>"#,
+    );
+    assert!(e.contains("\"vertex_weight\""), "{e}");
+    let e = err(
+        r#"<shape type="rectangle"><bsdf type="roughplastic"><texture type="mesh_attribute" name="alpha">
+             <string name="name" value="vertex_color"/></texture></bsdf></shape>"#,
+    );
+    assert!(e.contains("alpha") && e.contains("mesh_attribute"), "{e}");
+}

@@ -330,6 +330,7 @@ impl Accel {
                     dpdu: triangle_dpdu(e1, e2, t1 - t0, t2 - t0),
                     dpdv: triangle_dpdv(e1, e2, t1 - t0, t2 - t0),
                     shape,
+                    color: vertex_color(mesh, idx, [b0, b1, b2]),
                 }
             }
             Prim::Sphere(i) => {
@@ -363,6 +364,7 @@ impl Accel {
                     dpdu,
                     dpdv,
                     shape: s.shape,
+                    color: Vec3::ONE,
                 }
             }
         }
@@ -372,6 +374,16 @@ impl Accel {
     pub fn mesh(&self, shape: u32) -> Option<&TriangleMesh> {
         self.meshes.get(shape as usize).and_then(|m| m.as_ref())
     }
+}
+
+/// The barycentric blend `b` of triangle `idx`'s vertex colours (white without colours).
+#[inline]
+fn vertex_color(mesh: &TriangleMesh, idx: [u32; 3], b: [f32; 3]) -> Vec3 {
+    if mesh.colors.is_empty() {
+        return Vec3::ONE;
+    }
+    let [c0, c1, c2] = idx.map(|k| mesh.colors[k as usize]);
+    c0 * b[0] + c1 * b[1] + c2 * b[2]
 }
 
 /// A triangle of the scene: (shape, triangle index within the shape's mesh).
@@ -443,7 +455,7 @@ fn collect_triangles(scene: &Scene) -> anyhow::Result<(Vec<TriRef>, Vec<SphereGe
     Ok((tri_ref, spheres, dropped))
 }
 
-/// Normals and uvs per vertex (or none), indices within the vertices.
+/// Normals, uvs and colours per vertex (or none), indices within the vertices.
 fn check_mesh(m: &TriangleMesh, name: &str, si: usize) -> anyhow::Result<()> {
     if !m.normals.is_empty() && m.normals.len() != m.positions.len() {
         anyhow::bail!(
@@ -456,6 +468,13 @@ fn check_mesh(m: &TriangleMesh, name: &str, si: usize) -> anyhow::Result<()> {
         anyhow::bail!(
             "mesh '{name}' (shape {si}): {} uvs for {} vertices",
             m.uvs.len(),
+            m.positions.len()
+        );
+    }
+    if !m.colors.is_empty() && m.colors.len() != m.positions.len() {
+        anyhow::bail!(
+            "mesh '{name}' (shape {si}): {} vertex colours for {} vertices",
+            m.colors.len(),
             m.positions.len()
         );
     }

@@ -127,6 +127,9 @@ pub struct SurfaceInteraction {
     pub dpdv: Vec3,
     /// Index into the prepared scene's shapes.
     pub shape: u32,
+    /// The mesh's vertex colour here (linear RGB, barycentric blend; 1 without colours):
+    /// glTF `COLOR_0`, Mitsuba's `mesh_attribute` `vertex_color`.
+    pub color: Vec3,
 }
 
 /// A point offset off a surface along its geometric normal, on the side of `dir`, to avoid

@@ -351,6 +351,7 @@ struct EnvSample<C> {
     wl: SampledWavelengths,
     uv: Vec2,
     segment: f32,
+    color: Vec3,
     /// The carrier before the vertex scattered it.
     carrier: C,
 }
@@ -721,6 +722,7 @@ fn vertex<C: Carrier>(
         wl,
         uv: si.uv,
         segment: si.t, // glTF volume absorption (gltf branch hook)
+        color: si.color,
     };
 
     // ---- Emitter sampling (the shadow ray is traced with the batch's others; an
@@ -741,6 +743,7 @@ fn vertex<C: Carrier>(
                 wl: *wl,
                 uv: si.uv,
                 segment: si.t,
+                color: si.color,
                 carrier: b.carrier,
             });
         } else if let Some(ls) = light.sample(si.p, u, wl) {
@@ -844,6 +847,7 @@ fn resolve_env_samples<C: Carrier>(
             wl: &s.wl,
             uv: s.uv,
             segment: s.segment,
+            color: s.color,
         };
         let term = shadow_term(&s.carrier, bsdf, &ctx, &s.v, &ls, sel_pdf, s.p, s.ng);
         if let Some((ray, contribution)) = term {

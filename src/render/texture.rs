@@ -127,6 +127,9 @@ pub enum Texture {
         color1: Spectrum,
         to_uv: Mat3,
     },
+    /// The interpolated vertex colour ([`Texture::eval_at`] reads it; the scene parser
+    /// admits it only where a BSDF evaluates through `eval_at`, elsewhere it is white).
+    VertexColor,
 }
 
 impl Texture {
@@ -144,6 +147,25 @@ impl Texture {
                 color1: Spectrum::reflectance(color1),
                 to_uv: *to_uv,
             },
+            TextureDesc::VertexColor => Texture::VertexColor,
+        }
+    }
+
+    /// Spectral value at a shading point: [`Texture::eval`] at its UV, or its vertex colour
+    /// upsampled as a reflectance (Jakob & Hanika 2019; grey stays flat).
+    #[inline]
+    pub fn eval_at(&self, ctx: &crate::render::bsdf::ShadingCtx) -> Spec {
+        match self {
+            Texture::VertexColor => {
+                let c = ctx.color;
+                if c.x == c.y && c.y == c.z {
+                    Spec::splat(c.x)
+                } else {
+                    let p = srgb_reflectance(c.to_array());
+                    Spec::from_array(ctx.wl.lambda.map(|l| p.eval(l)))
+                }
+            }
+            _ => self.eval(ctx.uv, ctx.wl),
         }
     }
 
@@ -176,6 +198,7 @@ impl Texture {
                     color1.eval(wl)
                 }
             }
+            Texture::VertexColor => Spec::splat(1.0),
         }
     }
 
@@ -205,6 +228,7 @@ impl Texture {
                     color1.mean_hint()
                 }
             }
+            Texture::VertexColor => 1.0,
         }
     }
 
@@ -222,6 +246,7 @@ impl Texture {
                 color1: color1.desc(),
                 to_uv: *to_uv,
             },
+            Texture::VertexColor => TextureDesc::VertexColor,
         }
     }
 

@@ -248,13 +248,12 @@ impl Loader<'_> {
             .read_tex_coords(uv_set)
             .map(|t| t.into_f32().map(Vec2::from).collect())
             .unwrap_or_default();
-        if prim.get(&gltf::Semantic::Colors(0)).is_some() {
-            // glTF multiplies the base colour by COLOR_0; a shading point carries no
-            // per-vertex data but its UV, so the colours are dropped — said, not hidden.
-            eprintln!(
-                "warning: {what}: COLOR_0 vertex colours are not applied (the base colour is used alone)"
-            );
-        }
+        // glTF 2.0 §3.9.2: baseColor = baseColorFactor × baseColorTexture × COLOR_0 (linear;
+        // normalized u8/u16 are mapped to [0, 1] by the reader, alpha is not a colour).
+        let colors: Vec<Vec3> = reader
+            .read_colors(0)
+            .map(|c| c.into_rgb_f32().map(Vec3::from).collect())
+            .unwrap_or_default();
         if uv_set > 0 && uvs.is_empty() {
             eprintln!("warning: {what}: its material reads TEXCOORD_{uv_set}, which it lacks");
         }
@@ -273,6 +272,11 @@ impl Loader<'_> {
                 Vec::new()
             },
             uvs: if uvs.len() == n { uvs } else { Vec::new() },
+            colors: if colors.len() == n {
+                colors
+            } else {
+                Vec::new()
+            },
             positions,
             indices: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         };

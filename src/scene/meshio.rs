@@ -32,6 +32,7 @@ pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
         let m = &model.mesh;
         let n = m.positions.len() / 3;
         let part = TriangleMesh {
+            colors: Vec::new(),
             positions: m
                 .positions
                 .chunks_exact(3)
@@ -80,6 +81,16 @@ fn prop_f32(p: &Property) -> Option<f32> {
         Property::Double(v) => v as f32,
         _ => return None,
     })
+}
+
+/// A PLY colour channel in [0, 1]: integer channels normalised by their maximum (u8 / 255),
+/// floats as stored.
+fn color_channel(p: &Property) -> Option<f32> {
+    match *p {
+        Property::UChar(v) => Some(v as f32 / 255.0),
+        Property::UShort(v) => Some(v as f32 / 65535.0),
+        _ => prop_f32(p),
+    }
 }
 
 fn prop_list(p: &Property) -> Option<Vec<i64>> {
@@ -169,7 +180,8 @@ fn check_ply_header(path: &Path, what: &str) -> Result<()> {
 }
 
 /// Loads a PLY mesh (ascii, binary little or big endian). Vertex properties x, y, z
-/// (required), nx, ny, nz and u, v / s, t / texture_u, texture_v (optional); faces from
+/// (required), nx, ny, nz, u, v / s, t / texture_u, texture_v and red, green, blue / r, g, b
+/// (optional; Mitsuba's `vertex_color` attribute); faces from
 /// `vertex_indices` or `vertex_index`, polygons fan-triangulated.
 pub fn load_ply(path: &Path) -> Result<TriangleMesh> {
     check_exists(path, "PLY")?;
@@ -205,6 +217,9 @@ pub(super) fn load_ply_general(path: &Path) -> Result<TriangleMesh> {
         .into_iter()
         .find(|(a, b)| has(a) && has(b));
     let has_n = has("nx") && has("ny") && has("nz");
+    let rgb_keys = [["red", "green", "blue"], ["r", "g", "b"]]
+        .into_iter()
+        .find(|k| k.iter().all(|c| has(c)));
     for (i, e) in vertices.iter().enumerate() {
         let p = match (get(e, "x"), get(e, "y"), get(e, "z")) {
             (Some(x), Some(y), Some(z)) => Vec3::new(x, y, z),
@@ -224,6 +239,10 @@ pub(super) fn load_ply_general(path: &Path) -> Result<TriangleMesh> {
                 get(e, ku).unwrap_or(0.0),
                 get(e, kv).unwrap_or(0.0),
             ));
+        }
+        if let Some(keys) = rgb_keys {
+            let c = keys.map(|k| e.get(k).and_then(color_channel).unwrap_or(0.0));
+            mesh.colors.push(Vec3::from(c));
         }
     }
     let nv = mesh.positions.len() as i64;

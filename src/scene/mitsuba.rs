@@ -1514,7 +1514,24 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     to_uv,
                 })
             }
-            _ => Err(self.unknown_plugin(p, &["bitmap", "checkerboard"])),
+            "mesh_attribute" => {
+                let name = p
+                    .string(self, "name")?
+                    .ok_or_else(|| self.err(p.node, "mesh_attribute: missing parameter 'name'"))?;
+                // Mitsuba's PLY loader groups the vertex properties red/green/blue (or
+                // r/g/b) into the attribute `vertex_color`; the shape's check refuses a
+                // mesh without them.
+                if name != "vertex_color" {
+                    return Err(self.err(
+                        p.node,
+                        format!(
+                            "mesh_attribute: attribute \"{name}\" is not supported (only \"vertex_color\", the PLY vertex properties red, green, blue)"
+                        ),
+                    ));
+                }
+                Ok(TextureDesc::VertexColor)
+            }
+            _ => Err(self.unknown_plugin(p, &["bitmap", "checkerboard", "mesh_attribute"])),
         }
     }
 
@@ -1873,11 +1890,27 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 self.bsdfs.len() - 1
             }
         };
+        let name = self.attr(p.node, "id")?;
+        let coloured = matches!(&geometry, Geometry::Mesh(m) if !m.colors.is_empty());
+        if !coloured
+            && self.bsdfs[bsdf]
+                .flags()
+                .contains(bsdf::BsdfFlags::VERTEX_COLOR)
+        {
+            return Err(self.err(
+                p.node,
+                format!(
+                    "shape \"{}\" ({}): its BSDF reads the mesh attribute \"vertex_color\", which the shape lacks (a PLY with vertex properties red, green, blue)",
+                    name.as_deref().unwrap_or("unnamed"),
+                    p.plugin
+                ),
+            ));
+        }
         Ok(Shape {
             geometry,
             bsdf,
             emission,
-            name: self.attr(p.node, "id")?,
+            name,
         })
     }
 

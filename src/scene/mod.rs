@@ -184,18 +184,22 @@ pub enum Geometry {
     },
 }
 
-/// A world-space triangle mesh. `normals` and `uvs` are either empty or one per vertex.
+/// A world-space triangle mesh. `normals`, `uvs` and `colors` are either empty or one per
+/// vertex.
 #[derive(Clone, Default)]
 pub struct TriangleMesh {
     pub positions: Vec<Vec3>,
     pub normals: Vec<Vec3>,
     pub uvs: Vec<Vec2>,
     pub indices: Vec<[u32; 3]>,
+    /// Linear RGB vertex colours (glTF `COLOR_0`, PLY `red green blue`): they reach the
+    /// shading point interpolated ([`crate::render::geometry::SurfaceInteraction::color`]).
+    pub colors: Vec<Vec3>,
 }
 
 /// Sizes and a hash of every bit of the arrays, not the arrays: a render's provenance hashes
 /// the scene's `Debug` form, and a 2M-triangle mesh printed in full was ~200 MB of float
-/// formatting (~1 s). Any change to a coordinate, normal, uv or index changes the hash.
+/// formatting (~1 s). Any change to a coordinate, normal, uv, index or colour changes the hash.
 impl std::fmt::Debug for TriangleMesh {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         // FNV-1a over 32-bit words, one stream per array so a value cannot move between them
@@ -220,12 +224,19 @@ impl std::fmt::Debug for TriangleMesh {
             ),
             words(&mut self.uvs.iter().flat_map(|t| t.to_array().map(f32::to_bits))),
             words(&mut self.indices.iter().flat_map(|t| *t)),
+            words(
+                &mut self
+                    .colors
+                    .iter()
+                    .flat_map(|c| c.to_array().map(f32::to_bits)),
+            ),
         ];
         f.debug_struct("TriangleMesh")
             .field("vertices", &self.positions.len())
             .field("normals", &self.normals.len())
             .field("uvs", &self.uvs.len())
             .field("triangles", &self.indices.len())
+            .field("colors", &self.colors.len())
             .field("content_hash", &hash.map(|h| format!("{h:016x}")))
             .finish()
     }
@@ -254,6 +265,9 @@ pub enum TextureDesc {
         color1: SpectrumDesc,
         to_uv: Mat3,
     },
+    /// The mesh's vertex colours (Mitsuba's `mesh_attribute` `vertex_color`), upsampled as
+    /// a reflectance at the shading point.
+    VertexColor,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -40,6 +40,16 @@ impl Ty {
         })
     }
 
+    /// The factor that maps a stored colour channel to [0, 1]: integer channels are
+    /// normalised by their maximum (u8 / 255), floats are taken as stored.
+    fn color_scale(self) -> f32 {
+        match self {
+            Ty::U8 => 1.0 / 255.0,
+            Ty::U16 => 1.0 / 65535.0,
+            _ => 1.0,
+        }
+    }
+
     fn size(self) -> usize {
         match self {
             Ty::I8 | Ty::U8 => 1,
@@ -193,6 +203,9 @@ fn read_vertices(body: &mut Body, e: &Element, mesh: &mut TriangleMesh) -> Optio
     let uv = [("u", "v"), ("s", "t"), ("texture_u", "texture_v")]
         .into_iter()
         .find_map(|(a, b)| Some([find(a)?, find(b)?]));
+    let rgb = [["red", "green", "blue"], ["r", "g", "b"]]
+        .into_iter()
+        .find_map(|k| Some([find(k[0])?, find(k[1])?, find(k[2])?]));
     let stride: usize = e.props.iter().map(|p| p.ty.size()).sum();
     if body.bytes.len() - body.pos < e.count.checked_mul(stride)? {
         return None;
@@ -203,6 +216,9 @@ fn read_vertices(body: &mut Body, e: &Element, mesh: &mut TriangleMesh) -> Optio
     }
     if uv.is_some() {
         mesh.uvs.reserve_exact(e.count);
+    }
+    if rgb.is_some() {
+        mesh.colors.reserve_exact(e.count);
     }
     let mut vals = vec![0.0f32; e.props.len()];
     for _ in 0..e.count {
@@ -215,6 +231,10 @@ fn read_vertices(body: &mut Body, e: &Element, mesh: &mut TriangleMesh) -> Optio
         }
         if let Some([a, b]) = uv {
             mesh.uvs.push(Vec2::new(vals[a], vals[b]));
+        }
+        if let Some(c) = rgb {
+            mesh.colors
+                .push(Vec3::from(c.map(|k| vals[k] * e.props[k].ty.color_scale())));
         }
     }
     Some(())

@@ -20,8 +20,9 @@
 //! Records with stored tangents encode a whole shading frame in the normal lanes, which this
 //! loader does not decode (an error says so).
 //!
-//! Vertex colours and custom attributes are read past and not used (an error would refuse
-//! meshes Mitsuba renders identically: they only matter to a `mesh_attribute` texture).
+//! Vertex colours (versions 3/4) become the mesh's colours (a `mesh_attribute`
+//! `vertex_color` reads them); custom attributes are read past and not used (an error would
+//! refuse meshes Mitsuba renders identically: they only matter to a `mesh_attribute` texture).
 
 use super::TriangleMesh;
 use anyhow::{bail, Context, Result};
@@ -263,12 +264,16 @@ fn read_legacy<R: Read>(r: &mut Reader<R>, version: u16) -> Result<SerializedMes
     } else {
         Vec::new()
     };
-    if flags & 0x8 != 0 {
-        r.floats(3 * vertices, double)?; // vertex colours: not used
-    }
+    // Mitsuba's `vertex_color` attribute (for a `mesh_attribute` texture).
+    let colors = if flags & 0x8 != 0 {
+        vec3s(&r.floats(3 * vertices, double)?)
+    } else {
+        Vec::new()
+    };
     let indices = triangles(&r.u32s(3 * faces)?, 3, vertices)?;
     Ok(SerializedMesh {
         mesh: TriangleMesh {
+            colors,
             positions,
             normals,
             uvs,
@@ -312,6 +317,7 @@ fn read_v5<R: Read>(r: &mut Reader<R>) -> Result<SerializedMesh> {
         r.u32s(vertices)?;
     }
     let mesh = TriangleMesh {
+        colors: Vec::new(),
         positions: records
             .chunks_exact(8)
             .map(|c| Vec3::from_slice(c))

@@ -62,14 +62,21 @@ impl TriangleMesh {
         if had && self.uvs.is_empty() != other.uvs.is_empty() {
             self.uvs.clear();
         }
+        if had && self.colors.is_empty() != other.colors.is_empty() {
+            self.colors.clear();
+        }
         let keep_n = !had || !self.normals.is_empty();
         let keep_uv = !had || !self.uvs.is_empty();
+        let keep_c = !had || !self.colors.is_empty();
         self.positions.extend_from_slice(&other.positions);
         if keep_n {
             self.normals.extend_from_slice(&other.normals);
         }
         if keep_uv {
             self.uvs.extend_from_slice(&other.uvs);
+        }
+        if keep_c {
+            self.colors.extend_from_slice(&other.colors);
         }
         self.indices
             .extend(other.indices.iter().map(|t| t.map(|i| i + base)));
@@ -79,10 +86,13 @@ impl TriangleMesh {
         if self.uvs.len() != self.positions.len() {
             self.uvs.clear();
         }
+        if self.colors.len() != self.positions.len() {
+            self.colors.clear();
+        }
     }
 
     /// Checks the invariants the renderer relies on: indices in range, finite positions,
-    /// `normals`/`uvs` empty or one per vertex. `what` names the mesh in the message.
+    /// `normals`/`uvs`/`colors` empty or one per vertex. `what` names the mesh in the message.
     pub fn validate(&self, what: &str) -> Result<()> {
         let n = self.positions.len();
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
@@ -108,6 +118,18 @@ impl TriangleMesh {
         }
         if !self.uvs.is_empty() && self.uvs.len() != n {
             bail!("{what}: {} uvs for {n} vertices", self.uvs.len());
+        }
+        if let Some(i) = self.colors.iter().position(|c| !c.is_finite()) {
+            bail!(
+                "{what}: vertex {i} has a non-finite colour {:?}",
+                self.colors[i]
+            );
+        }
+        if !self.colors.is_empty() && self.colors.len() != n {
+            bail!(
+                "{what}: {} vertex colours for {n} vertices",
+                self.colors.len()
+            );
         }
         if let Some((k, t)) = self
             .indices
@@ -177,6 +199,7 @@ pub fn smooth_normals(positions: &[Vec3], indices: &[[u32; 3]], weld: bool) -> V
 pub fn rectangle() -> TriangleMesh {
     let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
     TriangleMesh {
+        colors: Vec::new(),
         positions: corners.iter().map(|&(x, y)| Vec3::new(x, y, 0.0)).collect(),
         normals: vec![Vec3::Z; 4],
         uvs: corners
@@ -208,6 +231,7 @@ pub fn cube() -> TriangleMesh {
     ];
     const UV: [[f32; 2]; 4] = [[0., 1.], [1., 1.], [1., 0.], [0., 0.]];
     TriangleMesh {
+        colors: Vec::new(),
         positions: P.iter().map(|&p| Vec3::from(p)).collect(),
         normals: (0..24).map(|i| Vec3::from(N[i / 4])).collect(),
         uvs: (0..24).map(|i| Vec2::from(UV[i % 4])).collect(),

@@ -154,6 +154,7 @@ mod tests {
             dpdu,
             dpdv,
             shape: 0,
+            color: Vec3::ONE,
         }
     }
 

@@ -31,13 +31,16 @@ impl BsdfPlugin for Diffuse {
     const PLUGINS: &'static [&'static str] = &["diffuse"];
 
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
-        Ok(Diffuse::new(&p.texture("reflectance", 0.5)?))
+        Ok(Diffuse::new(&p.color_texture("reflectance", 0.5)?))
     }
 }
 
 impl BsdfModel for Diffuse {
     fn flags(&self) -> BsdfFlags {
-        BsdfFlags::DIFFUSE_REFLECTION
+        BsdfFlags::DIFFUSE_REFLECTION.with(
+            BsdfFlags::VERTEX_COLOR,
+            matches!(self.reflectance, Texture::VertexColor),
+        )
     }
 
     fn describe(&self) -> String {
@@ -48,7 +51,7 @@ impl BsdfModel for Diffuse {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return Spec::ZERO;
         }
-        self.reflectance.eval(ctx.uv, ctx.wl) * (FRAC_1_PI * wo.z)
+        self.reflectance.eval_at(ctx) * (FRAC_1_PI * wo.z)
     }
 
     fn pdf(&self, _ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
@@ -76,7 +79,7 @@ impl BsdfModel for Diffuse {
         }
         Some(BsdfSample::smooth(
             wo,
-            self.reflectance.eval(ctx.uv, ctx.wl),
+            self.reflectance.eval_at(ctx),
             pdf,
             BsdfFlags::DIFFUSE_REFLECTION,
         ))

@@ -41,6 +41,8 @@ impl BsdfFlags {
     pub const MULTILAYER: Self = Self(1 << 12);
     /// A film thickness that varies over the surface (a texture).
     pub const THICKNESS_MAP: Self = Self(1 << 13);
+    /// Reads the mesh's vertex colours (a shape without them is refused).
+    pub const VERTEX_COLOR: Self = Self(1 << 14);
 
     pub const REFLECTION: Self =
         Self(Self::DIFFUSE_REFLECTION.0 | Self::GLOSSY_REFLECTION.0 | Self::DELTA_REFLECTION.0);
@@ -115,7 +117,7 @@ impl BitOrAssign for BsdfFlags {
 
 impl fmt::Debug for BsdfFlags {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        const NAMES: [&str; 14] = [
+        const NAMES: [&str; 15] = [
             "diffuse reflection",
             "diffuse transmission",
             "glossy reflection",
@@ -130,6 +132,7 @@ impl fmt::Debug for BsdfFlags {
             "interference",
             "multilayer",
             "thickness map",
+            "vertex colour",
         ];
         let set: Vec<&str> = (0..NAMES.len())
             .filter(|&i| self.0 & (1 << i) != 0)

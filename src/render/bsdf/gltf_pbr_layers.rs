@@ -257,7 +257,14 @@ impl Point {
     pub fn at(pbr: &GltfPbr, ctx: &ShadingCtx, inside: bool) -> Point {
         let m = &pbr.material;
         let [r, g, b, _] = m.base_color;
-        let base = rgb_spectrum([r, g, b], &m.base_color_texture, &pbr.base_poly, ctx);
+        // glTF 2.0 §3.9.2: baseColor = factor × texture × COLOR_0 (the vertex colour).
+        let c = ctx.color;
+        let base = if c == Vec3::ONE {
+            rgb_spectrum([r, g, b], &m.base_color_texture, &pbr.base_poly, ctx)
+        } else {
+            let factor = [r * c.x, g * c.y, b * c.z];
+            rgb_spectrum(factor, &m.base_color_texture, &srgb_reflectance(factor), ctx)
+        };
         let coverage = pbr.coverage(ctx.uv).unwrap_or(1.0);
         let (roughness, metallic) = match &m.metallic_roughness_texture {
             Some(t) => {

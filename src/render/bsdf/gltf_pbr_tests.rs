@@ -367,6 +367,7 @@ fn volume_absorbs_along_the_inside_segment() {
             wl: &wl,
             uv: Vec2::ZERO,
             segment,
+            color: glam::Vec3::ONE,
         };
         b.sample_split(&ctx, wi, 0.5, Vec2::splat(0.5))[1].unwrap().weight
     };
@@ -378,6 +379,7 @@ fn volume_absorbs_along_the_inside_segment() {
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 4.0,
+        color: glam::Vec3::ONE,
     };
     let out = b.sample_split(&ctx, -wi, 0.5, Vec2::splat(0.5))[1].unwrap().weight;
     let ctx0 = ctx_of(&wl);

@@ -41,6 +41,8 @@ pub struct ShadingCtx<'a> {
     /// a model with an absorbing interior attenuates light that crossed it (glTF
     /// `KHR_materials_volume`, Beer–Lambert).
     pub segment: f32,
+    /// The vertex colour at the point ([`super::geometry::SurfaceInteraction::color`]).
+    pub color: Vec3,
 }
 
 /// A sampled direction.

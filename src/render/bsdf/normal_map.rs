@@ -140,6 +140,7 @@ mod tests {
             dpdu,
             dpdv: Vec3::ZERO,
             shape: 0,
+            color: Vec3::ONE,
         }
     }
 

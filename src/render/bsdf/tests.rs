@@ -218,6 +218,7 @@ pub(super) fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) ->
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     let mut observed = vec![0.0f64; THETA_BINS * PHI_BINS];
     let mut sampler = Sampler::from_seed(seed);
@@ -332,6 +333,7 @@ fn chi2_rejects_a_wrong_pdf() {
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     counters::take();
     let mut s = Sampler::from_seed(1);
@@ -458,6 +460,7 @@ fn thin_film_conserves_energy_when_lossless() {
                 wl: &wl,
                 uv: Vec2::ZERO,
                 segment: 0.0,
+                color: glam::Vec3::ONE,
             };
             for cos in [1.0f32, 0.8, 0.5, 0.2, 0.05, 1e-3] {
                 let (r, t) = f.reflect_transmit(&ctx, cos);
@@ -486,6 +489,7 @@ fn zero_thickness_film_is_bare_substrate() {
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     counters::take();
     for cos in [1.0f32, 0.6, 0.1] {
@@ -504,6 +508,7 @@ fn finite_at_grazing_and_degenerate_inputs() {
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     counters::take();
     let mut all = test_bsdfs();
@@ -561,6 +566,7 @@ fn dielectric_sampling() {
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     counters::take();
     let wi = dir(30.0, 0.0);
@@ -587,6 +593,7 @@ fn diffuse_white_furnace_weights() {
         wl: &wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     };
     counters::take();
     let mut s = Sampler::from_seed(2);
@@ -606,6 +613,7 @@ pub(super) fn ctx_of(wl: &SampledWavelengths) -> ShadingCtx<'_> {
         wl,
         uv: Vec2::ZERO,
         segment: 0.0,
+        color: glam::Vec3::ONE,
     }
 }
 

@@ -5,7 +5,7 @@
 use super::normal_map::frame_with_tangent;
 use crate::render::geometry::{Frame, SurfaceInteraction};
 use crate::scene::{BitmapTexture, TextureDesc};
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use std::sync::Arc;
 
 /// The bump-mapped frame for height gradient `grad` = scale·(∂h/∂u, ∂h/∂v), as Mitsuba:
@@ -90,45 +90,10 @@ impl super::BsdfPlugin for BumpMap {
 }
 
 impl super::BsdfModel for BumpMap {
-    fn flags(&self) -> super::BsdfFlags {
-        self.inner.flags()
-    }
+    super::frame_only_wrapper!();
 
     fn describe(&self) -> String {
         format!("bumpmap(scale {}) {}", self.scale, self.inner.describe())
-    }
-
-    fn eval(&self, ctx: &super::ShadingCtx, wi: Vec3, wo: Vec3) -> crate::render::texture::Spec {
-        self.inner.eval(ctx, wi, wo)
-    }
-
-    fn pdf(&self, ctx: &super::ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
-        self.inner.pdf(ctx, wi, wo)
-    }
-
-    fn sample(
-        &self,
-        ctx: &super::ShadingCtx,
-        wi: Vec3,
-        u1: f32,
-        u2: Vec2,
-        lobes: super::Lobes,
-    ) -> Option<super::BsdfSample> {
-        self.inner.sample(ctx, wi, u1, u2, lobes)
-    }
-
-    fn sample_split(
-        &self,
-        ctx: &super::ShadingCtx,
-        wi: Vec3,
-        u1: f32,
-        u2: Vec2,
-    ) -> [Option<super::BsdfSample>; 2] {
-        self.inner.sample_split(ctx, wi, u1, u2)
-    }
-
-    fn polarized(&self) -> Result<&dyn super::PolarizedBsdf, &'static str> {
-        self.inner.polarized()
     }
 
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
@@ -143,6 +108,7 @@ impl super::BsdfModel for BumpMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     fn si(ng: Vec3, dpdu: Vec3, dpdv: Vec3) -> SurfaceInteraction {
         SurfaceInteraction {

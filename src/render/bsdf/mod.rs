@@ -197,6 +197,61 @@ macro_rules! delta_lobes_only {
 }
 use delta_lobes_only;
 
+/// The [`BsdfModel`] methods of a model that only changes the shading frame of the model it
+/// wraps (`self.inner`: normal and bump maps): flags, values, sampling and the polarised
+/// form are the inner model's, evaluated in the frame the wrapper's `shading_frame` gives.
+macro_rules! frame_only_wrapper {
+    () => {
+        fn flags(&self) -> $crate::render::bsdf::BsdfFlags {
+            self.inner.flags()
+        }
+
+        fn eval(
+            &self,
+            ctx: &$crate::render::bsdf::ShadingCtx,
+            wi: ::glam::Vec3,
+            wo: ::glam::Vec3,
+        ) -> $crate::render::texture::Spec {
+            self.inner.eval(ctx, wi, wo)
+        }
+
+        fn pdf(
+            &self,
+            ctx: &$crate::render::bsdf::ShadingCtx,
+            wi: ::glam::Vec3,
+            wo: ::glam::Vec3,
+        ) -> f32 {
+            self.inner.pdf(ctx, wi, wo)
+        }
+
+        fn sample(
+            &self,
+            ctx: &$crate::render::bsdf::ShadingCtx,
+            wi: ::glam::Vec3,
+            u1: f32,
+            u2: ::glam::Vec2,
+            lobes: $crate::render::bsdf::Lobes,
+        ) -> Option<$crate::render::bsdf::BsdfSample> {
+            self.inner.sample(ctx, wi, u1, u2, lobes)
+        }
+
+        fn sample_split(
+            &self,
+            ctx: &$crate::render::bsdf::ShadingCtx,
+            wi: ::glam::Vec3,
+            u1: f32,
+            u2: ::glam::Vec2,
+        ) -> [Option<$crate::render::bsdf::BsdfSample>; 2] {
+            self.inner.sample_split(ctx, wi, u1, u2)
+        }
+
+        fn polarized(&self) -> Result<&dyn $crate::render::bsdf::PolarizedBsdf, &'static str> {
+            self.inner.polarized()
+        }
+    };
+}
+use frame_only_wrapper;
+
 /// How a model is made from a scene file's plugin element.
 pub trait BsdfPlugin: Sized {
     /// Mitsuba plugin names (`type="…"`) this model is built from.

@@ -78,45 +78,10 @@ impl super::BsdfPlugin for NormalMap {
 }
 
 impl super::BsdfModel for NormalMap {
-    fn flags(&self) -> super::BsdfFlags {
-        self.inner.flags()
-    }
+    super::frame_only_wrapper!();
 
     fn describe(&self) -> String {
         format!("normalmap {}", self.inner.describe())
-    }
-
-    fn eval(&self, ctx: &super::ShadingCtx, wi: Vec3, wo: Vec3) -> crate::render::texture::Spec {
-        self.inner.eval(ctx, wi, wo)
-    }
-
-    fn pdf(&self, ctx: &super::ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
-        self.inner.pdf(ctx, wi, wo)
-    }
-
-    fn sample(
-        &self,
-        ctx: &super::ShadingCtx,
-        wi: Vec3,
-        u1: f32,
-        u2: glam::Vec2,
-        lobes: super::Lobes,
-    ) -> Option<super::BsdfSample> {
-        self.inner.sample(ctx, wi, u1, u2, lobes)
-    }
-
-    fn sample_split(
-        &self,
-        ctx: &super::ShadingCtx,
-        wi: Vec3,
-        u1: f32,
-        u2: glam::Vec2,
-    ) -> [Option<super::BsdfSample>; 2] {
-        self.inner.sample_split(ctx, wi, u1, u2)
-    }
-
-    fn polarized(&self) -> Result<&dyn super::PolarizedBsdf, &'static str> {
-        self.inner.polarized()
     }
 
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {

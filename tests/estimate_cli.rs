@@ -120,3 +120,39 @@ fn single_angle_without_index_is_a_clear_error() {
         String::from_utf8_lossy(&st.stderr)
     );
 }
+
+/// A noise-free capture fitted exactly is not reported as a misfit (its χ²/dof against a
+/// noise estimate at the floor only measures the model's own float rounding), while the
+/// same capture with the wrong fixed index still is.
+#[test]
+fn noise_free_capture_fits_without_a_misfit_warning() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let mut cfg = SimulateConfig::preset("sample1").unwrap();
+    cfg.width = 16;
+    cfg.height = 16;
+    cfg.noise_sigma = 0.0;
+    let true_n = match cfg.film_ior {
+        thinfilm::optics::Ior::Constant(n) => n.re,
+        _ => panic!("sample1 has a constant index"),
+    };
+    write_capture_set(&cfg, &cap).unwrap();
+    let run = |extra: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+            .arg("estimate")
+            .arg(&cap)
+            .arg("--out")
+            .arg(tmp.path().join("fit"))
+            .arg("--quiet")
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).to_string()
+    };
+    let err = run(&[]);
+    assert!(!err.contains("does not explain the data"), "{err}");
+    let wrong = format!("{}", true_n + 0.01);
+    let err = run(&["--film-ior", &wrong]);
+    assert!(err.contains("does not explain the data"), "{err}");
+}

@@ -98,10 +98,15 @@ fn floor_radiance(path: &Path) -> [f64; 3] {
     scene
         .emitters
         .retain(|e| !matches!(e, EmitterDesc::Envmap { .. } | EmitterDesc::Constant { .. }));
+    mean_rgb(&scene, 16)
+}
+
+/// Mean RGB of a 4 × 4 render of `scene` at `spp` samples per pixel (seed 1).
+fn mean_rgb(scene: &Scene, spp: u32) -> [f64; 3] {
     let out = render(
-        &scene,
+        scene,
         &RenderOptions {
-            spp: Some(16),
+            spp: Some(spp),
             resolution: Some((4, 4)),
             seed: Some(1),
             ..Default::default()
@@ -461,24 +466,7 @@ fn furnace_radiance(path: &Path) -> [f64; 3] {
     scene.emitters = vec![EmitterDesc::Constant {
         radiance: SpectrumDesc::Constant(1.0),
     }];
-    let out = render(
-        &scene,
-        &RenderOptions {
-            spp: Some(64),
-            resolution: Some((4, 4)),
-            seed: Some(1),
-            ..Default::default()
-        },
-    )
-    .expect("render");
-    let n = out.image.pixels.len() as f64;
-    let mut m = [0.0; 3];
-    for p in &out.image.pixels {
-        for c in 0..3 {
-            m[c] += p[c] as f64 / n;
-        }
-    }
-    m
+    mean_rgb(&scene, 64)
 }
 
 /// glTF 2.0 §3.9.2: baseColor = baseColorFactor × baseColorTexture × `COLOR_0`. In a white

@@ -245,19 +245,35 @@ fn furnace_coloured_metal_keeps_its_hue_and_film_on_metal() {
     // The film changes the colour.
     let hue = |c: [f64; 3]| c[2] / c[0];
     assert!((hue(got_f) - hue(got)).abs() > 0.05, "{got_f:?} vs {got:?}");
+    // With KHR_materials_specular the film sits on the metal's complex index with that
+    // colour as edge tint: the furnace still reads the BSDF's own albedo.
+    let tinted = r#"{"name": "filmed tinted gold",
+      "pbrMetallicRoughness": {"baseColorFactor": [1.0, 0.77, 0.34, 1], "metallicFactor": 1, "roughnessFactor": 0.3},
+      "extensions": {"KHR_materials_iridescence": {"iridescenceFactor": 1, "iridescenceIor": 1.5,
+                     "iridescenceThicknessMaximum": 300},
+                     "KHR_materials_specular": {"specularColorFactor": [1.0, 0.6, 0.3]}}}"#;
+    let (got_t, want_t) = measured_and_expected(tinted);
+    let r = luminance(got_t) / luminance(want_t);
+    eprintln!("film on tinted metal: rendered {got_t:?} albedo {want_t:?} ratio {r:.4}");
+    assert!((r - 1.0).abs() < 0.12, "ratio {r}");
 }
 
 /// Lossless glass (smooth, with a volume) in a white furnace is invisible: radiance 1, with
-/// and without a film.
+/// and without a film; rough (roughness 0.5) too, with the energy compensation of its
+/// refraction lobe.
 #[test]
 fn furnace_lossless_glass_with_and_without_a_film() {
-    for ext in [
-        "",
-        r#", "KHR_materials_iridescence": {"iridescenceFactor": 1, "iridescenceIor": 1.8, "iridescenceThicknessMaximum": 350}"#,
+    for (ext, roughness) in [
+        ("", 0.0),
+        (
+            r#", "KHR_materials_iridescence": {"iridescenceFactor": 1, "iridescenceIor": 1.8, "iridescenceThicknessMaximum": 350}"#,
+            0.0,
+        ),
+        ("", 0.5),
     ] {
         let m = format!(
             r#"{{"name": "glass",
-              "pbrMetallicRoughness": {{"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0}},
+              "pbrMetallicRoughness": {{"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": {roughness}}},
               "extensions": {{"KHR_materials_transmission": {{"transmissionFactor": 1}},
                              "KHR_materials_volume": {{"thicknessFactor": 1}}{ext}}}}}"#
         );
@@ -276,7 +292,7 @@ fn furnace_lossless_glass_with_and_without_a_film() {
         }
         let mean = sum.map(|v| v / n);
         eprintln!(
-            "glass{}: mean {mean:?}",
+            "glass{} roughness {roughness}: mean {mean:?}",
             if ext.is_empty() { "" } else { " + film" }
         );
         for v in mean {

@@ -230,6 +230,66 @@ fn defaults_are_a_neutral_studio_and_model_viewer_framing() {
     assert_eq!(s.camera.projection, Projection::Perspective);
 }
 
+/// How far the model reaches towards the frame's edges when `scene`'s camera renders at
+/// `width` × `height`: the largest |x|/x_edge and |y|/y_edge over the mesh's vertices in the
+/// camera's frame (≤ 1: in view).
+fn frame_fill(scene: &Scene, width: u32, height: u32) -> (f32, f32) {
+    let aspect = width as f32 / height as f32;
+    let c = &scene.camera;
+    let fov_x = thinfilm::render::camera::fov_x_deg(c.fov_deg, c.fov_axis, aspect);
+    let tan_x = (0.5 * fov_x.to_radians()).tan();
+    let tan_y = tan_x / aspect;
+    let to_local = c.to_world.inverse();
+    let mut fill = (0.0f32, 0.0f32);
+    for s in &scene.shapes {
+        let thinfilm::scene::Geometry::Mesh(m) = &s.geometry else {
+            continue;
+        };
+        for p in &m.positions {
+            let q = to_local.transform_point3(*p);
+            assert!(q.z > 0.0, "vertex {p} behind the camera");
+            fill.0 = fill.0.max((q.x / q.z).abs() / tan_x);
+            fill.1 = fill.1.max((q.y / q.z).abs() / tan_y);
+        }
+    }
+    fill
+}
+
+/// Without a camera the model is framed as `<model-viewer>` frames it at the aspect the
+/// render asks for: a vertical field of 30° on square and wide films, widened on films
+/// narrower than the model's ideal aspect so that it fits horizontally — in view at every
+/// aspect, and filling the narrower dimension of a tall film as much as a square film's.
+#[test]
+fn camera_less_framing_fits_the_model_at_any_aspect() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_gltf(dir.path(), "plain.gltf", vec![], json!({}));
+    let s = thinfilm::scene::load(&path, &[]).unwrap();
+    let square = frame_fill(&s, 300, 300).0;
+    for (w, h) in [(300, 300), (600, 200), (200, 600), (100, 400)] {
+        let (fx, fy) = frame_fill(&s, w, h);
+        eprintln!(
+            "{w}×{h}: the floor reaches {fx:.3} of the half width, {fy:.3} of the half height"
+        );
+        assert!(fx <= 1.0 && fy <= 1.0, "{w}×{h}: out of view ({fx}, {fy})");
+        let aspect = w as f32 / h as f32;
+        let fov_x =
+            thinfilm::render::camera::fov_x_deg(s.camera.fov_deg, s.camera.fov_axis, aspect);
+        let tan_y = (0.5 * fov_x.to_radians()).tan() / aspect;
+        if w >= h {
+            assert!(
+                (tan_y - 15f32.to_radians().tan()).abs() < 1e-5,
+                "{w}×{h}: tan {tan_y}"
+            );
+        } else {
+            // The floor (wider than tall) fills the narrower, horizontal, dimension.
+            assert!(
+                fx > 0.95 * square,
+                "{w}×{h}: the floor fills {fx} of the width, {square} on a square film"
+            );
+        }
+    }
+}
+
 #[test]
 fn orthographic_camera_sets_extent_and_aspect() {
     let dir = tempfile::tempdir().unwrap();

@@ -100,6 +100,16 @@ impl Doc {
         attrs["TEXCOORD_0"] = json!(a);
     }
 
+    /// Gives the last quad a `TANGENT` accessor of `values` (4 floats per element), declared
+    /// as `ty` with `count` elements.
+    fn tangents(&mut self, values: &[f32], ty: &str, count: usize) {
+        let v = self.view(values.iter().flat_map(|v| v.to_le_bytes()).collect());
+        self.accessors
+            .push(json!({"bufferView": v, "componentType": 5126, "count": count, "type": ty}));
+        let a = self.accessors.len() - 1;
+        self.meshes.last_mut().unwrap()["primitives"][0]["attributes"]["TANGENT"] = json!(a);
+    }
+
     /// Writes `name`.gltf (+ .bin) in `dir` with every mesh on a root node, `extra_nodes`
     /// after them and `top` merged into the root.
     fn write(
@@ -395,4 +405,97 @@ fn area_light_through_a_cut_out_is_counted_once() {
     let (without, with) = (run(false), run(true));
     assert!(without[0] > 0.02, "{without:?}");
     close("through a cut-out quad", with, without, 0.03);
+}
+
+/// The normal map follows the mesh's `TANGENT` (glTF 2.0 §3.7.2.1: bitangent = w·(n × t)).
+/// A diffuse floor (specular 0: ρ/π exactly) with a constant normal-map texel tilted in
+/// both tangent-space axes, lit by one directional light, seen straight down: its radiance
+/// is ρ/π·E·(n'·l) with n' the texel in the frame (t, w·(n × t), n). A TANGENT along ∂p/∂u
+/// renders as without the attribute; one turned 90° in the tangent plane, or with w = −1,
+/// changes the radiance by the ratio that frame predicts; malformed ones are refused (wrong
+/// type or count) or ignored with a warning (NaN), never a panic.
+#[test]
+fn normal_maps_follow_the_tangent_attribute() {
+    use glam::{Quat, Vec3};
+    let dir = tempfile::tempdir().unwrap();
+    let texel = [200u8, 170, 220, 255];
+    png(dir.path(), "n.png", texel, texel);
+    let ts = Vec3::new(
+        2.0 * texel[0] as f32 / 255.0 - 1.0,
+        2.0 * texel[1] as f32 / 255.0 - 1.0,
+        2.0 * texel[2] as f32 / 255.0 - 1.0,
+    );
+    let l = Vec3::new(1.0, 2.0, 0.7).normalize();
+    let q = Quat::from_rotation_arc(Vec3::NEG_Z, -l);
+    let light =
+        json!({"rotation": q.to_array(), "extensions": {"KHR_lights_punctual": {"light": 0}}});
+    let top = merge(
+        merge(texture_table("n.png"), narrow_camera()),
+        json!({"extensionsUsed": ["KHR_lights_punctual"], "extensions": {"KHR_lights_punctual":
+            {"lights": [{"type": "directional", "intensity": 683.0}]}}}),
+    );
+    let material = json!({"normalTexture": {"index": 0},
+        "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1], "metallicFactor": 0, "roughnessFactor": 1},
+        "extensions": {"KHR_materials_specular": {"specularFactor": 0}}});
+    let file = |name: &str, tangent: Option<(&[f32], &str, usize)>| {
+        let mut d = Doc::new();
+        d.quad(0.0, [-1.0, 1.0], [-1.0, 1.0], false, 0);
+        if let Some((v, ty, n)) = tangent {
+            d.tangents(v, ty, n);
+        }
+        d.write(
+            dir.path(),
+            name,
+            json!([material.clone()]),
+            vec![down_camera(0.0, 0.0), light.clone()],
+            top.clone(),
+        )
+    };
+    let four = |t: [f32; 4]| t.repeat(4);
+    // Predicted n'·l for tangent t and sign w on the floor (n = +Y).
+    let predict = |t: Vec3, w: f32| {
+        let n = Vec3::Y;
+        let np = (t * ts.x + n.cross(t) * w * ts.y + n * ts.z).normalize();
+        np.dot(l) as f64
+    };
+    let none = mean_radiance(&file("none", None), 4);
+    assert!(none[1] > 0.01, "{none:?}");
+    let along = four([1.0, 0.0, 0.0, 1.0]);
+    let same = mean_radiance(&file("along", Some((&along, "VEC4", 4))), 4);
+    close("TANGENT = ∂p/∂u", same, none, 1e-3);
+    let cases = [
+        ("turned 90°", [0.0f32, 0.0, -1.0, 1.0], Vec3::NEG_Z, 1.0),
+        ("w = −1", [1.0, 0.0, 0.0, -1.0], Vec3::X, -1.0),
+    ];
+    for (what, t, dir_t, w) in cases {
+        let tangent = four(t);
+        let got = mean_radiance(&file(what, Some((&tangent, "VEC4", 4))), 4);
+        let ratio = predict(dir_t, w) / predict(Vec3::X, 1.0);
+        eprintln!(
+            "{what}: radiance ratio {:.4}, predicted {ratio:.4}",
+            got[1] / none[1]
+        );
+        assert!(
+            (ratio - 1.0).abs() > 0.05,
+            "{what}: the case does not discriminate"
+        );
+        close(what, got, none.map(|v| v * ratio), 0.01);
+    }
+    // Malformed: wrong type or count is an error naming TANGENT; NaN is ignored (∂p/∂u).
+    let vec3 = [1.0f32, 0.0, 0.0].repeat(4);
+    for (name, v, ty, n) in [
+        ("vec3", &vec3[..], "VEC3", 4),
+        ("count", &along[..12], "VEC4", 3),
+    ] {
+        let e = thinfilm::scene::load(&file(name, Some((v, ty, n))), &[]).unwrap_err();
+        let e = format!("{e:#}");
+        assert!(
+            e.contains("TANGENT") && e.contains(&format!("{name}.gltf")),
+            "{e}"
+        );
+    }
+    let mut nan = along.clone();
+    nan[5] = f32::NAN;
+    let got = mean_radiance(&file("nan", Some((&nan, "VEC4", 4))), 4);
+    close("NaN TANGENT ignored", got, none, 1e-3);
 }

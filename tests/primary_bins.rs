@@ -101,6 +101,7 @@ fn quad(corners: [Vec3; 4], bsdf: usize, name: &str) -> Shape {
     Shape {
         geometry: Geometry::Mesh(TriangleMesh {
             colors: Vec::new(),
+            tangents: Vec::new(),
             positions: corners.to_vec(),
             normals: vec![],
             uvs: vec![],
@@ -151,6 +152,7 @@ fn room(extra: Vec<Shape>) -> Scene {
         Shape {
             geometry: Geometry::Mesh(TriangleMesh {
                 colors: Vec::new(),
+                tangents: Vec::new(),
                 positions: vec![
                     Vec3::new(-0.5, 0.0, 3.0),
                     Vec3::new(0.5, 0.0, 3.0),
@@ -238,6 +240,7 @@ fn bins_step_aside_when_many_triangles_cross_the_camera_plane() {
     let fan = Shape {
         geometry: Geometry::Mesh(TriangleMesh {
             colors: Vec::new(),
+            tangents: Vec::new(),
             positions,
             normals: vec![],
             uvs: vec![],

@@ -70,6 +70,7 @@ fn sphere(bsdf: usize) -> Shape {
 fn floor(y: f32, half: f32, bsdf: usize) -> Shape {
     let mesh = TriangleMesh {
         colors: Vec::new(),
+        tangents: Vec::new(),
         positions: vec![
             Vec3::new(-half, y, -half),
             Vec3::new(half, y, -half),
@@ -542,6 +543,7 @@ fn bad_inputs_are_errors() {
     bad.shapes.push(Shape {
         geometry: Geometry::Mesh(TriangleMesh {
             colors: Vec::new(),
+            tangents: Vec::new(),
             positions: vec![Vec3::ZERO; 3],
             normals: vec![],
             uvs: vec![],
@@ -592,6 +594,7 @@ fn emissive_box(h: f32, bsdf: usize) -> Shape {
     Shape {
         geometry: Geometry::Mesh(TriangleMesh {
             colors: Vec::new(),
+            tangents: Vec::new(),
             positions,
             normals: vec![],
             uvs: vec![],

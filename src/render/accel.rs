@@ -5,7 +5,7 @@
 use super::camera::Ray;
 use super::geometry::{Frame, SurfaceInteraction};
 use crate::scene::{Geometry, Scene, TriangleMesh};
-use glam::{Mat3, Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3, Vec4};
 use obvhs::cwbvh::CwBvh;
 use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
@@ -331,6 +331,7 @@ impl Accel {
                     dpdv: triangle_dpdv(e1, e2, t1 - t0, t2 - t0),
                     shape,
                     color: vertex_color(mesh, idx, [b0, b1, b2]),
+                    tangent: vertex_tangent(mesh, idx, [b0, b1, b2]),
                 }
             }
             Prim::Sphere(i) => {
@@ -365,6 +366,7 @@ impl Accel {
                     dpdv,
                     shape: s.shape,
                     color: Vec3::ONE,
+                    tangent: Vec4::ZERO,
                 }
             }
         }
@@ -384,6 +386,17 @@ fn vertex_color(mesh: &TriangleMesh, idx: [u32; 3], b: [f32; 3]) -> Vec3 {
     }
     let [c0, c1, c2] = idx.map(|k| mesh.colors[k as usize]);
     c0 * b[0] + c1 * b[1] + c2 * b[2]
+}
+
+/// The barycentric blend `b` of triangle `idx`'s vertex tangents (xyz; w the first vertex's
+/// bitangent sign), zero without tangents.
+#[inline]
+fn vertex_tangent(mesh: &TriangleMesh, idx: [u32; 3], b: [f32; 3]) -> Vec4 {
+    if mesh.tangents.is_empty() {
+        return Vec4::ZERO;
+    }
+    let [t0, t1, t2] = idx.map(|k| mesh.tangents[k as usize]);
+    (t0.truncate() * b[0] + t1.truncate() * b[1] + t2.truncate() * b[2]).extend(t0.w)
 }
 
 /// A triangle of the scene: (shape, triangle index within the shape's mesh).
@@ -468,6 +481,13 @@ fn check_mesh(m: &TriangleMesh, name: &str, si: usize) -> anyhow::Result<()> {
         anyhow::bail!(
             "mesh '{name}' (shape {si}): {} uvs for {} vertices",
             m.uvs.len(),
+            m.positions.len()
+        );
+    }
+    if !m.tangents.is_empty() && m.tangents.len() != m.positions.len() {
+        anyhow::bail!(
+            "mesh '{name}' (shape {si}): {} tangents for {} vertices",
+            m.tangents.len(),
             m.positions.len()
         );
     }

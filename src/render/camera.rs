@@ -177,6 +177,7 @@ pub fn fov_x_deg(fov_deg: f32, axis: FovAxis, aspect: f32) -> f32 {
                 fov_x_deg(fov_deg, FovAxis::Y, aspect)
             }
         }
+        FovAxis::FitY { min_aspect } => from_tan(half(fov_deg) * aspect.max(min_aspect)),
     }
 }
 
@@ -390,5 +391,11 @@ mod tests {
         let expect = 2.0 * ((30.0f32).to_radians().tan() * 2.0).atan().to_degrees();
         assert!((fx - expect).abs() < 1e-4);
         assert!((fov_x_deg(60.0, FovAxis::Smaller, 0.5) - 60.0).abs() < 1e-4);
+        // FitY: along y down to min_aspect, then the width of a min_aspect film.
+        let fit = FovAxis::FitY { min_aspect: 0.8 };
+        assert!((fov_x_deg(60.0, fit, 2.0) - expect).abs() < 1e-4);
+        let narrow = 2.0 * ((30.0f32).to_radians().tan() * 0.8).atan().to_degrees();
+        assert!((fov_x_deg(60.0, fit, 0.5) - narrow).abs() < 1e-4);
+        assert!((fov_x_deg(60.0, fit, 0.8) - narrow).abs() < 1e-4);
     }
 }

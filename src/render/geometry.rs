@@ -1,7 +1,7 @@
 //! Small geometric helpers shared by the renderer: orthonormal frames, sampling warps and the
 //! surface interaction record.
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec4};
 use std::f32::consts::{FRAC_1_PI, PI};
 
 /// An orthonormal frame (s, t, n); local coordinates have n as +z.
@@ -130,6 +130,9 @@ pub struct SurfaceInteraction {
     /// The mesh's vertex colour here (linear RGB, barycentric blend; 1 without colours):
     /// glTF `COLOR_0`, Mitsuba's `mesh_attribute` `vertex_color`.
     pub color: Vec3,
+    /// The mesh's vertex tangent here (glTF `TANGENT`, barycentric blend of xyz, w = ±1 the
+    /// bitangent's sign); zero without tangents (models then use `dpdu`).
+    pub tangent: Vec4,
 }
 
 /// A point offset off a surface along its geometric normal, on the side of `dir`, to avoid

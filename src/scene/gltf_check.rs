@@ -294,9 +294,15 @@ fn check_meshes(root: &Root, file: &str) -> Result<()> {
                 &[(Type::Vec3, &[F32])],
                 file,
             )?;
-            // NORMAL and every TEXCOORD_n (a material may read any set).
-            let mut vertex_attrs: Vec<(Semantic, String, &[(Type, &[ComponentType])])> =
-                vec![(Semantic::Normals, "NORMAL".into(), &[(Type::Vec3, &[F32])])];
+            // NORMAL, TANGENT and every TEXCOORD_n (a material may read any set).
+            let mut vertex_attrs: Vec<(Semantic, String, &[(Type, &[ComponentType])])> = vec![
+                (Semantic::Normals, "NORMAL".into(), &[(Type::Vec3, &[F32])]),
+                (
+                    Semantic::Tangents,
+                    "TANGENT".into(),
+                    &[(Type::Vec4, &[F32])],
+                ),
+            ];
             for sem in p.attributes.keys() {
                 if let Checked::Valid(Semantic::TexCoords(k)) = sem {
                     let types: &[(Type, &[ComponentType])] = &[(Type::Vec2, &[F32, U8, U16])];

@@ -259,8 +259,10 @@ pub(crate) fn camera(world: Mat4, cam: &gltf::Camera) -> (Camera, Option<f32>) {
 /// distance is D = r / sin 15°; the camera sits at c + 1.05·D·(0, cos 75°, sin 75°) (in front,
 /// 15° above the target), and its vertical field of view is 2·atan(tan 15° · max(1, a*/a))
 /// for a film of aspect a, with a* = max over vertices of √(x² + z²)/(D − |y|) / tan 15°
-/// (vertex offsets from c): wide models get a wider view on narrow films.
-pub fn model_viewer_camera(vertices: &[Vec3], aspect: f32) -> Option<Camera> {
+/// (vertex offsets from c; model-viewer's `idealAspect`): wide models get a wider view on
+/// narrow films. The film's aspect is known only when rendering (`--resolution`), so the
+/// camera carries a* ([`FovAxis::FitY`]) and the renderer applies the rule at any aspect.
+pub fn model_viewer_camera(vertices: &[Vec3]) -> Option<Camera> {
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     for v in vertices {
         lo = lo.min(*v);
@@ -286,14 +288,17 @@ pub fn model_viewer_camera(vertices: &[Vec3], aspect: f32) -> Option<Camera> {
         })
         .fold(0.0f32, f32::max)
         / tan_half;
-    let fov_y = 2.0 * (tan_half * (ideal_aspect / aspect).max(1.0)).atan();
     let dist = 1.05 * d;
     let phi = 75f32.to_radians();
     let origin = c + dist * Vec3::new(0.0, phi.cos(), phi.sin());
     Some(Camera {
         to_world: look_at(origin, c, Vec3::Y),
-        fov_deg: fov_y.to_degrees(),
-        fov_axis: FovAxis::Y,
+        // 2·atan(tan 15°): 30° up to rounding, computed as before the aspect was deferred so
+        // that square renders are bit-identical.
+        fov_deg: (2.0 * tan_half.atan()).to_degrees(),
+        fov_axis: FovAxis::FitY {
+            min_aspect: ideal_aspect,
+        },
         near_clip: ((dist - r) * 0.5).max(dist * 1e-4),
         far_clip: (dist + r) * 2.0,
         projection: Projection::Perspective,
@@ -378,7 +383,7 @@ mod tests {
     #[test]
     fn model_viewer_framing_puts_the_sphere_in_view() {
         let verts = [Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0)];
-        let cam = model_viewer_camera(&verts, 1.0).unwrap();
+        let cam = model_viewer_camera(&verts).unwrap();
         let origin = cam.to_world.transform_point3(Vec3::ZERO);
         let c = Vec3::new(0.0, 1.0, 0.0);
         let r = 3f32.sqrt();
@@ -387,6 +392,10 @@ mod tests {
         // 15° above the target, on its +Z side.
         let el = ((origin.y - c.y) / dist).asin().to_degrees();
         assert!((el - 15.0).abs() < 1e-3 && origin.z > 0.0, "{el}");
-        assert!(cam.fov_deg >= 30.0 - 1e-4);
+        assert!((cam.fov_deg - 30.0).abs() < 1e-4, "{}", cam.fov_deg);
+        let FovAxis::FitY { min_aspect } = cam.fov_axis else {
+            panic!("{:?}", cam.fov_axis)
+        };
+        assert!(min_aspect > 0.0 && min_aspect <= 1.0 + 1e-5, "{min_aspect}");
     }
 }

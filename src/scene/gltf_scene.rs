@@ -3,9 +3,10 @@
 //! What is read and how it maps onto [`Scene`]:
 //! - **Meshes**: every triangle primitive of every node of the default scene (or the first
 //!   scene), with node transforms composed down the hierarchy; positions, normals (inverse
-//!   transpose; computed smooth if absent), the `TEXCOORD_n` set its material's textures
-//!   read (glTF's v runs down the image, the same as Mitsuba's bitmap convention, so no
-//!   flip). Point/line primitives are skipped with a warning.
+//!   transpose; computed smooth if absent), `TANGENT` (for normal maps; ∂p/∂u if absent),
+//!   the `TEXCOORD_n` set its material's textures read (glTF's v runs down the image, the
+//!   same as Mitsuba's bitmap convention, so no flip), `COLOR_0`. Point/line primitives are
+//!   skipped with a warning.
 //! - **Materials**: every material becomes a [`GltfPbr`](crate::render::bsdf::gltf_pbr::GltfPbr),
 //!   the glTF 2.0 metallic-roughness BRDF with its extensions (ior, specular, transmission,
 //!   volume, iridescence, emissive strength, texture transform), built by
@@ -25,7 +26,7 @@ use super::{
 use crate::optics::{Complex64, Ior};
 use crate::render::bsdf::Bsdf;
 use anyhow::{bail, Context, Result};
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 use gltf::image::Format;
 use std::collections::HashMap;
 use std::path::Path;
@@ -254,6 +255,11 @@ impl Loader<'_> {
             .read_colors(0)
             .map(|c| c.into_rgb_f32().map(Vec3::from).collect())
             .unwrap_or_default();
+        let tangents = tangents(
+            reader.read_tangents().map(|t| t.map(Vec4::from).collect()),
+            positions.len(),
+            &what,
+        );
         if uv_set > 0 && uvs.is_empty() {
             eprintln!("warning: {what}: its material reads TEXCOORD_{uv_set}, which it lacks");
         }
@@ -277,6 +283,7 @@ impl Loader<'_> {
             } else {
                 Vec::new()
             },
+            tangents,
             positions,
             indices: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         };
@@ -295,6 +302,30 @@ impl Loader<'_> {
             emission,
             name: mesh.name().map(str::to_string),
         }))
+    }
+}
+
+/// The primitive's `TANGENT` attribute (VEC4 float, one per vertex: `gltf_check` refuses
+/// other types and counts), or none — with a warning naming the primitive when a tangent is
+/// not finite, its xyz is zero or w is not ±1 (the normal map then takes its tangent from
+/// ∂p/∂u, as without the attribute).
+fn tangents(read: Option<Vec<Vec4>>, n: usize, what: &str) -> Vec<Vec4> {
+    let Some(t) = read else {
+        return Vec::new();
+    };
+    let bad = t.iter().position(|t| {
+        !t.is_finite() || t.truncate().length_squared() < 1e-12 || (t.w.abs() - 1.0).abs() > 1e-3
+    });
+    match bad {
+        Some(i) => {
+            eprintln!(
+                "warning: {what}: TANGENT {i} = {:?} is not a finite non-zero vector with w = ±1; the attribute is ignored (tangents from the texture coordinates)",
+                t[i].to_array()
+            );
+            Vec::new()
+        }
+        None if t.len() != n => Vec::new(),
+        None => t,
     }
 }
 
@@ -373,7 +404,8 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
 }
 
 /// The file's camera with a film of its aspect ratio (512 high), or, without one, the
-/// `<model-viewer>` framing of every vertex on the default film.
+/// `<model-viewer>` framing of every vertex on the default film (and at any other aspect a
+/// render asks for: [`FovAxis::FitY`](super::FovAxis::FitY)).
 fn camera_and_film(
     camera: Option<(Camera, Option<f32>)>,
     shapes: &[Shape],
@@ -402,8 +434,7 @@ fn camera_and_film(
         })
         .flatten()
         .collect();
-    let aspect = film.width as f32 / film.height as f32;
-    let camera = gltf_lights::model_viewer_camera(&vertices, aspect)
+    let camera = gltf_lights::model_viewer_camera(&vertices)
         .with_context(|| format!("{file}: the meshes have no finite vertices"))?;
     Ok((camera, film))
 }

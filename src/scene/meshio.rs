@@ -33,6 +33,7 @@ pub fn load_obj(path: &Path) -> Result<TriangleMesh> {
         let n = m.positions.len() / 3;
         let part = TriangleMesh {
             colors: Vec::new(),
+            tangents: Vec::new(),
             positions: m
                 .positions
                 .chunks_exact(3)

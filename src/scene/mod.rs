@@ -8,7 +8,7 @@
 
 use crate::image_io::RgbImage;
 use crate::render::bsdf::Bsdf;
-use glam::{Mat3, Mat4, Vec2, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -99,13 +99,19 @@ pub enum Projection {
     Orthographic,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum FovAxis {
     X,
     Y,
     Diagonal,
     Smaller,
     Larger,
+    /// `fov` along y on films at least `min_aspect` wide; a narrower film keeps the width of
+    /// a `min_aspect` one, tan(fov_x/2) = min_aspect·tan(fov/2): `<model-viewer>`'s framing at
+    /// any aspect (glTF files without a camera; `min_aspect` is the model's ideal aspect).
+    FitY {
+        min_aspect: f32,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -195,6 +201,10 @@ pub struct TriangleMesh {
     /// Linear RGB vertex colours (glTF `COLOR_0`, PLY `red green blue`): they reach the
     /// shading point interpolated ([`crate::render::geometry::SurfaceInteraction::color`]).
     pub colors: Vec<Vec3>,
+    /// Vertex tangents (glTF `TANGENT`: xyz the tangent, w = ±1 the bitangent's sign): they
+    /// reach the shading point interpolated
+    /// ([`crate::render::geometry::SurfaceInteraction::tangent`]).
+    pub tangents: Vec<Vec4>,
 }
 
 /// Sizes and a hash of every bit of the arrays, not the arrays: a render's provenance hashes
@@ -231,8 +241,13 @@ impl std::fmt::Debug for TriangleMesh {
                     .flat_map(|c| c.to_array().map(f32::to_bits)),
             ),
         ];
-        f.debug_struct("TriangleMesh")
-            .field("vertices", &self.positions.len())
+        let mut d = f.debug_struct("TriangleMesh");
+        // Tangents only where there are any (the form of other meshes is unchanged).
+        if !self.tangents.is_empty() {
+            let t = words(&mut (self.tangents.iter()).flat_map(|t| t.to_array().map(f32::to_bits)));
+            d.field("tangents", &format!("{} {t:016x}", self.tangents.len()));
+        }
+        d.field("vertices", &self.positions.len())
             .field("normals", &self.normals.len())
             .field("uvs", &self.uvs.len())
             .field("triangles", &self.indices.len())

@@ -274,6 +274,7 @@ fn read_legacy<R: Read>(r: &mut Reader<R>, version: u16) -> Result<SerializedMes
     Ok(SerializedMesh {
         mesh: TriangleMesh {
             colors,
+            tangents: Vec::new(),
             positions,
             normals,
             uvs,
@@ -318,6 +319,7 @@ fn read_v5<R: Read>(r: &mut Reader<R>) -> Result<SerializedMesh> {
     }
     let mesh = TriangleMesh {
         colors: Vec::new(),
+        tangents: Vec::new(),
         positions: records
             .chunks_exact(8)
             .map(|c| Vec3::from_slice(c))

@@ -29,7 +29,8 @@ impl TriangleMesh {
     }
 
     /// Applies a point transform; normals go through the inverse transpose and are
-    /// renormalised.
+    /// renormalised, tangents through the matrix itself, their bitangent sign flipped by a
+    /// mirroring transform (which turns n × t against the transformed bitangent).
     pub fn transform(&mut self, m: &Mat4) {
         for p in &mut self.positions {
             *p = m.transform_point3(*p);
@@ -37,6 +38,11 @@ impl TriangleMesh {
         let nm = m.inverse().transpose();
         for n in &mut self.normals {
             *n = nm.transform_vector3(*n).try_normalize().unwrap_or(*n);
+        }
+        let sign = if m.determinant() < 0.0 { -1.0 } else { 1.0 };
+        for t in &mut self.tangents {
+            let v = m.transform_vector3(t.truncate());
+            *t = v.try_normalize().unwrap_or(v).extend(t.w * sign);
         }
     }
 
@@ -48,6 +54,10 @@ impl TriangleMesh {
         }
         for n in &mut self.normals {
             *n = -*n;
+        }
+        // The bitangent w·(n × t) keeps its direction.
+        for t in &mut self.tangents {
+            t.w = -t.w;
         }
     }
 
@@ -78,6 +88,11 @@ impl TriangleMesh {
         if keep_c {
             self.colors.extend_from_slice(&other.colors);
         }
+        if had && self.tangents.is_empty() != other.tangents.is_empty() {
+            self.tangents.clear();
+        } else {
+            self.tangents.extend_from_slice(&other.tangents);
+        }
         self.indices
             .extend(other.indices.iter().map(|t| t.map(|i| i + base)));
         if self.normals.len() != self.positions.len() {
@@ -88,6 +103,9 @@ impl TriangleMesh {
         }
         if self.colors.len() != self.positions.len() {
             self.colors.clear();
+        }
+        if self.tangents.len() != self.positions.len() {
+            self.tangents.clear();
         }
     }
 
@@ -130,6 +148,9 @@ impl TriangleMesh {
                 "{what}: {} vertex colours for {n} vertices",
                 self.colors.len()
             );
+        }
+        if !self.tangents.is_empty() && self.tangents.len() != n {
+            bail!("{what}: {} tangents for {n} vertices", self.tangents.len());
         }
         if let Some((k, t)) = self
             .indices
@@ -200,6 +221,7 @@ pub fn rectangle() -> TriangleMesh {
     let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
     TriangleMesh {
         colors: Vec::new(),
+        tangents: Vec::new(),
         positions: corners.iter().map(|&(x, y)| Vec3::new(x, y, 0.0)).collect(),
         normals: vec![Vec3::Z; 4],
         uvs: corners
@@ -232,6 +254,7 @@ pub fn cube() -> TriangleMesh {
     const UV: [[f32; 2]; 4] = [[0., 1.], [1., 1.], [1., 0.], [0., 0.]];
     TriangleMesh {
         colors: Vec::new(),
+        tangents: Vec::new(),
         positions: P.iter().map(|&p| Vec3::from(p)).collect(),
         normals: (0..24).map(|i| Vec3::from(N[i / 4])).collect(),
         uvs: (0..24).map(|i| Vec2::from(UV[i % 4])).collect(),

@@ -121,6 +121,7 @@ mod tests {
             dpdv,
             shape: 0,
             color: Vec3::ONE,
+            tangent: glam::Vec4::ZERO,
         }
     }
 

@@ -129,6 +129,9 @@ pub struct GltfPbr {
     /// The edge tint of metals (`specularColorFactor` × `specularFactor`, white without
     /// `KHR_materials_specular`), upsampled the same way.
     edge_poly: RgbSigmoidPolynomial,
+    /// Rough refracting glass: its interface's single-scattering albedos, for the energy
+    /// compensation of its lobes ([`layers::Point::glass_compensation`]).
+    glass: Option<Arc<layers::GlassAlbedo>>,
 }
 
 /// Lobe choice weights at wi: null (alpha), specular reflection, diffuse, transmission.
@@ -198,9 +201,13 @@ impl GltfPbr {
         } else {
             [1.0; 3]
         };
+        let transmits = material.transmission > 0.0 || material.transmission_texture.is_some();
+        let glass = (transmits && material.volume.is_some() && material.roughness > 0.0)
+            .then(|| Arc::new(layers::GlassAlbedo::new(material.ior)));
         Ok(GltfPbr {
             base_poly: srgb_reflectance([r, g, b]),
             edge_poly: srgb_reflectance(edge),
+            glass,
             material,
         })
     }
@@ -265,7 +272,7 @@ impl GltfPbr {
             }
             if let Some(ggx) = p.ggx {
                 if let Some((_, w)) = ggx.reflection(wi, wo) {
-                    v += p.mix_metal(f_d, f_m) * p.energy_compensation(wi.z) * w;
+                    v += p.mix_metal(f_d, f_m) * p.energy_compensation(self, wi.z) * w;
                 }
             }
             v * p.coverage
@@ -278,7 +285,8 @@ impl GltfPbr {
                 Some(_) => match layers::refraction(ggx, wi, wo, p.eta) {
                     Some((m, w, _)) => {
                         let (f_d, _) = p.fresnel(self, ctx, wi.dot(m).clamp(0.0, 1.0));
-                        (Spec::ONE - f_d) * p.base * (w * t)
+                        let k = p.glass_compensation(self, wi.z).unwrap_or(1.0);
+                        (Spec::ONE - f_d) * p.base * (w * t * k)
                     }
                     None => Spec::ZERO,
                 },

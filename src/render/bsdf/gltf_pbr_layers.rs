@@ -169,20 +169,93 @@ pub(super) fn ggx_albedo(alpha: f32, mu: f32) -> f32 {
         }
         t
     });
+    bilinear(t, alpha, mu, |a, b, t| a + (b - a) * t)
+}
+
+/// Bilinear lookup in a table of `ALBEDO_N` × `ALBEDO_N` over (α, μ) ∈ [0, 1]².
+#[inline]
+fn bilinear<T: Copy>(t: &[T], alpha: f32, mu: f32, lerp: impl Fn(T, T, f32) -> T) -> T {
     let fa = alpha.clamp(0.0, 1.0) * (ALBEDO_N - 1) as f32;
     let fm = mu.clamp(0.0, 1.0) * (ALBEDO_N - 1) as f32;
     let (ia, im) = ((fa as usize).min(ALBEDO_N - 2), (fm as usize).min(ALBEDO_N - 2));
     let (da, dm) = (fa - ia as f32, fm - im as f32);
     let at = |a: usize, m: usize| t[a * ALBEDO_N + m];
-    let lo = at(ia, im) * (1.0 - dm) + at(ia, im + 1) * dm;
-    let hi = at(ia + 1, im) * (1.0 - dm) + at(ia + 1, im + 1) * dm;
-    lo * (1.0 - da) + hi * da
+    let lo = lerp(at(ia, im), at(ia, im + 1), dm);
+    let hi = lerp(at(ia + 1, im), at(ia + 1, im + 1), dm);
+    lerp(lo, hi, da)
 }
 
-/// The index the iridescence extension puts under a film on a metal: the real index whose
-/// normal-incidence reflectance is the base colour F0(λ), n = (1 + √F0)/(1 − √F0), F0 kept
-/// below 0.9999 (KHR_materials_iridescence, "Thin-film Fresnel": `Fresnel0ToIor(baseF0)`,
-/// the phase shift of a dielectric). On the metal's complex index (Gulbrandsen) the film's
+/// The single-scattering directional albedo of a rough lossless dielectric interface
+/// (GGX, exact Fresnel, no film), split into reflection E_R(α, μ) and refraction E_T(α, μ)
+/// in energy (the radiance factor 1/η² undone), from outside (relative index η = ior) and
+/// from inside (1/η); tabulated per material over the same (α, μ) grid as [`ggx_albedo`]
+/// by a 16 × 16 midpoint rule over the visible normals of wi: a visible normal m reflects
+/// with weight F(wi·m)·G1(wo_r) and refracts with (1 − F)·G1(wo_t) (Heitz 2018; Walter et
+/// al. 2007). What is missing from E_R + E_T is the energy of the light that scatters
+/// more than once between the microfacets.
+#[derive(Debug)]
+pub(super) struct GlassAlbedo {
+    /// [outside, inside], each ALBEDO_N² of (E_R, E_T).
+    sides: [Vec<[f32; 2]>; 2],
+}
+
+impl GlassAlbedo {
+    pub fn new(ior: f32) -> Self {
+        GlassAlbedo {
+            sides: [ior, 1.0 / ior].map(Self::table),
+        }
+    }
+
+    fn table(eta: f32) -> Vec<[f32; 2]> {
+        let q = 16;
+        let mut t = Vec::with_capacity(ALBEDO_N * ALBEDO_N);
+        for ia in 0..ALBEDO_N {
+            let a = (ia as f32 / (ALBEDO_N - 1) as f32).max(1e-3);
+            let ggx = Ggx::new(a, a);
+            for im in 0..ALBEDO_N {
+                let mu = (im as f32 / (ALBEDO_N - 1) as f32).max(1e-3);
+                let wi = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                let (mut er, mut et) = (0.0f64, 0.0f64);
+                for i in 0..q * q {
+                    let u = glam::Vec2::new(
+                        ((i % q) as f32 + 0.5) / q as f32,
+                        ((i / q) as f32 + 0.5) / q as f32,
+                    );
+                    let m = ggx.sample_visible(wi, u);
+                    let c = wi.dot(m);
+                    let f = fresnel_dielectric(c, eta).0;
+                    let wr = 2.0 * c * m - wi;
+                    if wr.z > 0.0 {
+                        er += (f * ggx.g1(wr, m)) as f64;
+                    }
+                    if let Some(wt) = super::refract(wi, m, eta) {
+                        if wt.z < 0.0 {
+                            et += ((1.0 - f) * ggx.g1(wt, m)) as f64;
+                        }
+                    }
+                }
+                let n = (q * q) as f64;
+                t.push([(er / n) as f32, (et / n) as f32]);
+            }
+        }
+        t
+    }
+
+    /// (E_R, E_T) from inside (`inside`) or outside at roughness α and cos θ = μ.
+    pub fn at(&self, inside: bool, alpha: f32, mu: f32) -> [f32; 2] {
+        let side = &self.sides[usize::from(inside)];
+        bilinear(side, alpha, mu, |a, b, t| [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t])
+    }
+}
+
+/// The index under a film on a metal without `KHR_materials_specular`: Gulbrandsen's
+/// complex index at edge tint g = 0, which is the real index whose normal-incidence
+/// reflectance is the base colour F0(λ), n = (1 + √F0)/(1 − √F0), k = 0 — the index the
+/// iridescence extension itself puts under the film (KHR_materials_iridescence, "Thin-film
+/// Fresnel": `Fresnel0ToIor(baseF0)`) and every viewer draws. Written in closed form (F0 kept
+/// below 0.9999) because [`gulbrandsen_index`] at g = 0 leaves k a rounding error ≠ 0. With
+/// the specular extension the film's base is the bare metal's own index, its colour the
+/// edge tint ([`Point::at`]). On the white-tint index of a bare glTF metal the film's
 /// colours are far paler (F0 0.8, 600 nm of index 1.3: linear sRGB 0.85, 0.82, 0.80 against
 /// 0.67, 0.79, 0.71 here) than the viewers' and the specification's.
 #[inline]
@@ -227,6 +300,22 @@ fn channel(tex: &Option<Arc<BitmapTexture>>, ctx: &ShadingCtx, c: usize) -> f32 
     tex.as_ref().map_or(1.0, |t| t.eval(ctx.uv)[c])
 }
 
+/// A metal's edge tint g(λ) at the shading point: white without `KHR_materials_specular`;
+/// with it `specularColorFactor` × `specularColorTexture` × `specularFactor` ×
+/// `specularTexture` A (`specular`, the factor × A), each channel at most 1.
+#[inline]
+fn edge_tint(pbr: &GltfPbr, ctx: &ShadingCtx, specular: f32) -> Spec {
+    let m = &pbr.material;
+    let tint = |s: f32| m.specular_color.map(|c| (c * s).min(1.0));
+    match &m.specular_texture {
+        None => rgb_spectrum(tint(m.specular), &m.specular_color_texture, &pbr.edge_poly, ctx),
+        Some(_) => {
+            let f = tint(specular);
+            rgb_spectrum(f, &m.specular_color_texture, &srgb_reflectance(f), ctx)
+        }
+    }
+}
+
 /// The material's values at one shading point, seen from the side the light arrives on.
 pub(super) struct Point {
     pub base: Spec,
@@ -247,6 +336,10 @@ pub(super) struct Point {
     pub film: Option<(f32, f32, f32)>,
     /// The metal's complex index per wavelength (when metallic > 0).
     pub metal: [Complex32; 4],
+    /// The index under the film on the metal (when metallic > 0 and there is a film):
+    /// Gulbrandsen's with edge tint g = the `KHR_materials_specular` colour, g = 0 without
+    /// that extension ([`metal_film_base`]).
+    pub metal_film: [Complex32; 4],
     /// Beer–Lambert transmittance of the segment that arrived from inside a volume.
     pub absorption: Spec,
     /// GGX roughness α (0 for smooth surfaces), for the energy compensation.
@@ -304,15 +397,15 @@ impl Point {
             (f > 0.0).then_some((f, d, i.ior))
         });
         let metal = if metallic > 0.0 {
-            let edge = rgb_spectrum(
-                m.specular_color.map(|c| (c * m.specular).min(1.0)),
-                &m.specular_color_texture,
-                &pbr.edge_poly,
-                ctx,
-            );
+            let edge = edge_tint(pbr, ctx, specular);
             std::array::from_fn(|i| gulbrandsen_index(base[i], edge[i]))
         } else {
             [Complex32::new(1.0, 0.0); 4]
+        };
+        let metal_film = match (metallic > 0.0 && film.is_some(), m.has_specular_extension) {
+            (true, true) => metal,
+            (true, false) => metal_film_base(base),
+            (false, _) => [Complex32::new(1.0, 0.0); 4],
         };
         let absorption = match &m.volume {
             Some(v) if inside && v.attenuation_distance.is_finite() => {
@@ -336,6 +429,7 @@ impl Point {
             beyond,
             film,
             metal,
+            metal_film,
             absorption,
             alpha: if m.roughness > 0.0 { alpha } else { 0.0 },
         }
@@ -347,16 +441,42 @@ impl Point {
     /// for F = 1 ([`ggx_albedo`]) at the incident angle and F0 the layer's normal-incidence
     /// reflectance (the dielectric's exact F(1) × specular, the metal's base colour, mixed
     /// by metallic; the film is left out of F0). With F ≡ 1 the lobe's albedo is then 1 at
-    /// every roughness (white furnace); smooth lobes are unchanged.
+    /// every roughness (white furnace); smooth lobes are unchanged. The transmitting share
+    /// of a rough refracting dielectric takes the glass factor instead
+    /// ([`Self::glass_compensation`]).
     #[inline]
-    pub fn energy_compensation(&self, mu: f32) -> Spec {
+    pub fn energy_compensation(&self, pbr: &GltfPbr, mu: f32) -> Spec {
         if self.alpha <= 0.0 {
             return Spec::ONE;
         }
         let e = ggx_albedo(self.alpha, mu).max(1e-3);
         let f0_d = fresnel_dielectric(1.0, self.eta).0 * self.specular;
         let f0 = Spec::splat(f0_d) * (1.0 - self.metallic) + self.base * self.metallic;
-        Spec::ONE + f0 * ((1.0 - e) / e)
+        let c = Spec::ONE + f0 * ((1.0 - e) / e);
+        match self.glass_compensation(pbr, mu) {
+            // The dielectric's transmitting share: its factor 1 + F0 (1 − E)/E replaced.
+            Some(k) => {
+                let c_d = 1.0 + f0_d * (1.0 - e) / e;
+                c + Spec::splat((1.0 - self.metallic) * self.transmission * (k - c_d))
+            }
+            None => c,
+        }
+    }
+
+    /// Energy compensation of rough refracting glass (Turquin 2019, §4 for dielectrics):
+    /// its reflection and refraction lobes both scaled by 1/(E_R(μ) + E_T(μ)), the
+    /// interface's single-scattering albedo ([`GlassAlbedo`]), so that lossless clear glass
+    /// keeps all the energy at every angle and roughness, total internal reflection
+    /// included (white furnace). Kept in [1, 4]. None for smooth glass, thin-walled
+    /// transmission and materials without transmission.
+    #[inline]
+    pub fn glass_compensation(&self, pbr: &GltfPbr, mu: f32) -> Option<f32> {
+        let glass = pbr.glass.as_deref()?;
+        if self.alpha <= 0.0 || self.transmission <= 0.0 {
+            return None;
+        }
+        let [er, et] = glass.at(self.ambient > 1.0, self.alpha, mu);
+        Some((1.0 / (er + et).max(0.25)).clamp(1.0, 4.0))
     }
 
     /// The Airy reflectance of the film on `substrate` at cos θ (exact, s and p averaged).
@@ -399,7 +519,7 @@ impl Point {
                 f_d = f_d * (1.0 - factor) + r * factor;
             }
             if self.metallic > 0.0 {
-                let r = self.film_r(ctx, d, n, metal_film_base(self.base), c);
+                let r = self.film_r(ctx, d, n, self.metal_film, c);
                 f_m = f_m * (1.0 - factor) + r * factor;
             }
         }
@@ -444,16 +564,21 @@ pub(super) fn refraction(ggx: Ggx, wi: Vec3, wo: Vec3, eta: f32) -> Option<(Vec3
 }
 
 /// The shading frame perturbed by a tangent-space normal map (glTF: RGB = (x, y, z)·½ + ½,
-/// x and y scaled by `scale`); tangent from ∂p/∂u, bitangent n × t. The unperturbed frame
-/// where the tangent or the result degenerates.
+/// x and y scaled by `scale`). The tangent is the mesh's `TANGENT` where it has one
+/// (interpolated, orthogonalised against the shading normal, bitangent w·(n × t), glTF 2.0
+/// §3.7.2.1), else ∂p/∂u with bitangent n × t (the Sample Viewer without the attribute).
+/// The unperturbed frame where the tangent or the result degenerates.
 pub(super) fn normal_mapped(si: &SurfaceInteraction, tex: &BitmapTexture, scale: f32) -> Frame {
     let n = si.shading.n;
-    let t = si.dpdu - n * n.dot(si.dpdu);
-    if !(t.length_squared() > 1e-20 && t.is_finite()) {
+    let tangential = |v: Vec3| {
+        let t = v - n * n.dot(v);
+        (t.length_squared() > 1e-20 && t.is_finite()).then(|| t.normalize())
+    };
+    let vertex = tangential(si.tangent.truncate()).map(|t| (t, si.tangent.w.signum()));
+    let Some((t, sign)) = vertex.or_else(|| tangential(si.dpdu).map(|t| (t, 1.0))) else {
         return si.shading;
-    }
-    let t = t.normalize();
-    let b = n.cross(t);
+    };
+    let b = n.cross(t) * sign;
     let v = tex.eval(si.uv);
     let ts = Vec3::new(
         (2.0 * v[0] - 1.0) * scale,

@@ -106,6 +106,7 @@ mod tests {
             dpdv: Vec3::ZERO,
             shape: 0,
             color: Vec3::ONE,
+            tangent: glam::Vec4::ZERO,
         }
     }
 

@@ -303,6 +303,9 @@ pub fn run(args: Args) -> Result<()> {
         }
         refs.retain(|r| args.only.contains(&r.name));
     }
+    if args.mitsuba {
+        check_seed_apart(&refs, args.seed)?;
+    }
     let tmp = tempfile_dir()?;
     let mut table = String::new();
     let mut series = Vec::new();
@@ -405,6 +408,21 @@ pub fn run(args: Args) -> Result<()> {
     }
     write_plot(&series, &args.plot)?;
     let _ = std::fs::remove_dir_all(&tmp);
+    Ok(())
+}
+
+/// Mitsuba's bench renders must not share samples with the reference they are scored
+/// against: `render_references.py` renders seed S as passes with seeds S·1000003 + i
+/// (i < 16), so a bench run with the reference's own seed would repeat the first
+/// reference pass's samples and understate Mitsuba's error.
+fn check_seed_apart(refs: &[thinfilm::compare::references::Reference], seed: u64) -> Result<()> {
+    if let Some(r) = refs.iter().find(|r| r.seed == Some(seed)) {
+        bail!(
+            "--seed {seed} is the seed reference '{}' was rendered with (tests/references/manifest.json): \
+             Mitsuba's bench renders would share samples with it; pick another --seed",
+            r.name
+        );
+    }
     Ok(())
 }
 

@@ -221,9 +221,18 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     } else {
         args.output.clone()
     };
-    provenance::write_exr(&path, &out.image, out.filter_weights.as_deref(), &info)?;
+    // The PNG is written beside the EXR (two independent files from the same pixels).
     let png = path.with_extension("png");
-    thinfilm::image_io::write_png_tonemapped(&png, &out.image, args.exposure)?;
+    let (exr_written, png_written) = std::thread::scope(|s| {
+        let png_written =
+            s.spawn(|| thinfilm::image_io::write_png_tonemapped(&png, &out.image, args.exposure));
+        let exr_written =
+            provenance::write_exr(&path, &out.image, out.filter_weights.as_deref(), &info);
+        let png_written = (png_written.join()).unwrap_or_else(|p| std::panic::resume_unwind(p));
+        (exr_written, png_written)
+    });
+    exr_written?;
+    png_written?;
     print_stats(report, &out);
     report.text(format_args!(
         "wrote {} and {}",

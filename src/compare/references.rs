@@ -18,6 +18,9 @@ pub struct Reference {
     /// Mitsuba variant the reference was rendered with, when recorded (the polarised scenes
     /// need `*_polarized`); None = the default `llvm_ad_spectral`.
     pub variant: Option<String>,
+    /// Seed Mitsuba rendered the reference with (its passes use seeds derived from it), when
+    /// recorded.
+    pub seed: Option<u64>,
 }
 
 /// Reads the manifest at `root/tests/references/manifest.json` (paths inside are relative to
@@ -53,6 +56,7 @@ pub fn load_manifest(root: &Path) -> Result<Vec<Reference>> {
             height: num("height")? as usize,
             spp: num("spp")?,
             variant: r["variant"].as_str().map(str::to_string),
+            seed: r["seed"].as_u64(),
         });
     }
     out.sort_by(|a, b| a.name.cmp(&b.name));

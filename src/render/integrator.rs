@@ -832,7 +832,10 @@ fn resolve_env_samples<C: Carrier>(
         _ => unreachable!("only environment samples are deferred"),
     };
     drawn.clear();
-    drawn.extend(samples.iter().map(|s| env(s).sample_direction(s.u)));
+    // perf: every sample's first cache miss is under way before any sample waits on its own
+    // (the prefetching draw then starts the texel loads of the radiance stage).
+    samples.iter().for_each(|s| env(s).prefetch_sample(s.u));
+    drawn.extend((samples.iter()).map(|s| env(s).sample_direction_prefetch(s.u)));
     le.clear();
     le.extend((samples.iter().zip(drawn.iter())).map(|(s, d)| match d {
         Some((wi, _)) => env(s).eval(*wi, &s.wl),

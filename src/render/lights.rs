@@ -97,6 +97,13 @@ impl Distribution1D {
         j
     }
 
+    /// Starts loading the guide cell [`Self::search`] reads first for `u`.
+    #[inline]
+    fn prefetch_guide(&self, u: f32) {
+        let n = self.len();
+        prefetch(&self.cells[((u * n as f32) as usize).min(n - 1)]);
+    }
+
     pub fn len(&self) -> usize {
         self.cells.len() - 1
     }
@@ -165,6 +172,14 @@ impl Distribution2D {
         let (v, pdf_v, row) = self.marginal.sample(u.y);
         let (x, pdf_u, _) = self.conditional[row].sample(u.x);
         (Vec2::new(x, v), pdf_u * pdf_v)
+    }
+
+    /// Starts loading the cache line [`Self::sample`] of `u` misses first: the guide cell
+    /// of the row it picks (the marginal, a few kB, stays in cache).
+    #[inline]
+    pub fn prefetch_sample(&self, u: Vec2) {
+        let row = self.marginal.sample(u.y).2;
+        self.conditional[row].prefetch_guide(u.x);
     }
 
     pub fn pdf(&self, p: Vec2) -> f32 {
@@ -279,6 +294,24 @@ fn atan2_fast2(y0: f32, x0: f32, y1: f32, x1: f32) -> (f32, f32) {
 /// rows are transposed four at a time).
 pub(crate) const LANES: usize = 16;
 const _: () = assert!(LANES % 4 == 0);
+
+/// A hint to start loading the cache line of `r` (no effect on any value). The environment
+/// sample is a chain of dependent cache misses (row CDF guide entry → CDF cell → texels);
+/// [`crate::render::integrator`] finishes a round's samples stage by stage, and a prefetch
+/// of every sample's next address before the stage that reads it overlaps their misses.
+#[inline(always)]
+fn prefetch<T>(r: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch never faults and reads nothing architecturally; SSE is baseline on
+    // x86_64.
+    #[allow(unused_unsafe)]
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((r as *const T).cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = r;
+}
 
 /// [`atan2_fast`] lane by lane, branch-free: the same operations per lane, so the results
 /// are bit-identical where `special` is false; `special` marks lanes (NaN, or both
@@ -677,6 +710,32 @@ impl EnvMap {
     /// Samples a world direction; returns (dir, solid-angle pdf).
     #[inline]
     pub fn sample_direction(&self, u: Vec2) -> Option<(Vec3, f32)> {
+        self.sample_direction_uv(u).map(|(dir, pdf, _)| (dir, pdf))
+    }
+
+    /// Starts loading the first cache line [`Self::sample_direction`] of `u` will miss.
+    #[inline]
+    pub fn prefetch_sample(&self, u: Vec2) {
+        self.dist.prefetch_sample(u);
+    }
+
+    /// [`Self::sample_direction`], and starts loading the texel rows [`Self::eval`] of the
+    /// direction will read (those under the sampled (u, v); `eval` recomputes (u, v) from
+    /// the direction, the same texels but for rounding at a texel edge).
+    #[inline]
+    pub fn sample_direction_prefetch(&self, u: Vec2) -> Option<(Vec3, f32)> {
+        let (dir, pdf, uv) = self.sample_direction_uv(u)?;
+        // Corners 0 and 2: the texel rows above and below; the column neighbours (16-byte
+        // entries) are mostly in the same cache lines.
+        let [(a, _), _, (b, _), _] = self.bilinear_texels(uv.x, uv.y);
+        prefetch(&self.texel_rows[a]);
+        prefetch(&self.texel_rows[b]);
+        Some((dir, pdf))
+    }
+
+    /// [`Self::sample_direction`] with the sampled texture coordinates.
+    #[inline(always)]
+    fn sample_direction_uv(&self, u: Vec2) -> Option<(Vec3, f32, Vec2)> {
         let (uv, pdf_uv) = self.dist.sample(u);
         let theta = PI * uv.y;
         let phi = 2.0 * PI * uv.x;
@@ -688,7 +747,7 @@ impl EnvMap {
         let local = Vec3::new(st * sp, ct, -st * cp);
         let dir = (self.to_world * local).normalize();
         // Jacobian of (u, v) → direction: dω = 2π² sin θ du dv.
-        Some((dir, pdf_uv / (2.0 * PI * PI * st)))
+        Some((dir, pdf_uv / (2.0 * PI * PI * st), uv))
     }
 
     #[inline]
@@ -1398,11 +1457,19 @@ impl LightSet {
         }))
     }
 
-    pub fn build(scene: &Scene, accel: &Accel) -> anyhow::Result<Self> {
-        let mut lights = Vec::new();
-        for (i, e) in scene.emitters.iter().enumerate() {
-            lights.push(Self::emitter_light(i, e)?);
-        }
+    /// The scene's `<emitter>` lights (environment maps with their RGB → spectrum texels and
+    /// sampling tables, delta lights), in order: they need no BVH, so [`super::prepare`]
+    /// builds them on a second thread beside it.
+    pub fn emitter_lights(scene: &Scene) -> anyhow::Result<Vec<Light>> {
+        (scene.emitters.iter().enumerate())
+            .map(|(i, e)| Self::emitter_light(i, e))
+            .collect()
+    }
+
+    /// The light set: `emitters` ([`Self::emitter_lights`] of `scene`), then the area lights
+    /// of the shapes.
+    pub fn build(scene: &Scene, accel: &Accel, emitters: Vec<Light>) -> anyhow::Result<Self> {
+        let mut lights = emitters;
         let mut shape_light = vec![None; scene.shapes.len()];
         for (si, slot) in shape_light.iter_mut().enumerate() {
             if let Some(light) = Self::area_light(scene, accel, si)? {

@@ -145,7 +145,7 @@ pub fn write_exr(
     if let Some(w) = filter_weights {
         channels.push((FILTER_WEIGHT_CHANNEL, w));
     }
-    crate::image_io::write_exr_channels_with_attributes(
+    crate::image_io::write_exr_channels_rle(
         path,
         image.width,
         image.height,

@@ -132,7 +132,12 @@ impl BsdfPlugin for PolarizedPlastic {
 
 impl BsdfModel for PolarizedPlastic {
     fn flags(&self) -> BsdfFlags {
-        BsdfFlags::GLOSSY_REFLECTION | BsdfFlags::DIFFUSE_REFLECTION
+        (BsdfFlags::GLOSSY_REFLECTION | BsdfFlags::DIFFUSE_REFLECTION).with(
+            BsdfFlags::VERTEX_COLOR,
+            self.diffuse_reflectance.reads_mesh_attribute()
+                || self.specular.reads_mesh_attribute()
+                || self.roughness.reads_mesh_attribute(),
+        )
     }
 
     fn describe(&self) -> String {

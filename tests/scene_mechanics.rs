@@ -481,8 +481,8 @@ fn accepted_and_refused_parameters() {
 #[test]
 fn rough_models_and_what_is_still_refused() {
     // A model the renderer does not have is refused where it is read, naming the plugin.
-    let e = err(r#"<shape type="sphere"><bsdf type="pplastic"/></shape>"#);
-    assert!(e.contains("unsupported bsdf plugin \"pplastic\""), "{e}");
+    let e = err(r#"<shape type="sphere"><bsdf type="principled"/></shape>"#);
+    assert!(e.contains("unsupported bsdf plugin \"principled\""), "{e}");
     // Mitsuba's rough BSDFs default to Beckmann, and Beckmann is what they get.
     use thinfilm::render::bsdf::microfacet::Distribution;
     for (dist, kind) in [

@@ -250,6 +250,11 @@ impl Texture {
         }
     }
 
+    /// Whether this is a `mesh_attribute` (read from the shading point's vertex colour).
+    pub fn reads_mesh_attribute(&self) -> bool {
+        matches!(self, Texture::VertexColor)
+    }
+
     /// Whether the value varies over the surface.
     pub fn is_varying(&self) -> bool {
         !matches!(self, Texture::Value(_))

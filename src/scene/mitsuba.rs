@@ -19,6 +19,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod params;
+mod ply_attributes;
 
 pub use params::{parse_layers, PluginParams, RealSpectrum};
 
@@ -121,6 +122,7 @@ pub fn load_str(
         built: HashSet::new(),
         ids: HashMap::new(),
         bsdfs: Vec::new(),
+        mesh_attributes: Default::default(),
         shapes: Vec::new(),
         emitters: Vec::new(),
         sensor: None,
@@ -270,6 +272,9 @@ struct Ctx<'a, 'i> {
     direct_strategies: Option<(Node<'a, 'i>, u32, bool)>,
     /// Objects being parsed around the current one (nesting depth).
     depth: usize,
+    /// Attribute names of the scene's `mesh_attribute` textures (a mesh supplies one, as the
+    /// interpolated colour of its shading points).
+    mesh_attributes: std::collections::BTreeSet<String>,
 }
 
 /// A node's identity across documents: (document address, node id).
@@ -1518,17 +1523,21 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let name = p
                     .string(self, "name")?
                     .ok_or_else(|| self.err(p.node, "mesh_attribute: missing parameter 'name'"))?;
-                // Mitsuba's PLY loader groups the vertex properties red/green/blue (or
-                // r/g/b) into the attribute `vertex_color`; the shape's check refuses a
-                // mesh without them.
-                if name != "vertex_color" {
+                if !(name.starts_with("vertex_") || name.starts_with("face_")) {
                     return Err(self.err(
                         p.node,
-                        format!(
-                            "mesh_attribute: attribute \"{name}\" is not supported (only \"vertex_color\", the PLY vertex properties red, green, blue)"
-                        ),
+                        format!("mesh_attribute: invalid name \"{name}\": it must start with \"vertex_\" or \"face_\" (as in Mitsuba)"),
                     ));
                 }
+                // Mitsuba multiplies the evaluated (upsampled) value by `scale`.
+                let scale = p.float(self, "scale", 1.0)?;
+                if scale != 1.0 {
+                    return Err(self.err(
+                        p.node,
+                        format!("mesh_attribute: scale = {scale} is not supported (only 1)"),
+                    ));
+                }
+                self.mesh_attributes.insert(name);
                 Ok(TextureDesc::VertexColor)
             }
             _ => Err(self.unknown_plugin(p, &["bitmap", "checkerboard", "mesh_attribute"])),
@@ -1849,10 +1858,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
         }
         p.list = rest;
+        let attribute = self.mesh_attribute_of(p, bsdf.as_ref())?;
         let geometry = match p.plugin.as_str() {
             "sphere" => self.sphere(p, &to_world, flip_normals)?,
             "obj" | "ply" | "serialized" | "rectangle" | "cube" | "disk" | "cylinder" => {
-                Geometry::Mesh(self.mesh(p, &to_world, flip_normals)?)
+                Geometry::Mesh(self.mesh(p, &to_world, flip_normals, attribute.as_deref())?)
             }
             _ => {
                 return Err(self.unknown_plugin(
@@ -1891,18 +1901,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
             }
         };
         let name = self.attr(p.node, "id")?;
-        let coloured = matches!(&geometry, Geometry::Mesh(m) if !m.colors.is_empty());
-        if !coloured
-            && self.bsdfs[bsdf]
-                .flags()
-                .contains(bsdf::BsdfFlags::VERTEX_COLOR)
-        {
+        if let (Some(a), Geometry::Sphere { .. }) = (&attribute, &geometry) {
             return Err(self.err(
                 p.node,
                 format!(
-                    "shape \"{}\" ({}): its BSDF reads the mesh attribute \"vertex_color\", which the shape lacks (a PLY with vertex properties red, green, blue)",
+                    "shape \"{}\" (sphere): its BSDF reads the mesh attribute \"{a}\", which an analytic sphere lacks",
                     name.as_deref().unwrap_or("unnamed"),
-                    p.plugin
                 ),
             ));
         }
@@ -1928,6 +1932,79 @@ impl<'a, 'i> Ctx<'a, 'i> {
         sphere_geometry(&m, flip_normals).map_err(|e| self.err(p.node, e))
     }
 
+    /// The mesh attribute a shape's BSDF reads (its flags say whether it reads one): the
+    /// scene's one `mesh_attribute` name.
+    fn mesh_attribute_of(&self, p: &Props<'a, 'i>, bsdf: Option<&Val>) -> Result<Option<String>> {
+        let flags = match bsdf {
+            Some(Val::BsdfRef(i)) => self.bsdfs[*i].flags(),
+            Some(Val::Bsdf(b)) => b.flags(),
+            _ => return Ok(None),
+        };
+        if !flags.contains(bsdf::BsdfFlags::VERTEX_COLOR) {
+            return Ok(None);
+        }
+        match self.mesh_attributes.iter().collect::<Vec<_>>().as_slice() {
+            [one] => Ok(Some(one.to_string())),
+            names => Err(self.err(
+                p.node,
+                format!(
+                    "the scene's mesh_attribute textures read {} attributes ({}): thinfilm supports one per scene",
+                    names.len(),
+                    names.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", ")
+                ),
+            )),
+        }
+    }
+
+    /// Reads mesh attribute `name` of the mesh file `path` into `m.colors` as the colour
+    /// its shading points interpolate: an RGB "color" attribute as stored (upsampled at
+    /// shading, as Mitsuba's spectral variants upsample it), another 3-channel attribute as
+    /// its luminance, a 1-channel one as a grey. A per-face attribute is returned instead,
+    /// one colour per triangle (Mitsuba evaluates it constant over the face).
+    fn load_mesh_attribute(
+        &self,
+        p: &Props<'a, 'i>,
+        path: &Path,
+        name: &str,
+        m: &mut TriangleMesh,
+    ) -> Result<Option<Vec<Vec3>>> {
+        if p.plugin == "serialized" && name == "vertex_color" {
+            return Ok(None); // the file's vertex colours, if any
+        }
+        if p.plugin != "ply" {
+            return Err(self.err(
+                p.node,
+                format!("{} shape: mesh attribute \"{name}\": only PLY files (and serialized vertex colours) carry mesh attributes", p.plugin),
+            ));
+        }
+        let a = ply_attributes::read(path, name)
+            .map_err(|e| self.err(p.node, format!("{}: {e:#}", path.display())))?;
+        let color = a.dim == 3 && name.contains("color");
+        let colors: Vec<Vec3> = (a.values.chunks_exact(a.dim))
+            .map(|v| match v {
+                [r, g, b] if color => Vec3::new(*r, *g, *b),
+                [r, g, b] => Vec3::splat(0.2126 * r + 0.7152 * g + 0.0722 * b),
+                _ => Vec3::splat(v[0]),
+            })
+            .collect();
+        let (want, what) = if a.per_face {
+            (m.indices.len(), "triangles")
+        } else {
+            (m.positions.len(), "vertices")
+        };
+        if colors.len() != want {
+            return Err(self.err(
+                p.node,
+                format!("{}: attribute \"{name}\" has {} values for {want} {what} (face attributes need a triangle mesh)", path.display(), colors.len()),
+            ));
+        }
+        if a.per_face {
+            return Ok(Some(colors));
+        }
+        m.colors = colors;
+        Ok(None)
+    }
+
     /// A triangle-mesh shape in world space: a mesh file (`obj`, `ply`, `serialized`) or a
     /// tessellated primitive (`rectangle`, `cube`, `disk`, `cylinder`).
     fn mesh(
@@ -1935,8 +2012,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
         p: &mut Props<'a, 'i>,
         to_world: &Mat4,
         flip_normals: bool,
+        attribute: Option<&str>,
     ) -> Result<TriangleMesh> {
         let mut to_world = *to_world;
+        let mut face_colors = None;
         let mut file_face_normals = false;
         let mut what = self.loc(p.node);
         let mut mesh = match p.plugin.as_str() {
@@ -1961,6 +2040,9 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     }
                 };
                 let (mut m, flipped) = loaded.map_err(|e| self.err(p.node, format!("{e:#}")))?;
+                if let Some(a) = attribute {
+                    face_colors = self.load_mesh_attribute(p, &path, a, &mut m)?;
+                }
                 if p.plugin != "serialized" {
                     let flip_tex = p.bool(self, "flip_tex_coords", p.plugin == "obj")?;
                     if flip_tex != flipped {
@@ -2001,6 +2083,20 @@ impl<'a, 'i> Ctx<'a, 'i> {
             mesh.normals.clear();
         } else {
             mesh.ensure_normals();
+        }
+        if let Some(c) = face_colors {
+            // After the smooth normals, which need the shared vertices.
+            mesh.split_faces_with_colors(&c);
+        }
+        if attribute.is_some() && mesh.colors.is_empty() {
+            return Err(self.err(
+                p.node,
+                format!(
+                    "{} shape: its BSDF reads the mesh attribute \"{}\", which the shape lacks",
+                    p.plugin,
+                    attribute.unwrap_or_default()
+                ),
+            ));
         }
         mesh.transform(&to_world);
         if flip_normals {

@@ -163,6 +163,29 @@ impl TriangleMesh {
         Ok(())
     }
 
+    /// Gives every triangle its own three vertices coloured `colors[triangle]` (a per-face
+    /// mesh attribute, constant over each face as Mitsuba evaluates it, through the
+    /// interpolated vertex colour).
+    pub fn split_faces_with_colors(&mut self, colors: &[Vec3]) {
+        fn corners<T: Copy>(indices: &[[u32; 3]], n: usize, v: &[T]) -> Vec<T> {
+            if v.len() != n {
+                return Vec::new(); // absent (or unusable): stays absent
+            }
+            (indices.iter())
+                .flat_map(|t| t.map(|k| v[k as usize]))
+                .collect()
+        }
+        let (idx, n) = (&self.indices, self.positions.len());
+        let positions = corners(idx, n, &self.positions);
+        let normals = corners(idx, n, &self.normals);
+        let uvs = corners(idx, n, &self.uvs);
+        self.colors = (colors.iter()).flat_map(|&c| [c; 3]).collect();
+        self.indices = (0..self.indices.len() as u32)
+            .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+            .collect();
+        (self.positions, self.normals, self.uvs) = (positions, normals, uvs);
+    }
+
     /// Replaces missing or non-finite normals by angle-weighted smooth normals (what Mitsuba
     /// does for meshes without normals unless `face_normals` is set).
     pub fn ensure_normals(&mut self) {

@@ -16,7 +16,8 @@ BSDFs given as XML text (RGB `eta`/`k` of conductors, `specular_reflectance` /
 `specular_transmittance` ≠ 1), loaded by Mitsuba's `scalar_spectral` variant and evaluated at
 four fixed wavelengths, so that the test can load the very same XML into thinfilm and compare
 per wavelength — the check of Mitsuba's spectral upsampling of RGB indices (clamped to [0, 1])
-and of where the factors apply.
+and of where the factors apply. tests/references/bsdf_mueller_points.json holds the Mueller
+matrices of the polarised cases (`pplastic`) from `scalar_spectral_polarized`, for the same test.
 """
 
 import json
@@ -25,11 +26,12 @@ import os
 
 import mitsuba as mi
 
-mi.set_variant("scalar_rgb", "scalar_spectral")
+mi.set_variant("scalar_rgb", "scalar_spectral", "scalar_spectral_polarized")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "..", "..", "tests", "references", "bsdf_points.json")
 OUT_SPECTRAL = os.path.join(HERE, "..", "..", "tests", "references", "bsdf_spectral_points.json")
+OUT_MUELLER = os.path.join(HERE, "..", "..", "tests", "references", "bsdf_mueller_points.json")
 WAVELENGTHS = [420.0, 500.0, 580.0, 660.0]
 
 # Veach's MIS scene (as converted for Mitsuba 3 by users): RGB indices with components > 1,
@@ -50,7 +52,17 @@ SPECTRAL_CASES = [
     # Conductor materials from Mitsuba's own tables (thinfilm's library lacks them).
     '<bsdf type="roughconductor"><float name="alpha" value="0.2"/><string name="material" value="a-C"/></bsdf>',
     '<bsdf type="roughconductor"><float name="alpha" value="0.15"/><string name="material" value="Cr"/></bsdf>',
+] + [
+    # Polarised plastic (Baek et al. 2018): both distributions, anisotropy, a specular factor.
+    '<bsdf type="pplastic"><rgb name="diffuse_reflectance" value="0.05, 0.03, 0.1"/><float name="alpha" value="0.06"/></bsdf>',
+    ('<bsdf type="pplastic"><rgb name="diffuse_reflectance" value="0.2, 0.4, 0.6"/><float name="alpha" value="0.3"/>'
+     '<string name="distribution" value="ggx"/><float name="int_ior" value="1.6"/><float name="specular_reflectance" value="0.5"/></bsdf>'),
+    ('<bsdf type="pplastic"><float name="diffuse_reflectance" value="0.8"/><float name="alpha_u" value="0.05"/>'
+     '<float name="alpha_v" value="0.3"/><float name="eta" value="1.33"/></bsdf>'),
 ]
+
+# BSDFs whose Mueller matrices (scalar_spectral_polarized) are compared: their first cases.
+MUELLER_CASES = [xml for xml in SPECTRAL_CASES if "pplastic" in xml]
 
 
 def direction(theta_deg, phi_deg):
@@ -113,12 +125,14 @@ def pairs(case):
     return out
 
 
-def spectral_points():
-    """Per-wavelength eval and pdf of the XML cases (scalar_spectral)."""
-    mi.set_variant("scalar_spectral")
+def spectral_points(polarized=False):
+    """Per-wavelength eval and pdf of the XML cases (scalar_spectral); with `polarized`, the
+    Mueller matrices of MUELLER_CASES (scalar_spectral_polarized: rows, columns, wavelengths,
+    in Mitsuba's implicit Stokes bases, stokes_basis(-wo) in and stokes_basis(wi) out)."""
+    mi.set_variant("scalar_spectral_polarized" if polarized else "scalar_spectral")
     ctx = mi.BSDFContext()
     rows = []
-    for xml in SPECTRAL_CASES:
+    for xml in MUELLER_CASES if polarized else SPECTRAL_CASES:
         bsdf = mi.load_string(xml.replace("<bsdf ", '<bsdf version="3.0.0" ', 1))
         eta = 1.5 if "roughdielectric" in xml else None
         for theta_i, phi_i in [(20.0, 30.0), (60.0, 200.0)]:
@@ -134,18 +148,25 @@ def spectral_points():
                     si.sh_frame = mi.Frame3f([1, 0, 0], [0, 1, 0], [0, 0, 1])
                     si.wi = wi
                     si.wavelengths = WAVELENGTHS
-                    value = [float(v) for v in bsdf.eval(ctx, si, mi.Vector3f(wo))]
+                    v = bsdf.eval(ctx, si, mi.Vector3f(wo))
+                    if polarized:
+                        value = [[[float(v[i][j][k]) for k in range(4)] for j in range(4)] for i in range(4)]
+                    else:
+                        value = [float(x) for x in v]
                     pdf = float(bsdf.pdf(ctx, si, mi.Vector3f(wo)))
                     rows.append({"xml": xml, "wi": wi, "wo": wo, "eval": value, "pdf": pdf})
     doc = {
-        "about": "Mitsuba 3 scalar_spectral eval (f·cos θo at `wavelengths`) and pdf of BSDFs given as XML, at local direction pairs; made by tools/mitsuba/bsdf_point_references.py",
+        "about": ("Mitsuba 3 scalar_spectral_polarized eval (Mueller matrix [row][column][wavelength] of f·cos θo)"
+                  if polarized else "Mitsuba 3 scalar_spectral eval (f·cos θo at `wavelengths`) and pdf")
+        + " of BSDFs given as XML, at local direction pairs; made by tools/mitsuba/bsdf_point_references.py",
         "mitsuba": mi.__version__,
         "wavelengths": WAVELENGTHS,
         "points": rows,
     }
-    with open(OUT_SPECTRAL, "w") as f:
-        json.dump(doc, f, indent=1)
-    print(f"{len(rows)} points -> {OUT_SPECTRAL}")
+    out = OUT_MUELLER if polarized else OUT_SPECTRAL
+    with open(out, "w") as f:
+        json.dump(doc, f, indent=None if polarized else 1)
+    print(f"{len(rows)} points -> {out}")
 
 
 def main():
@@ -175,3 +196,4 @@ def main():
 if __name__ == "__main__":
     main()
     spectral_points()
+    spectral_points(polarized=True)

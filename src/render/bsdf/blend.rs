@@ -42,7 +42,7 @@ impl BlendBsdf {
     /// ([`super::roughness::eval_1`]).
     #[inline]
     fn weight(&self, ctx: &ShadingCtx) -> f32 {
-        super::roughness::eval_1(&self.weight, ctx.uv).clamp(0.0, 1.0)
+        super::roughness::eval_1(&self.weight, ctx).clamp(0.0, 1.0)
     }
 
     /// The nested BSDF to sample for `u1` given w, with `u1` rescaled to [0, 1):
@@ -81,7 +81,8 @@ impl BsdfPlugin for BlendBsdf {
 
 impl BsdfModel for BlendBsdf {
     fn flags(&self) -> BsdfFlags {
-        self.bsdfs[0].flags() | self.bsdfs[1].flags()
+        (self.bsdfs[0].flags() | self.bsdfs[1].flags())
+            .with(BsdfFlags::VERTEX_COLOR, self.weight.reads_mesh_attribute())
     }
 
     fn describe(&self) -> String {

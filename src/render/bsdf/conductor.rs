@@ -128,11 +128,15 @@ impl BsdfPlugin for Conductor {
 
 impl BsdfModel for Conductor {
     fn flags(&self) -> BsdfFlags {
-        if self.roughness.is_rough() {
+        let lobe = if self.roughness.is_rough() {
             BsdfFlags::GLOSSY_REFLECTION
         } else {
             BsdfFlags::DELTA_REFLECTION
-        }
+        };
+        lobe.with(
+            BsdfFlags::VERTEX_COLOR,
+            self.specular.reads_mesh_attribute() || self.roughness.reads_mesh_attribute(),
+        )
     }
 
     fn describe(&self) -> String {

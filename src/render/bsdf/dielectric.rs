@@ -102,6 +102,7 @@ impl BsdfModel for Dielectric {
     fn flags(&self) -> BsdfFlags {
         (BsdfFlags::DELTA_REFLECTION | BsdfFlags::DELTA_TRANSMISSION | BsdfFlags::TWO_SIDED)
             .with(BsdfFlags::DISPERSIVE, self.dispersive)
+            .with(BsdfFlags::VERTEX_COLOR, self.factors.reads_mesh_attribute())
     }
 
     fn describe(&self) -> String {

@@ -31,7 +31,7 @@ impl BsdfPlugin for Diffuse {
     const PLUGINS: &'static [&'static str] = &["diffuse"];
 
     fn build(p: &mut PluginParams) -> anyhow::Result<Self> {
-        Ok(Diffuse::new(&p.color_texture("reflectance", 0.5)?))
+        Ok(Diffuse::new(&p.texture("reflectance", 0.5)?))
     }
 }
 
@@ -39,7 +39,7 @@ impl BsdfModel for Diffuse {
     fn flags(&self) -> BsdfFlags {
         BsdfFlags::DIFFUSE_REFLECTION.with(
             BsdfFlags::VERTEX_COLOR,
-            matches!(self.reflectance, Texture::VertexColor),
+            self.reflectance.reads_mesh_attribute(),
         )
     }
 

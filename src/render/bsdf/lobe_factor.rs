@@ -28,6 +28,11 @@ impl LobeFactor {
         Ok(LobeFactor((!unit).then(|| Box::new(Texture::new(&t)))))
     }
 
+    /// Whether the factor is a `mesh_attribute`.
+    pub fn reads_mesh_attribute(&self) -> bool {
+        self.0.as_ref().is_some_and(|t| t.reads_mesh_attribute())
+    }
+
     /// Whether the factor is 1 everywhere.
     pub fn is_one(&self) -> bool {
         self.0.is_none()
@@ -38,7 +43,7 @@ impl LobeFactor {
     pub fn eval(&self, ctx: &ShadingCtx) -> Spec {
         match &self.0 {
             None => Spec::ONE,
-            Some(t) => t.eval(ctx.uv, ctx.wl),
+            Some(t) => t.eval_at(ctx),
         }
     }
 
@@ -102,6 +107,11 @@ impl SpecularFactors {
             reflection: LobeFactor::read(p, "specular_reflectance")?,
             transmission: LobeFactor::read(p, "specular_transmittance")?,
         })
+    }
+
+    /// Whether either factor is a `mesh_attribute`.
+    pub fn reads_mesh_attribute(&self) -> bool {
+        self.reflection.reads_mesh_attribute() || self.transmission.reads_mesh_attribute()
     }
 
     /// Whether both are 1.

@@ -20,8 +20,8 @@ impl Mask {
     /// Opacity at the shading point, in [0, 1]: Mitsuba's `eval_1`
     /// ([`super::roughness::eval_1`]: an RGB bitmap's luminance, a checkerboard's squares
     /// swapped).
-    fn opacity(&self, uv: Vec2) -> f32 {
-        super::roughness::eval_1(&self.opacity, uv).clamp(0.0, 1.0)
+    fn opacity(&self, ctx: &ShadingCtx) -> f32 {
+        super::roughness::eval_1(&self.opacity, ctx).clamp(0.0, 1.0)
     }
 }
 
@@ -45,7 +45,8 @@ impl BsdfPlugin for Mask {
 
 impl BsdfModel for Mask {
     fn flags(&self) -> BsdfFlags {
-        self.inner.flags() | BsdfFlags::NULL
+        (self.inner.flags() | BsdfFlags::NULL)
+            .with(BsdfFlags::VERTEX_COLOR, self.opacity.reads_mesh_attribute())
     }
 
     fn describe(&self) -> String {
@@ -53,11 +54,11 @@ impl BsdfModel for Mask {
     }
 
     fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
-        self.inner.eval(ctx, wi, wo) * self.opacity(ctx.uv)
+        self.inner.eval(ctx, wi, wo) * self.opacity(ctx)
     }
 
     fn pdf(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
-        self.inner.pdf(ctx, wi, wo) * self.opacity(ctx.uv)
+        self.inner.pdf(ctx, wi, wo) * self.opacity(ctx)
     }
 
     fn sample(
@@ -68,7 +69,7 @@ impl BsdfModel for Mask {
         u2: Vec2,
         lobes: Lobes,
     ) -> Option<BsdfSample> {
-        let opacity = self.opacity(ctx.uv);
+        let opacity = self.opacity(ctx);
         if !lobes.transmission() {
             // The null lobe is masked out: the nested model at its opacity-scaled value.
             let mut s = self.inner.sample(ctx, wi, u1, u2, lobes)?;

@@ -157,7 +157,7 @@ impl Plastic {
 
     /// The base seen through the coating; `t_i` is the coating's transmittance at wi.
     fn diffuse_value(&self, ctx: &ShadingCtx, t_i: f32, wo: Vec3) -> Spec {
-        let rho = self.diffuse_reflectance.eval(ctx.uv, ctx.wl);
+        let rho = self.diffuse_reflectance.eval_at(ctx);
         let base = if self.nonlinear {
             rho / (Spec::ONE - rho * self.fdr_int)
         } else {
@@ -216,7 +216,10 @@ impl BsdfModel for Plastic {
             None => BsdfFlags::DELTA_REFLECTION,
             Some(_) => BsdfFlags::GLOSSY_REFLECTION,
         };
-        specular | BsdfFlags::DIFFUSE_REFLECTION
+        (specular | BsdfFlags::DIFFUSE_REFLECTION).with(
+            BsdfFlags::VERTEX_COLOR,
+            self.diffuse_reflectance.reads_mesh_attribute() || self.specular.reads_mesh_attribute(),
+        )
     }
 
     fn describe(&self) -> String {

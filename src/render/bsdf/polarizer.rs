@@ -71,7 +71,8 @@ impl BsdfPlugin for PolarizerBsdf {
 
 impl BsdfModel for PolarizerBsdf {
     fn flags(&self) -> BsdfFlags {
-        BsdfFlags::NULL | BsdfFlags::TWO_SIDED | BsdfFlags::NEEDS_POLARIZATION
+        (BsdfFlags::NULL | BsdfFlags::TWO_SIDED | BsdfFlags::NEEDS_POLARIZATION)
+            .with(BsdfFlags::VERTEX_COLOR, self.transmittance.reads_mesh_attribute())
     }
 
     fn describe(&self) -> String {
@@ -90,7 +91,7 @@ impl BsdfModel for PolarizerBsdf {
         lobes: Lobes,
     ) -> Option<BsdfSample> {
         lobes.transmission().then(|| {
-            let t = self.transmittance.eval(ctx.uv, ctx.wl);
+            let t = self.transmittance.eval_at(ctx);
             BsdfSample::delta(-wi, t * 0.5, 1.0, BsdfFlags::NULL)
         })
     }
@@ -122,7 +123,7 @@ impl PolarizedBsdf for PolarizerBsdf {
     ) -> Option<(BsdfSample, MuellerValue)> {
         let s = self.sample(ctx, wi, u1, u2, lobes)?;
         let axis = self.transmission_axis(wi);
-        let t = self.transmittance.eval(ctx.uv, ctx.wl).to_array();
+        let t = self.transmittance.eval_at(ctx).to_array();
         let m = t.map(linear_polarizer);
         Some((s, MuellerValue::polarizing(m, axis, axis)))
     }

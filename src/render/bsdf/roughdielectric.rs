@@ -119,7 +119,11 @@ impl BsdfPlugin for RoughDielectric {
 
 impl BsdfModel for RoughDielectric {
     fn flags(&self) -> BsdfFlags {
-        BsdfFlags::GLOSSY_REFLECTION | BsdfFlags::GLOSSY_TRANSMISSION | BsdfFlags::TWO_SIDED
+        (BsdfFlags::GLOSSY_REFLECTION | BsdfFlags::GLOSSY_TRANSMISSION | BsdfFlags::TWO_SIDED)
+            .with(
+                BsdfFlags::VERTEX_COLOR,
+                self.factors.reads_mesh_attribute() || self.roughness.reads_mesh_attribute(),
+            )
     }
 
     fn describe(&self) -> String {

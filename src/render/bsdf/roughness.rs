@@ -9,7 +9,6 @@ use super::ShadingCtx;
 use crate::render::texture::Texture;
 use crate::scene::mitsuba::PluginParams;
 use crate::scene::{SpectrumDesc, TextureDesc};
-use glam::Vec2;
 
 /// A constant or textured roughness.
 #[derive(Debug, Clone)]
@@ -36,9 +35,19 @@ impl Roughness {
                 alpha_v,
             } => Some(Microfacet::of(
                 *kind,
-                scalar(alpha_u, ctx.uv),
-                scalar(alpha_v, ctx.uv),
+                scalar(alpha_u, ctx),
+                scalar(alpha_v, ctx),
             )),
+        }
+    }
+
+    /// Whether α is a `mesh_attribute`.
+    pub fn reads_mesh_attribute(&self) -> bool {
+        match self {
+            Roughness::Constant(_) => false,
+            Roughness::Textured {
+                alpha_u, alpha_v, ..
+            } => alpha_u.reads_mesh_attribute() || alpha_v.reads_mesh_attribute(),
         }
     }
 
@@ -102,17 +111,23 @@ impl Roughness {
 }
 
 /// A roughness at `uv`: [`eval_1`], ≥ 0.
-fn scalar(t: &Texture, uv: Vec2) -> f32 {
-    eval_1(t, uv).max(0.0)
+fn scalar(t: &Texture, ctx: &ShadingCtx) -> f32 {
+    eval_1(t, ctx).max(0.0)
 }
 
 /// Mitsuba 3.9's `Texture::eval_1`, the scalar lookup its BSDFs use for roughness, opacity and
 /// blend weights: an RGB bitmap's luminance; for a `checkerboard`, **color1 where `eval`
 /// gives color0** and the other way round — its `eval_1` tests `mask.x != mask.y` where
 /// `eval` tests `==` (`checkerboard.cpp`), so a checkerboard roughness sits on the other
-/// squares than the same checkerboard as a colour; else the value.
-pub fn eval_1(t: &Texture, uv: Vec2) -> f32 {
+/// squares than the same checkerboard as a colour; a `mesh_attribute`'s value (a
+/// 1-channel attribute is stored as a grey, so this is its value); else the value.
+pub fn eval_1(t: &Texture, ctx: &ShadingCtx) -> f32 {
+    let uv = ctx.uv;
     match t {
+        Texture::VertexColor => {
+            let c = ctx.color;
+            0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+        }
         Texture::Bitmap(b) if b.channels >= 3 => {
             let c = b.eval(uv);
             0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]

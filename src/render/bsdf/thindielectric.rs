@@ -56,7 +56,8 @@ impl BsdfPlugin for ThinDielectric {
 
 impl BsdfModel for ThinDielectric {
     fn flags(&self) -> BsdfFlags {
-        BsdfFlags::DELTA_REFLECTION | BsdfFlags::DELTA_TRANSMISSION | BsdfFlags::TWO_SIDED
+        (BsdfFlags::DELTA_REFLECTION | BsdfFlags::DELTA_TRANSMISSION | BsdfFlags::TWO_SIDED)
+            .with(BsdfFlags::VERTEX_COLOR, self.factors.reads_mesh_attribute())
     }
 
     fn describe(&self) -> String {

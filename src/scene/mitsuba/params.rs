@@ -126,23 +126,10 @@ impl<'p, 'a, 'i> PluginParams<'p, 'a, 'i> {
         }
     }
 
-    /// A value or a `<texture>` (reflectances, weights).
+    /// A value or a `<texture>` (reflectances, weights; a `mesh_attribute` too: BSDFs
+    /// evaluate textures through [`crate::render::texture::Texture::eval_at`] and say in
+    /// their flags that they read one, `BsdfFlags::VERTEX_COLOR`).
     pub fn texture(&mut self, name: &str, default: f32) -> Result<TextureDesc> {
-        let node = self.props.node;
-        match self.props.texture(self.ctx, name, default)? {
-            TextureDesc::VertexColor => Err(self.ctx.err(
-                node,
-                format!(
-                    "{name}: a mesh_attribute texture is supported only as a diffuse reflectance"
-                ),
-            )),
-            t => Ok(t),
-        }
-    }
-
-    /// [`Self::texture`] that may also be a `mesh_attribute` (the vertex colours): for
-    /// BSDFs that evaluate it through [`crate::render::texture::Texture::eval_at`].
-    pub fn color_texture(&mut self, name: &str, default: f32) -> Result<TextureDesc> {
         self.props.texture(self.ctx, name, default)
     }
 

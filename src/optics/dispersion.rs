@@ -76,12 +76,32 @@ fn interpolate(rows: &[(f64, f64, f64)], lambda_nm: f64) -> Complex64 {
     if lambda_nm >= last.0 {
         return Complex64::new(last.1, last.2);
     }
-    // First row with λ > lambda_nm; rows are few (≤ 60), binary search anyway.
-    let hi = rows.partition_point(|r| r.0 <= lambda_nm);
+    let hi = first_row_above(rows, lambda_nm);
     let (l0, n0, k0) = rows[hi - 1];
     let (l1, n1, k1) = rows[hi];
     let t = (lambda_nm - l0) / (l1 - l0);
     Complex64::new(n0 + t * (n1 - n0), k0 + t * (k1 - k0))
+}
+
+/// The first row with λ > `lambda_nm` (`rows.partition_point(|r| r.0 <= lambda_nm)`), for
+/// `rows[0].0 < lambda_nm < rows[last].0`. The metal tables are uniform in photon energy,
+/// i.e. in 1/λ, so the row interpolated in 1/λ is the answer or next to it; walking from it
+/// finds the same row as a binary search (rows ascend), in ~1 step instead of 6 (a gold
+/// conductor looks its index up at four wavelengths per hit: 7 % of a gold teapot's render).
+#[inline]
+fn first_row_above(rows: &[(f64, f64, f64)], lambda_nm: f64) -> usize {
+    let n = rows.len();
+    let (f, l) = (1.0 / rows[0].0, 1.0 / rows[n - 1].0);
+    let t = (f - 1.0 / lambda_nm) / (f - l);
+    // `as usize` saturates (NaN → 0); the clamp keeps the walks in bounds.
+    let mut hi = ((t * (n - 1) as f64) as usize + 1).clamp(1, n - 1);
+    while hi > 1 && rows[hi - 1].0 > lambda_nm {
+        hi -= 1;
+    }
+    while hi < n - 1 && rows[hi].0 <= lambda_nm {
+        hi += 1;
+    }
+    hi
 }
 
 const DIELECTRICS: &str = include_str!("data/dielectrics.txt");
@@ -283,6 +303,43 @@ mod tests {
         assert_eq!(au.nk(298.757050), Complex64::new(1.795, 1.920375));
         assert!(lookup("AU").is_some() && lookup("fused_silica").is_some());
         assert!(lookup("unobtainium").is_none());
+    }
+
+    #[test]
+    fn row_search_is_the_binary_search() {
+        let all = build().unwrap();
+        let tables: Vec<&[(f64, f64, f64)]> = (all.iter())
+            .filter_map(|m| match &m.model {
+                Model::Table(rows) => Some(rows.as_slice()),
+                _ => None,
+            })
+            .collect();
+        // Made-up tables too: uneven in 1/λ, and with equal neighbours.
+        let uneven = [
+            (300.0, 1.0, 0.0),
+            (301.0, 2.0, 0.0),
+            (700.0, 3.0, 0.0),
+            (900.0, 4.0, 0.0),
+        ];
+        let ties = [
+            (400.0, 1.0, 0.0),
+            (500.0, 2.0, 0.0),
+            (500.0, 3.0, 0.0),
+            (600.0, 4.0, 0.0),
+        ];
+        assert!(tables.len() >= 4);
+        for rows in tables.into_iter().chain([&uneven[..], &ties[..]]) {
+            let (lo, hi) = (rows[0].0, rows[rows.len() - 1].0);
+            // Every row, its neighbours in f64 and a dense sweep between the ends.
+            let mut probes: Vec<f64> = (rows.iter())
+                .flat_map(|r| [r.0, r.0.next_down(), r.0.next_up()])
+                .collect();
+            probes.extend((0..=5000).map(|k| lo + (hi - lo) * k as f64 / 5000.0));
+            for l in probes.into_iter().filter(|&l| l > lo && l < hi) {
+                let want = rows.partition_point(|r| r.0 <= l);
+                assert_eq!(first_row_above(rows, l), want, "λ = {l}");
+            }
+        }
     }
 
     #[test]

@@ -554,6 +554,8 @@ pub(super) fn trace_lanes<C: Carrier>(
         }
         count(Counter::Rays, rays.len() as u64);
         scene.intersect_batch(rays, hits);
+        // perf: the environment lookups of escaped rays start before any lane waits on one.
+        scene.lights().prefetch_escaped(rays, hits);
         for (&i, &hit) in lane_of.iter().zip(hits.iter()) {
             let i = i as usize;
             let mut requests = Requests {
@@ -835,6 +837,9 @@ fn resolve_env_samples<C: Carrier>(
     // perf: every sample's first cache miss is under way before any sample waits on its own
     // (the prefetching draw then starts the texel loads of the radiance stage).
     samples.iter().for_each(|s| env(s).prefetch_sample(s.u));
+    samples
+        .iter()
+        .for_each(|s| env(s).prefetch_sample_guided(s.u));
     drawn.extend((samples.iter()).map(|s| env(s).sample_direction_prefetch(s.u)));
     le.clear();
     le.extend((samples.iter().zip(drawn.iter())).map(|(s, d)| match d {

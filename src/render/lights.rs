@@ -97,6 +97,22 @@ impl Distribution1D {
         j
     }
 
+    /// Starts loading the CDF cell the guide entry of `u` points to ([`Self::search`]'s
+    /// second read; its guide cell should be in cache by now: [`Self::prefetch_guide`]).
+    #[inline]
+    fn prefetch_guided(&self, u: f32) {
+        let n = self.len();
+        let j = self.cells[((u * n as f32) as usize).min(n - 1)].guide as usize;
+        prefetch(&self.cells[j]);
+    }
+
+    /// Starts loading the cell [`Self::pdf`] of `x` reads.
+    #[inline]
+    fn prefetch_pdf(&self, x: f32) {
+        let n = self.len();
+        prefetch(&self.cells[((x * n as f32) as usize).min(n - 1)]);
+    }
+
     /// Starts loading the guide cell [`Self::search`] reads first for `u`.
     #[inline]
     fn prefetch_guide(&self, u: f32) {
@@ -180,6 +196,21 @@ impl Distribution2D {
     pub fn prefetch_sample(&self, u: Vec2) {
         let row = self.marginal.sample(u.y).2;
         self.conditional[row].prefetch_guide(u.x);
+    }
+
+    /// [`Self::prefetch_sample`]'s next stage: the CDF cell the row's guide entry points to.
+    #[inline]
+    pub fn prefetch_sample_guided(&self, u: Vec2) {
+        let row = self.marginal.sample(u.y).2;
+        self.conditional[row].prefetch_guided(u.x);
+    }
+
+    /// Starts loading the conditional cell [`Self::pdf`] of `p` reads.
+    #[inline]
+    pub fn prefetch_pdf(&self, p: Vec2) {
+        let nv = self.conditional.len();
+        let row = ((p.y * nv as f32) as usize).min(nv - 1);
+        self.conditional[row].prefetch_pdf(p.x);
     }
 
     pub fn pdf(&self, p: Vec2) -> f32 {
@@ -717,6 +748,23 @@ impl EnvMap {
     #[inline]
     pub fn prefetch_sample(&self, u: Vec2) {
         self.dist.prefetch_sample(u);
+    }
+
+    /// [`Self::prefetch_sample`]'s next stage (after it, before [`Self::sample_direction`]).
+    #[inline]
+    pub fn prefetch_sample_guided(&self, u: Vec2) {
+        self.dist.prefetch_sample_guided(u);
+    }
+
+    /// Starts loading what the lookups of a ray escaping along `dir` read: the sampling
+    /// pdf's cell ([`Self::pdf_direction`], for MIS) and the texel rows ([`Self::eval`]).
+    #[inline]
+    fn prefetch_lookup(&self, dir: Vec3) {
+        let uv = self.uv_of(dir);
+        self.dist.prefetch_pdf(uv);
+        let [(a, _), _, (b, _), _] = self.bilinear_texels(uv.x, uv.y);
+        prefetch(&self.texel_rows[a]);
+        prefetch(&self.texel_rows[b]);
     }
 
     /// [`Self::sample_direction`], and starts loading the texel rows [`Self::eval`] of the
@@ -1492,6 +1540,18 @@ impl LightSet {
                 .iter()
                 .any(|b| alpha_coverage(b, Vec2::ZERO).is_some()),
         })
+    }
+
+    /// Starts the environment lookups (MIS pdf, radiance) of the rays that escaped the
+    /// scene (`hits[i]` is None), before the lanes' vertices wait on them one by one.
+    pub fn prefetch_escaped(&self, rays: &[Ray], hits: &[Option<super::accel::Hit>]) {
+        for &li in &self.infinite {
+            if let Light::Env(e) = &self.lights[li as usize] {
+                for (ray, _) in rays.iter().zip(hits).filter(|(_, h)| h.is_none()) {
+                    e.prefetch_lookup(ray.dir);
+                }
+            }
+        }
     }
 
     /// Chooses a light (its index in `lights`) uniformly ([`Self::selection_pdf`]) with one

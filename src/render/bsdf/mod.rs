@@ -419,6 +419,7 @@ bsdf_models! {
     NormalMap(normal_map::NormalMap),
     Mask(mask::Mask),
     BumpMap(bump_map::BumpMap),
+    Null(null::NullBsdf),
 }
 
 impl Bsdf {

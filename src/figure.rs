@@ -86,6 +86,7 @@ pub fn teapot_scene(settings: &RenderSettings) -> Scene {
         }],
         polarizer: None,
         source: None,
+        media: None,
     }
 }
 

@@ -206,6 +206,7 @@ fn room(extra: Vec<Shape>) -> Scene {
         }],
         polarizer: None,
         source: None,
+        media: None,
     }
 }
 

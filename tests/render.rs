@@ -45,6 +45,7 @@ fn base_scene(
         emitters,
         polarizer: None,
         source: None,
+        media: None,
     }
 }
 

@@ -150,7 +150,7 @@ fn integrator_settings() {
         }
     );
     assert_eq!(load("").unwrap().integrator, IntegratorSettings::default());
-    // Without participating media (refused where declared) volpath is the path tracer.
+    // Without participating media volpath is the path tracer.
     let s =
         load(r#"<integrator type="volpath"><integer name="max_depth" value="4"/></integrator>"#)
             .unwrap();
@@ -322,9 +322,9 @@ fn errors_name_element_plugin_and_position() {
         load_str("<scene/>", Path::new("."), &[], "v.xml").unwrap_err()
     );
     assert!(e.contains("version"), "{e}");
-    assert!(err(r#"<medium type="homogeneous"/>"#).contains(
-        "unsupported medium plugin \"homogeneous\": participating media are not supported"
-    ));
+    // (Media: tests/scene_media.rs.)
+    assert!(err(r#"<medium type="heterogeneous"/>"#)
+        .contains("unsupported medium plugin \"heterogeneous\""));
     assert!(
         err(r#"<shape type="cube"><bsdf type="diffuse"/><bsdf type="diffuse"/></shape>"#)
             .contains("one BSDF")

@@ -31,6 +31,10 @@ use super::PreparedScene;
 use crate::spectrum::SampledWavelengths;
 use glam::{Vec2, Vec3};
 
+/// Participating media (Mitsuba's `volpath`): the hooks this file calls where the scene has
+/// media ([`PreparedScene::media`]).
+mod media;
+
 /// What a path carries between vertices besides its state ([`PathState`]): the throughput
 /// that the BSDF values along the path multiply.
 pub trait Carrier: Copy {
@@ -88,6 +92,9 @@ pub trait Carrier: Copy {
 
     /// Divides by the survival probability of Russian roulette.
     fn divide(&mut self, q: f32);
+
+    /// Multiplies by a spectral factor (a medium's transmittance or albedo).
+    fn attenuate(&mut self, factor: Spec);
 }
 
 /// A vertex as its BSDF scatters: the frame it scatters in and the direction back along the
@@ -171,6 +178,11 @@ impl Carrier for Spec {
     fn divide(&mut self, q: f32) {
         *self /= q;
     }
+
+    #[inline]
+    fn attenuate(&mut self, factor: Spec) {
+        *self *= factor;
+    }
 }
 
 /// What a path (or one branch of a split path) carries between vertices besides its
@@ -186,6 +198,8 @@ pub(super) struct PathState {
     prev_bsdf_delta: bool,
     /// Fresnel splits already made on the way here.
     pub splits: u32,
+    /// The medium the ray travels in ([`super::medium::NO_MEDIUM`] outside every medium).
+    medium: u32,
 }
 
 impl PathState {
@@ -198,6 +212,7 @@ impl PathState {
             prev_bsdf_pdf: 1.0,
             prev_bsdf_delta: true,
             splits: 0,
+            medium: super::medium::SENSOR_MEDIUM,
         }
     }
 
@@ -331,6 +346,8 @@ struct ShadowRequest {
     lane: u32,
     ray: Ray,
     contribution: Spec,
+    /// The medium the shadow ray starts in (participating media only).
+    medium: u32,
 }
 
 /// An environment light sample drawn at a lane's vertex (its random numbers and everything
@@ -570,6 +587,12 @@ pub(super) fn trace_lanes<C: Carrier>(
         resolve_env_samples(scene, env_samples, env_drawn, env_le, shadow);
     }
     for r in shadow.iter() {
+        if scene.media().is_some() {
+            // Media hook: transmittance through media and null interfaces.
+            let lane = &mut lanes[r.lane as usize];
+            lane.radiance += r.contribution * media::shadow_transmittance(scene, r, &lane.wl);
+            continue;
+        }
         // gltf branch hook: shadow rays pass alpha cut-outs (`lights::shadow_transmittance`).
         let tr = super::lights::shadow_transmittance(scene, &r.ray);
         if tr > 0.0 {
@@ -665,6 +688,12 @@ fn vertex<C: Carrier>(
         wl,
         ..
     } = lane;
+    // ---- Media hook: free flight to the surface, or a scattering vertex in the medium ----
+    if scene.media().is_some() {
+        if let Some(goes_on) = media::free_flight(scene, b, hit, wl, sampler, requests) {
+            return goes_on;
+        }
+    }
     let settings = scene.settings();
     let lights = scene.lights();
     let sel_pdf = lights.selection_pdf();
@@ -709,6 +738,13 @@ fn vertex<C: Carrier>(
         }
     }
 
+    // Media hook: a null interface is crossed without a path vertex (as `volpath` does).
+    if scene.media().is_some() {
+        if let Some(goes_on) = media::cross_null(scene, b, &si, wl, sampler) {
+            return goes_on;
+        }
+    }
+
     // ---- Continue? (Mitsuba: depth + 1 < max_depth) ----
     if settings.max_depth >= 0 && b.path.depth as i64 + 1 >= settings.max_depth as i64 {
         return false;
@@ -733,7 +769,8 @@ fn vertex<C: Carrier>(
         let li = lights.pick_index(sampler);
         let u = sampler.next_2d();
         let light = &lights.lights[li];
-        if let super::lights::Light::Env(_) = light {
+        // (Media hook: not deferred where shadow rays cross media — same values.)
+        if matches!(light, super::lights::Light::Env(_)) && scene.media().is_none() {
             requests.env_samples.push(EnvSample {
                 lane: requests.lane,
                 light: li as u32,
@@ -755,6 +792,7 @@ fn vertex<C: Carrier>(
                     lane: requests.lane,
                     ray,
                     contribution,
+                    medium: media::shadow_medium(scene, &b.path, &si, ls.wi),
                 });
             }
         }
@@ -863,6 +901,7 @@ fn resolve_env_samples<C: Carrier>(
                 lane: s.lane,
                 ray,
                 contribution,
+                medium: super::medium::NO_MEDIUM,
             });
         }
     }
@@ -893,6 +932,11 @@ fn advance<C: Carrier>(
         && super::lights::passes_shadow_rays(scene, si.shape)
     {
         (b.path.prev_p, b.path.prev_bsdf_pdf, b.path.prev_bsdf_delta) = mis_vertex;
+    }
+    // Media hook: the medium beyond the surface; a thin dielectric's transmission is a null
+    // interaction in `volpath` (no vertex: depth and MIS vertex kept).
+    if scene.media().is_some() {
+        media::after_crossing(scene, &mut b.path, si, bs, wo_world, mis_vertex);
     }
     if bs.terminate_secondary && !wl.secondary_terminated() {
         wl.terminate_secondary();

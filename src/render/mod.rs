@@ -22,6 +22,7 @@ pub mod film;
 pub mod geometry;
 pub mod integrator;
 pub mod lights;
+pub mod medium;
 pub mod passes;
 pub mod polarization;
 pub mod primary;
@@ -178,6 +179,8 @@ pub struct PreparedScene {
     polarized: Option<stokes::PolarizedSetup>,
     /// Candidate triangles per pixel for camera rays (None: camera rays use the BVH).
     primary_bins: Option<primary::PrimaryBins>,
+    /// Participating media (media branch hook; None: surfaces only).
+    media: Option<std::sync::Arc<medium::SceneMedia>>,
 }
 
 /// A surface point of a prepared scene: its geometry (a [`SurfaceInteraction`], by `Deref`)
@@ -323,6 +326,19 @@ impl PreparedScene {
     pub fn polarized(&self) -> Option<&stokes::PolarizedSetup> {
         self.polarized.as_ref()
     }
+
+    /// The scene's participating media, when it has some (Mitsuba's `volpath`).
+    #[inline]
+    pub fn media(&self) -> Option<&medium::SceneMedia> {
+        self.media.as_deref()
+    }
+
+    /// Whether camera rays start inside a medium (then even those that hit nothing are
+    /// traced as paths).
+    #[inline]
+    pub fn camera_in_medium(&self) -> bool {
+        self.media().is_some_and(|m| m.sensor != medium::NO_MEDIUM)
+    }
 }
 
 /// Validates the scene and options, runs effect analysis, builds the BVH and light tables.
@@ -424,6 +440,9 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     } else {
         None
     };
+    if polarized.is_some() && scene.media.is_some() {
+        bail!("participating media (volpath) with polarised transport are not supported");
+    }
     Ok(PreparedScene {
         accel,
         lights,
@@ -442,6 +461,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         degenerate_triangles,
         polarized,
         primary_bins,
+        media: scene.media.clone(),
     })
 }
 
@@ -541,7 +561,8 @@ fn trace_batch<C: Carrier>(
     scratch.first_hits.clear();
     for i in 0..m {
         match hits[i] {
-            None => escaped[i] = true,
+            // (Media hook: a camera inside a medium may scatter before the void it sees.)
+            None if !scene.camera_in_medium() => escaped[i] = true,
             hit => {
                 hit_index[scratch.lanes.len()] = i;
                 scratch.lanes.push(integrator::Lane::camera(

@@ -215,6 +215,7 @@ fn image_hash(scene: &Scene, p: &PreparedScene) -> u64 {
         emitters,
         polarizer,
         source: _,
+        media,
     } = scene;
     let mut h = Fnv::default();
     let _ = write!(
@@ -228,6 +229,10 @@ fn image_hash(scene: &Scene, p: &PreparedScene) -> u64 {
         p.fresnel_splits,
         env!("CARGO_PKG_VERSION"),
     );
+    // Media only where there are some: the hashes of surface-only scenes stay as they were.
+    if let Some(m) = media {
+        let _ = write!(h, "|{m:?}");
+    }
     h.0
 }
 

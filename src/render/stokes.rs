@@ -242,4 +242,13 @@ impl Carrier for StokesPath {
             }
         }
     }
+
+    #[inline]
+    fn attenuate(&mut self, factor: Spec) {
+        for (r, f) in self.rows.iter_mut().zip(factor.to_array()) {
+            for v in r.iter_mut() {
+                *v *= f;
+            }
+        }
+    }
 }

@@ -400,6 +400,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         emitters,
         polarizer: None,
         source: Some(path.to_path_buf()),
+        media: None,
     })
 }
 

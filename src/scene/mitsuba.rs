@@ -18,6 +18,7 @@
 // `!(x >= 0.0)` is deliberate throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod medium;
 mod params;
 mod ply_attributes;
 
@@ -127,6 +128,9 @@ pub fn load_str(
         emitters: Vec::new(),
         sensor: None,
         integrator: None,
+        integrator_plugin: None,
+        media: Vec::new(),
+        shape_media: Vec::new(),
         depth: 0,
         instanced_triangles: 0,
         direct_strategies: None,
@@ -151,6 +155,8 @@ struct Sensor {
     seed: u64,
     sampler: SamplerKind,
     polarizer: Option<Polarizer>,
+    /// The sensor's medium (index into the parser's media).
+    medium: Option<u32>,
 }
 
 #[derive(Debug, Clone)]
@@ -178,13 +184,19 @@ enum Val {
     ShapeGroup(Arc<Vec<Shape>>),
     Sensor(Box<Sensor>),
     Integrator(IntegratorSettings),
+    /// A participating medium (index into the parser's media).
+    Medium(u32),
+    Phase(crate::render::medium::Phase),
+    /// A `constvolume`'s value (an RGB is upsampled unbounded, as Mitsuba's `constvolume`).
+    ConstVolume(SpectrumDesc),
 }
 
 /// What a `<shape>` element yields.
 #[derive(Debug, Clone)]
 enum Shapes {
-    /// Shapes of the scene: one, or several for an `instance` of a multi-shape group.
-    Plain(Vec<Shape>),
+    /// Shapes of the scene: one, or several for an `instance` of a multi-shape group, and
+    /// the [interior, exterior] media they bound (`medium::NO_MEDIUM`: none).
+    Plain(Vec<Shape>, [u32; 2]),
     /// A `shapegroup`: shapes drawn only through `instance`s.
     Group(Vec<Shape>),
 }
@@ -210,6 +222,9 @@ impl Val {
             Val::Shapes(_) | Val::ShapeGroup(_) => "shape",
             Val::Sensor(_) => "sensor",
             Val::Integrator(_) => "integrator",
+            Val::Medium(_) => "medium",
+            Val::Phase(_) => "phase",
+            Val::ConstVolume(_) => "volume",
         }
     }
 }
@@ -224,6 +239,7 @@ enum Named {
     Emitter,
     /// The shapes of a `shapegroup`, in the group's space.
     ShapeGroup(Arc<Vec<Shape>>),
+    Medium(u32),
 }
 
 struct Prop<'a, 'i> {
@@ -265,6 +281,11 @@ struct Ctx<'a, 'i> {
     emitters: Vec<EmitterDesc>,
     sensor: Option<Sensor>,
     integrator: Option<IntegratorSettings>,
+    /// The integrator's plugin name, once read.
+    integrator_plugin: Option<String>,
+    /// Participating media declared so far, and the shapes that bound them.
+    media: Vec<crate::render::medium::Medium>,
+    shape_media: Vec<(u32, [u32; 2])>,
     /// Triangles added by flattening `instance`s so far.
     instanced_triangles: usize,
     /// A `direct` integrator's strategies (emitter sampling, BSDF sampling), checked against
@@ -771,6 +792,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         self.check_overrides()?;
         self.check_direct_strategies()?;
         let integrator = self.integrator.unwrap_or_default();
+        let sensor_medium = self.sensor.as_ref().and_then(|s| s.medium);
         let (camera, film, spp, seed, sampler, polarizer) = match self.sensor.clone() {
             Some(s) => (s.camera, s.film, s.spp, s.seed, s.sampler, s.polarizer),
             None => (
@@ -798,6 +820,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             emitters: std::mem::take(&mut self.emitters),
             polarizer,
             source: None,
+            media: self.scene_media(sensor_medium)?,
         })
     }
 
@@ -1031,7 +1054,8 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 })?;
                 self.register(node, id, Named::ShapeGroup(Arc::new(shapes)))?;
             }
-            Val::Shapes(Shapes::Plain(shapes)) => {
+            Val::Shapes(Shapes::Plain(shapes, media)) => {
+                self.add_shape_media(shapes.len(), media);
                 self.shapes.extend(shapes);
                 if let Some(id) = id {
                     self.register(node, id, Named::Shape)?;
@@ -1048,6 +1072,13 @@ impl<'a, 'i> Ctx<'a, 'i> {
                     self.sensor = Some(*s);
                 }
             }
+            Val::Medium(i) => match id {
+                Some(id) => self.register(node, id, Named::Medium(i))?,
+                None => eprintln!(
+                    "note: {}: a top-level medium without an id is not used by anything",
+                    self.loc(node)
+                ),
+            },
             Val::Integrator(s) => {
                 if self.integrator.is_some() {
                     return Err(self.err(node, "only one <integrator> is supported"));
@@ -1315,6 +1346,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         Named::Texture(t) => Val::Texture(t),
                         Named::Value(v) => v,
                         Named::ShapeGroup(g) => Val::ShapeGroup(g),
+                        Named::Medium(i) => Val::Medium(i),
                         Named::Shape | Named::Emitter => {
                             return Err(self.err(c, format!("\"{id}\" cannot be referenced here")))
                         }
@@ -1340,6 +1372,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
                                 self.register(c, id, Named::Bsdf(i))?;
                                 val = Val::BsdfRef(i);
                             }
+                            Val::Medium(i) => self.register(c, id, Named::Medium(*i))?,
                             _ => {}
                         }
                     }
@@ -1432,17 +1465,11 @@ impl<'a, 'i> Ctx<'a, 'i> {
         } else {
             self.check_attrs(node, &["type", "id", "name"])?;
         }
-        if matches!(tag, "medium" | "phase" | "volume") {
-            let plugin = self.attr(node, "type")?.unwrap_or_default();
-            return Err(self.err(
-                node,
-                format!(
-                    "unsupported {tag} plugin \"{plugin}\": participating media are not supported"
-                ),
-            ));
-        }
         let mut p = self.collect_props(node)?;
         let val = match tag {
+            "medium" => Val::Medium(self.build_medium(&mut p)?),
+            "phase" => Val::Phase(self.build_phase(&mut p)?),
+            "volume" => Val::ConstVolume(self.build_volume(&mut p)?),
             "bsdf" => Val::Bsdf(self.build_bsdf(&mut p)?),
             "texture" => Val::Texture(self.build_texture(&mut p)?),
             "emitter" => Val::Emitter(self.build_emitter(&mut p)?),
@@ -1762,7 +1789,15 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 let mut group = Vec::new();
                 for q in std::mem::take(&mut p.list) {
                     match q.val {
-                        Val::Shapes(Shapes::Plain(s)) => group.extend(s),
+                        Val::Shapes(Shapes::Plain(s, m)) => {
+                            if m != [crate::render::medium::NO_MEDIUM; 2] {
+                                return Err(self.err(
+                                    q.node,
+                                    "media bounded by shapes of a shapegroup are not supported",
+                                ));
+                            }
+                            group.extend(s)
+                        }
                         Val::Shapes(Shapes::Group(_)) => {
                             return Err(self.err(q.node, "a shapegroup cannot contain a shapegroup"))
                         }
@@ -1825,9 +1860,12 @@ impl<'a, 'i> Ctx<'a, 'i> {
                         Ok(s)
                     })
                     .collect::<Result<_>>()
-                    .map(Shapes::Plain)
+                    .map(|s| Shapes::Plain(s, [crate::render::medium::NO_MEDIUM; 2]))
             }
-            _ => Ok(Shapes::Plain(vec![self.build_shape(p)?])),
+            _ => {
+                let media = self.shape_media_refs(p)?;
+                Ok(Shapes::Plain(vec![self.build_shape(p)?], media))
+            }
         }
     }
 
@@ -2263,6 +2301,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
         (near_clip, far_clip): (f32, f32),
         projection: Projection,
     ) -> Result<Sensor> {
+        let medium = self.sensor_medium(p)?;
         // thinfilm extension: an ideal linear polariser in front of the sensor.
         let polarizer = match p.string(self, "polarizer")? {
             None => None,
@@ -2313,6 +2352,7 @@ impl<'a, 'i> Ctx<'a, 'i> {
             seed,
             sampler,
             polarizer,
+            medium,
         })
     }
 
@@ -2443,13 +2483,23 @@ impl<'a, 'i> Ctx<'a, 'i> {
             matches!(v, Val::Int(_))
         })?;
         let plugin = p.plugin.clone();
+        if !matches!(plugin.as_str(), "moment" | "aov" | "stokes") {
+            // (A wrapper renders its nested integrator, read before it.)
+            self.integrator_plugin = Some(plugin.clone());
+        }
         match plugin.as_str() {
             "path" | "volpath" | "volpathmis" | "prb" | "prb_basic" => {
-                if plugin != "path" {
-                    // Participating media are refused where they are declared, so these
-                    // integrators meet surfaces only: their estimate is the path tracer's.
+                if plugin == "volpathmis" {
+                    // Media are rendered with volpath's transport (`render/integrator/media.rs`)
+                    // whose distance sampling already averages the channels' densities.
                     eprintln!(
-                        "note: {}: integrator \"{plugin}\" is rendered by the path tracer (same expected image without participating media)",
+                        "note: {}: integrator \"volpathmis\" is rendered as volpath (same expected image; volpathmis's spectral MIS changes only the noise)",
+                        self.loc(p.node)
+                    );
+                } else if plugin.starts_with("prb") {
+                    // Surfaces only: their estimate is the path tracer's.
+                    eprintln!(
+                        "note: {}: integrator \"{plugin}\" is rendered by the path tracer (same expected image)",
                         self.loc(p.node)
                     );
                 }

@@ -66,6 +66,9 @@ pub struct Scene {
     pub polarizer: Option<Polarizer>,
     /// File the scene came from (for messages), if any.
     pub source: Option<PathBuf>,
+    /// Participating media, when the scene has some and asks for Mitsuba's `volpath`
+    /// (None: surfaces only, the path tracer's transport).
+    pub media: Option<Arc<crate::render::medium::SceneMedia>>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -567,6 +570,7 @@ fn scene_for_mesh(mut mesh: TriangleMesh, path: &Path) -> Result<Scene> {
         emitters: vec![default_environment()],
         polarizer: None,
         source: Some(path.to_path_buf()),
+        media: None,
     })
 }
 

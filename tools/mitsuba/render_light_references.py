@@ -13,6 +13,15 @@ Regenerate (from the repository root):
 
 Only some scenes:  --only spot --only thinlens
 Another directory of scenes (with its own manifest): --dir tests/references/projector
+
+Mitsuba's own noise at a test's sample count (--noise-spp 256): two more renders at that spp
+with different seeds, compared as the tests compare (largest relative difference of a
+channel's image mean, and of a bright 8x8 block's sum), recorded in the manifest as
+`noise_<N>spp` — the tests' tolerances are justified from these. The participating-media
+references (tests/scene_media.rs):
+
+    python3 tools/mitsuba/render_light_references.py --dir tests/references/media \
+        --spp 4096 --noise-spp 256
 """
 
 import argparse
@@ -31,6 +40,8 @@ def main():
     ap.add_argument("--variant", default="llvm_ad_spectral")
     ap.add_argument("--only", action="append", default=[])
     ap.add_argument("--dir", default=DIR, help="directory of NAME.xml scenes")
+    ap.add_argument("--noise-spp", type=int, default=0,
+                    help="also measure Mitsuba's seed-to-seed noise at this spp")
     args = ap.parse_args()
     scene_dir = os.path.abspath(args.dir)
 
@@ -66,12 +77,35 @@ def main():
             "spp": args.spp,
             "variant": args.variant,
             "mitsuba": mi.__version__,
-            "command": "python3 tools/mitsuba/render_light_references.py --spp %d%s" % (
-                args.spp, "" if scene_dir == DIR else " --dir " + os.path.relpath(scene_dir, REPO)),
+            "command": "python3 tools/mitsuba/render_light_references.py --spp %d%s%s" % (
+                args.spp, "" if scene_dir == DIR else " --dir " + os.path.relpath(scene_dir, REPO),
+                " --noise-spp %d" % args.noise_spp if args.noise_spp else ""),
         }
+        if args.noise_spp:
+            a, b = (np.array(mi.render(scene, spp=args.noise_spp, seed=s), dtype=np.float64)
+                    for s in (101, 102))
+            manifest[name]["noise_%dspp" % args.noise_spp] = seed_noise(a, b)
+            print(f"  noise at {args.noise_spp} spp: {manifest[name]['noise_%dspp' % args.noise_spp]}")
     with open(manifest_path, "w") as f:
         json.dump(manifest, f, indent=2, sort_keys=True)
         f.write("\n")
+
+
+def seed_noise(a, b):
+    """How two renders of one scene with different seeds differ, measured as the tests
+    measure thinfilm against the reference: per-channel image means, and the sums of the
+    8x8 blocks brighter than a quarter of the average block."""
+    means = [abs(a[..., c].mean() / b[..., c].mean() - 1) for c in range(3)]
+    h, w = a.shape[:2]
+    blocks = []
+    avg = b.sum(axis=2).mean() * 64
+    for y in range(0, h, 8):
+        for x in range(0, w, 8):
+            sa, sb = a[y:y + 8, x:x + 8].sum(), b[y:y + 8, x:x + 8].sum()
+            if sb > 0.25 * avg:
+                blocks.append(abs(sa / sb - 1))
+    return {"max_channel_mean_rel": round(max(means), 4),
+            "max_bright_block_rel": round(max(blocks), 4)}
 
 
 if __name__ == "__main__":

@@ -420,6 +420,7 @@ bsdf_models! {
     Mask(mask::Mask),
     BumpMap(bump_map::BumpMap),
     PolarizedPlastic(pplastic::PolarizedPlastic),
+    Null(null::NullBsdf),
 }
 
 impl Bsdf {

@@ -716,3 +716,34 @@ fn integer_image_formats_are_srgb_decoded() {
         }
     }
 }
+
+/// Mitsuba's `rawconstant`: a float is a flat constant; a vector is a raw RGB triple, the
+/// flat normal (0.5, 0.5, 1) of a `normalmap` leaving its nested BSDF's frame unchanged.
+#[test]
+fn rawconstant_textures() {
+    let s = load(
+        r#"<shape type="sphere"><bsdf type="diffuse"><texture type="rawconstant" name="reflectance"><float name="value" value="0.3"/></texture></bsdf></shape>"#,
+    )
+    .unwrap();
+    let wl = thinfilm::spectrum::SampledWavelengths::new([450.0, 520.0, 600.0, 680.0], [1.0; 4]);
+    let ctx = thinfilm::render::bsdf::ShadingCtx {
+        wl: &wl,
+        uv: glam::Vec2::ZERO,
+        segment: 0.0,
+        color: Vec3::ONE,
+    };
+    let f = s.bsdfs[0].eval(&ctx, Vec3::Z, Vec3::Z);
+    assert!(
+        (f - 0.3 / std::f32::consts::PI).abs().max_element() < 1e-6,
+        "{f:?}"
+    );
+    let s = load(
+        r#"<shape type="sphere"><bsdf type="normalmap"><texture name="normalmap" type="rawconstant"><vector name="value" value="0.5, 0.5, 1.0"/></texture><bsdf type="diffuse"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    let (wi, wo) = (Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.0, 0.6, 0.8));
+    let f = s.bsdfs[0].eval(&ctx, wi, wo)[0];
+    assert!((f - 0.5 / std::f32::consts::PI * 0.8).abs() < 1e-6, "{f}");
+    let e = err(r#"<texture type="rawconstant" id="t"/>"#);
+    assert!(e.contains("'value'") && e.contains("test.xml:2:"), "{e}");
+}

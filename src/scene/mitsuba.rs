@@ -1567,7 +1567,34 @@ impl<'a, 'i> Ctx<'a, 'i> {
                 self.mesh_attributes.insert(name);
                 Ok(TextureDesc::VertexColor)
             }
-            _ => Err(self.unknown_plugin(p, &["bitmap", "checkerboard", "mesh_attribute"])),
+            "rawconstant" => self.raw_constant(p),
+            _ => Err(self.unknown_plugin(
+                p,
+                &["bitmap", "checkerboard", "mesh_attribute", "rawconstant"],
+            )),
+        }
+    }
+
+    /// Mitsuba's `rawconstant` (`src/spectra/rawconstant.cpp`): a `<float>` value is a flat
+    /// constant; a `<vector>` is a raw RGB triple (no upsampling, no sRGB decoding), which
+    /// Mitsuba's spectral variants evaluate only through `eval_3` (a `normalmap`): a 1 × 1
+    /// raw bitmap.
+    fn raw_constant(&mut self, p: &mut Props<'a, 'i>) -> Result<TextureDesc> {
+        match p.take("value") {
+            Some(Prop {
+                val: Val::Float(v), ..
+            }) => Ok(TextureDesc::Value(SpectrumDesc::Constant(v as f32))),
+            Some(Prop {
+                val: Val::Vector(v) | Val::Point(v),
+                ..
+            }) => BitmapTexture::new(1, 1, 3, v.to_array().to_vec())
+                .map(|b| TextureDesc::Bitmap(Arc::new(b)))
+                .map_err(|e| self.err(p.node, format!("rawconstant: {e:#}"))),
+            Some(q) => Err(Props::type_err(self, &q, "a <float> or a <vector>")),
+            None => Err(self.err(
+                p.node,
+                "rawconstant: missing parameter 'value' (a <float> or a <vector>)",
+            )),
         }
     }
 

@@ -169,7 +169,8 @@ pub(super) fn ggx_albedo(alpha: f32, mu: f32) -> f32 {
         }
         t
     });
-    bilinear(t, alpha, mu, |a, b, t| a + (b - a) * t)
+    // a·(1 − t) + b·t, as the table was always read (renders stay bit-identical).
+    bilinear(t, alpha, mu, |a, b, t| a * (1.0 - t) + b * t)
 }
 
 /// Bilinear lookup in a table of `ALBEDO_N` × `ALBEDO_N` over (α, μ) ∈ [0, 1]².
@@ -244,7 +245,8 @@ impl GlassAlbedo {
     /// (E_R, E_T) from inside (`inside`) or outside at roughness α and cos θ = μ.
     pub fn at(&self, inside: bool, alpha: f32, mu: f32) -> [f32; 2] {
         let side = &self.sides[usize::from(inside)];
-        bilinear(side, alpha, mu, |a, b, t| [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t])
+        let lerp = |a: f32, b: f32, t: f32| a * (1.0 - t) + b * t;
+        bilinear(side, alpha, mu, |a, b, t| [lerp(a[0], b[0], t), lerp(a[1], b[1], t)])
     }
 }
 

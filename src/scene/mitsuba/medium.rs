@@ -169,17 +169,21 @@ impl<'a, 'i> Ctx<'a, 'i> {
     }
 
     /// The scene's media for the renderer: Some where the integrator is `volpath` (or
-    /// `volpathmis`) and the scene has media or `null` surfaces (which volpath's shadow
+    /// `volpathmis`) and the scene has media or null interactions (which volpath's shadow
     /// rays pass); other integrators ignore media, as Mitsuba's do (said on stderr).
     pub(super) fn scene_media(&mut self, sensor: Option<u32>) -> Result<Option<Arc<SceneMedia>>> {
         let volpath = matches!(
             self.integrator_plugin.as_deref(),
             Some("volpath" | "volpathmis")
         );
-        let has_null = self
-            .bsdfs
-            .iter()
-            .any(|b| matches!(b, crate::render::bsdf::Bsdf::Null(_)));
+        // Null interactions (a `null` surface, a thin dielectric's transmission) take no
+        // vertex in volpath and let its shadow rays through, media or not.
+        let has_null = self.bsdfs.iter().any(|b| {
+            matches!(
+                b,
+                crate::render::bsdf::Bsdf::Null(_) | crate::render::bsdf::Bsdf::ThinDielectric(_)
+            )
+        });
         if !volpath {
             if !self.media.is_empty() {
                 eprintln!(

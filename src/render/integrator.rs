@@ -369,6 +369,7 @@ struct EnvSample<C> {
     uv: Vec2,
     segment: f32,
     color: Vec3,
+    bump_normal: Vec3,
     /// The carrier before the vertex scattered it.
     carrier: C,
 }
@@ -761,6 +762,7 @@ fn vertex<C: Carrier>(
         uv: si.uv,
         segment: si.t, // glTF volume absorption (gltf branch hook)
         color: si.color,
+        bump_normal: bsdf.perturbed_normal(&si),
     };
 
     // ---- Emitter sampling (the shadow ray is traced with the batch's others; an
@@ -783,6 +785,7 @@ fn vertex<C: Carrier>(
                 uv: si.uv,
                 segment: si.t,
                 color: si.color,
+                bump_normal: ctx.bump_normal,
                 carrier: b.carrier,
             });
         } else if let Some(ls) = light.sample(si.p, u, wl) {
@@ -894,6 +897,7 @@ fn resolve_env_samples<C: Carrier>(
             uv: s.uv,
             segment: s.segment,
             color: s.color,
+            bump_normal: s.bump_normal,
         };
         let term = shadow_term(&s.carrier, bsdf, &ctx, &s.v, &ls, sel_pdf, s.p, s.ng);
         if let Some((ray, contribution)) = term {

@@ -169,6 +169,7 @@ pub(super) fn cross_null<C: Carrier>(
                 uv: si.uv,
                 segment: si.t,
                 color: si.color,
+                bump_normal: bsdf.perturbed_normal(si),
             };
             let wi = frame.to_local(-dir);
             match bsdf.sample(&ctx, wi, sampler.next_1d(), Vec2::ZERO, Lobes::ALL) {
@@ -295,6 +296,7 @@ fn null_transmission(
                 uv: si.uv,
                 segment: si.t,
                 color: si.color,
+                bump_normal: bsdf.perturbed_normal(si),
             };
             // The transmitted lobe alone carries its full value, 1 − R'.
             let s = bsdf.sample(

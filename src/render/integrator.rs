@@ -757,13 +757,7 @@ fn vertex<C: Carrier>(
         wi: frame.to_local(-ray.dir),
         wi_world: -ray.dir,
     };
-    let ctx = ShadingCtx {
-        wl,
-        uv: si.uv,
-        segment: si.t, // glTF volume absorption (gltf branch hook)
-        color: si.color,
-        bump_normal: bsdf.perturbed_normal(&si),
-    };
+    let ctx = shading_ctx(wl, &si, bsdf);
 
     // ---- Emitter sampling (the shadow ray is traced with the batch's others; an
     // environment sample is finished with the round's others) ----
@@ -825,6 +819,22 @@ fn vertex<C: Carrier>(
         return false;
     };
     advance(scene, b, &si, &v, &bs, &value, wl, sampler)
+}
+
+/// What `bsdf` sees of the shading point `si` besides the directions (the segment length for
+/// glTF volume absorption, a bump map's normal computed once per hit).
+pub(super) fn shading_ctx<'a>(
+    wl: &'a SampledWavelengths,
+    si: &SurfaceInteraction,
+    bsdf: &Bsdf,
+) -> ShadingCtx<'a> {
+    ShadingCtx {
+        wl,
+        uv: si.uv,
+        segment: si.t,
+        color: si.color,
+        bump_normal: bsdf.perturbed_normal(si),
+    }
 }
 
 /// The shadow ray and the contribution it carries if unoccluded, for light sample `ls` at a

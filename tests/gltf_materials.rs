@@ -132,6 +132,7 @@ fn albedo(bsdf: &Bsdf, c: f32, lambda: [f32; 4], n: u32) -> [f32; 4] {
         uv: glam::Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     let wi = Vec3::new((1.0 - c * c).max(0.0).sqrt(), 0.0, c);
     let mut s = Sampler::from_seed(3);

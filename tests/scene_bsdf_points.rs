@@ -45,6 +45,7 @@ fn rgb_indices_and_specular_factors_match_mitsuba() {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     let points = doc["points"].as_array().unwrap();
     assert!(points.len() >= 16);
@@ -84,6 +85,7 @@ fn textured_factor_and_roughness_vary_over_the_surface() {
         uv,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     let (a, b) = (Vec2::new(0.25, 0.25), Vec2::new(0.75, 0.25));
     let wi = Vec3::new(0.3, 0.1, 0.95).normalize();
@@ -135,6 +137,7 @@ fn mueller_matrices_match_mitsuba() {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     let points = doc["points"].as_array().unwrap();
     assert!(points.len() >= 8);

@@ -731,6 +731,7 @@ fn rawconstant_textures() {
         uv: glam::Vec2::ZERO,
         segment: 0.0,
         color: Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     let f = s.bsdfs[0].eval(&ctx, Vec3::Z, Vec3::Z);
     assert!(

@@ -110,6 +110,7 @@ fn scalar_face_attribute_weights_a_blend() {
             uv: Vec2::ZERO,
             segment: 0.0,
             color: m.colors[m.indices[k][0] as usize],
+            bump_normal: glam::Vec3::Z,
         };
         let f = b.eval(&ctx, wi, wo)[0] * std::f32::consts::PI;
         assert!((f - w).abs() < 1e-5, "triangle {k}: {f} vs {w}");

@@ -369,6 +369,7 @@ struct EnvSample<C> {
     uv: Vec2,
     segment: f32,
     color: Vec3,
+    bump_normal: Vec3,
     /// The carrier before the vertex scattered it.
     carrier: C,
 }
@@ -756,12 +757,7 @@ fn vertex<C: Carrier>(
         wi: frame.to_local(-ray.dir),
         wi_world: -ray.dir,
     };
-    let ctx = ShadingCtx {
-        wl,
-        uv: si.uv,
-        segment: si.t, // glTF volume absorption (gltf branch hook)
-        color: si.color,
-    };
+    let ctx = shading_ctx(wl, &si, bsdf);
 
     // ---- Emitter sampling (the shadow ray is traced with the batch's others; an
     // environment sample is finished with the round's others) ----
@@ -783,6 +779,7 @@ fn vertex<C: Carrier>(
                 uv: si.uv,
                 segment: si.t,
                 color: si.color,
+                bump_normal: ctx.bump_normal,
                 carrier: b.carrier,
             });
         } else if let Some(ls) = light.sample(si.p, u, wl) {
@@ -822,6 +819,22 @@ fn vertex<C: Carrier>(
         return false;
     };
     advance(scene, b, &si, &v, &bs, &value, wl, sampler)
+}
+
+/// What `bsdf` sees of the shading point `si` besides the directions (the segment length for
+/// glTF volume absorption, a bump map's normal computed once per hit).
+pub(super) fn shading_ctx<'a>(
+    wl: &'a SampledWavelengths,
+    si: &SurfaceInteraction,
+    bsdf: &Bsdf,
+) -> ShadingCtx<'a> {
+    ShadingCtx {
+        wl,
+        uv: si.uv,
+        segment: si.t,
+        color: si.color,
+        bump_normal: bsdf.perturbed_normal(si),
+    }
 }
 
 /// The shadow ray and the contribution it carries if unoccluded, for light sample `ls` at a
@@ -894,6 +907,7 @@ fn resolve_env_samples<C: Carrier>(
             uv: s.uv,
             segment: s.segment,
             color: s.color,
+            bump_normal: s.bump_normal,
         };
         let term = shadow_term(&s.carrier, bsdf, &ctx, &s.v, &ls, sel_pdf, s.p, s.ng);
         if let Some((ray, contribution)) = term {

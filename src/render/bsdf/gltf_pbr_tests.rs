@@ -455,6 +455,7 @@ fn volume_absorbs_along_the_inside_segment() {
             uv: Vec2::ZERO,
             segment,
             color: glam::Vec3::ONE,
+            bump_normal: glam::Vec3::Z,
         };
         b.sample_split(&ctx, wi, 0.5, Vec2::splat(0.5))[1].unwrap().weight
     };
@@ -467,6 +468,7 @@ fn volume_absorbs_along_the_inside_segment() {
         uv: Vec2::ZERO,
         segment: 4.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     let out = b.sample_split(&ctx, -wi, 0.5, Vec2::splat(0.5))[1].unwrap().weight;
     let ctx0 = ctx_of(&wl);

@@ -93,4 +93,8 @@ impl BsdfModel for Mask {
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
         self.inner.shading_frame(si)
     }
+
+    fn perturbed_normal(&self, si: &SurfaceInteraction) -> glam::Vec3 {
+        self.inner.perturbed_normal(si)
+    }
 }

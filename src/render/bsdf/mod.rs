@@ -43,6 +43,10 @@ pub struct ShadingCtx<'a> {
     pub segment: f32,
     /// The vertex colour at the point ([`super::geometry::SurfaceInteraction::color`]).
     pub color: Vec3,
+    /// The model's [`BsdfModel::perturbed_normal`] at the point (+z unless a bump map
+    /// perturbs the normal per direction): computed once per hit from the surface
+    /// derivatives, which `eval` / `sample` / `pdf` do not otherwise see.
+    pub bump_normal: Vec3,
 }
 
 /// A sampled direction.
@@ -152,6 +156,14 @@ pub trait BsdfModel {
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
         si.shading
     }
+
+    /// A perturbed normal at `si` in the local coordinates of [`Self::shading_frame`], for a
+    /// model that perturbs wi and wo itself (Mitsuba 3.8+'s `bumpmap`); it reaches the
+    /// model's methods as [`ShadingCtx::bump_normal`]. +z (no perturbation) unless overridden.
+    fn perturbed_normal(&self, si: &SurfaceInteraction) -> Vec3 {
+        let _ = si;
+        Vec3::Z
+    }
 }
 
 /// A model's polarised form: the Mueller-matrix versions of `eval` and `sample`, with the same
@@ -196,61 +208,6 @@ macro_rules! delta_lobes_only {
     };
 }
 use delta_lobes_only;
-
-/// The [`BsdfModel`] methods of a model that only changes the shading frame of the model it
-/// wraps (`self.inner`: normal and bump maps): flags, values, sampling and the polarised
-/// form are the inner model's, evaluated in the frame the wrapper's `shading_frame` gives.
-macro_rules! frame_only_wrapper {
-    () => {
-        fn flags(&self) -> $crate::render::bsdf::BsdfFlags {
-            self.inner.flags()
-        }
-
-        fn eval(
-            &self,
-            ctx: &$crate::render::bsdf::ShadingCtx,
-            wi: ::glam::Vec3,
-            wo: ::glam::Vec3,
-        ) -> $crate::render::texture::Spec {
-            self.inner.eval(ctx, wi, wo)
-        }
-
-        fn pdf(
-            &self,
-            ctx: &$crate::render::bsdf::ShadingCtx,
-            wi: ::glam::Vec3,
-            wo: ::glam::Vec3,
-        ) -> f32 {
-            self.inner.pdf(ctx, wi, wo)
-        }
-
-        fn sample(
-            &self,
-            ctx: &$crate::render::bsdf::ShadingCtx,
-            wi: ::glam::Vec3,
-            u1: f32,
-            u2: ::glam::Vec2,
-            lobes: $crate::render::bsdf::Lobes,
-        ) -> Option<$crate::render::bsdf::BsdfSample> {
-            self.inner.sample(ctx, wi, u1, u2, lobes)
-        }
-
-        fn sample_split(
-            &self,
-            ctx: &$crate::render::bsdf::ShadingCtx,
-            wi: ::glam::Vec3,
-            u1: f32,
-            u2: ::glam::Vec2,
-        ) -> [Option<$crate::render::bsdf::BsdfSample>; 2] {
-            self.inner.sample_split(ctx, wi, u1, u2)
-        }
-
-        fn polarized(&self) -> Result<&dyn $crate::render::bsdf::PolarizedBsdf, &'static str> {
-            self.inner.polarized()
-        }
-    };
-}
-use frame_only_wrapper;
 
 /// How a model is made from a scene file's plugin element.
 pub trait BsdfPlugin: Sized {
@@ -371,6 +328,14 @@ macro_rules! bsdf_dispatch {
             pub fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
                 match self {
                     $(Bsdf::$variant(b) => b.shading_frame(si),)*
+                }
+            }
+
+            /// The perturbed normal for [`ShadingCtx::bump_normal`] at `si`.
+            #[inline]
+            pub fn perturbed_normal(&self, si: &SurfaceInteraction) -> Vec3 {
+                match self {
+                    $(Bsdf::$variant(b) => b.perturbed_normal(si),)*
                 }
             }
 

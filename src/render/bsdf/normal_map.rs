@@ -63,12 +63,27 @@ pub struct NormalMap {
     pub use_shadowing_function: bool,
 }
 
-impl NormalMap {
-    /// The perturbed frame in the coordinates of the unperturbed one, for incident `wi`;
-    /// None where the texel's normal degenerates.
-    fn local_frame(&self, uv: Vec2, wi: Vec3) -> Option<Frame> {
-        let rgb = self.map.eval(uv);
-        let mut n = Vec3::new(2.0 * rgb[0] - 1.0, 2.0 * rgb[1] - 1.0, 2.0 * rgb[2] - 1.0);
+/// Mitsuba 3.8+'s handling of a perturbed normal `n` given in the unperturbed shading frame
+/// (shared by `normalmap.cpp` and `bumpmap.cpp`, which differ only in how n is made): the
+/// wrapper perturbs wi and wo itself, per incident direction.
+/// - `flip_invalid_normals` (Schüssler et al. 2017's simplest fix): where wi lies below n,
+///   n's tangential part is mirrored, (−x, −y, z);
+/// - directions on opposite sides of the unperturbed and the perturbed normal give zero;
+/// - `use_shadowing_function`: values and sample weights are multiplied by Estevez et al.
+///   2019's terminator term 2 / (1 + √(1 + α² tan²θo)), with α² = min(tan²θn / 8, 1) of the
+///   perturbed normal's tilt θn and θo in the unperturbed frame.
+#[derive(Debug, Clone, Copy)]
+pub struct Perturbation {
+    pub flip_invalid_normals: bool,
+    pub use_shadowing_function: bool,
+}
+
+impl Perturbation {
+    /// The perturbed frame (normal `n`, need not be unit, after the flip; s = +x made
+    /// orthogonal to it) in the coordinates of the unperturbed one, for incident `wi`; None
+    /// where n degenerates.
+    pub fn frame(&self, n: Vec3, wi: Vec3) -> Option<Frame> {
+        let mut n = n;
         if self.flip_invalid_normals && wi.z * wi.dot(n) <= 0.0 {
             n = Vec3::new(-n.x, -n.y, n.z);
         }
@@ -94,10 +109,105 @@ impl NormalMap {
 
     /// The perturbed frame and (wi, wo) in it, None where Mitsuba's value is zero (no usable
     /// normal, or wo on different sides of the two normals).
-    fn perturb(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Option<(Frame, Vec3, Vec3)> {
-        let f = self.local_frame(ctx.uv, wi)?;
+    fn perturb(&self, n: Vec3, wi: Vec3, wo: Vec3) -> Option<(Frame, Vec3, Vec3)> {
+        let f = self.frame(n, wi)?;
         let (wi_p, wo_p) = (f.to_local(wi), f.to_local(wo));
         (wo.z * wo_p.z > 0.0).then_some((f, wi_p, wo_p))
+    }
+
+    /// `inner`'s value in the frame of `n`.
+    pub fn eval(&self, inner: &super::Bsdf, ctx: &ShadingCtx, n: Vec3, wi: Vec3, wo: Vec3) -> Spec {
+        match self.perturb(n, wi, wo) {
+            Some((f, wi_p, wo_p)) => inner.eval(ctx, wi_p, wo_p) * self.shadowing(f.n, wo),
+            None => Spec::ZERO,
+        }
+    }
+
+    /// `inner`'s pdf in the frame of `n` (no shadowing: Mitsuba's pdf is the nested one).
+    pub fn pdf(&self, inner: &super::Bsdf, ctx: &ShadingCtx, n: Vec3, wi: Vec3, wo: Vec3) -> f32 {
+        match self.perturb(n, wi, wo) {
+            Some((_, wi_p, wo_p)) => inner.pdf(ctx, wi_p, wo_p),
+            None => 0.0,
+        }
+    }
+
+    /// `inner` sampled in the frame of `n`, wo returned to the unperturbed frame.
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample(
+        &self,
+        inner: &super::Bsdf,
+        ctx: &ShadingCtx,
+        n: Vec3,
+        wi: Vec3,
+        u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
+    ) -> Option<BsdfSample> {
+        let f = self.frame(n, wi)?;
+        let mut s = inner.sample(ctx, f.to_local(wi), u1, u2, lobes)?;
+        let wo = f.to_world(s.wo);
+        if s.wo.z * wo.z <= 0.0 {
+            return None;
+        }
+        s.wo = wo;
+        s.weight *= self.shadowing(f.n, wo);
+        Some(s)
+    }
+
+    /// [`Self::eval`] as a Mueller operator, Stokes bases in the unperturbed frame.
+    pub fn eval_mueller(
+        &self,
+        inner: &dyn PolarizedBsdf,
+        ctx: &ShadingCtx,
+        n: Vec3,
+        wi: Vec3,
+        wo: Vec3,
+    ) -> MuellerValue {
+        let Some((f, wi_p, wo_p)) = self.perturb(n, wi, wo) else {
+            return MuellerValue::ZERO;
+        };
+        let v = inner.eval_mueller(ctx, wi_p, wo_p).scaled(self.shadowing(f.n, wo));
+        mueller_to_parent(v, &f)
+    }
+
+    /// [`Self::sample`] with the Mueller weight.
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample_mueller(
+        &self,
+        inner: &dyn PolarizedBsdf,
+        ctx: &ShadingCtx,
+        n: Vec3,
+        wi: Vec3,
+        u1: f32,
+        u2: Vec2,
+        lobes: Lobes,
+    ) -> Option<(BsdfSample, MuellerValue)> {
+        let f = self.frame(n, wi)?;
+        let (mut s, v) = inner.sample_mueller(ctx, f.to_local(wi), u1, u2, lobes)?;
+        let wo = f.to_world(s.wo);
+        if s.wo.z * wo.z <= 0.0 {
+            return None;
+        }
+        let g = self.shadowing(f.n, wo);
+        s.wo = wo;
+        s.weight *= g;
+        Some((s, mueller_to_parent(v.scaled(g), &f)))
+    }
+}
+
+impl NormalMap {
+    /// The flag rules of this map.
+    fn rules(&self) -> Perturbation {
+        Perturbation {
+            flip_invalid_normals: self.flip_invalid_normals,
+            use_shadowing_function: self.use_shadowing_function,
+        }
+    }
+
+    /// The texel's normal 2·rgb − 1 in the unperturbed frame (not normalised).
+    fn texel_normal(&self, uv: Vec2) -> Vec3 {
+        let rgb = self.map.eval(uv);
+        Vec3::new(2.0 * rgb[0] - 1.0, 2.0 * rgb[1] - 1.0, 2.0 * rgb[2] - 1.0)
     }
 }
 
@@ -146,17 +256,13 @@ impl super::BsdfModel for NormalMap {
     }
 
     fn eval(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> Spec {
-        match self.perturb(ctx, wi, wo) {
-            Some((f, wi_p, wo_p)) => self.inner.eval(ctx, wi_p, wo_p) * self.shadowing(f.n, wo),
-            None => Spec::ZERO,
-        }
+        let n = self.texel_normal(ctx.uv);
+        self.rules().eval(&self.inner, ctx, n, wi, wo)
     }
 
     fn pdf(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
-        match self.perturb(ctx, wi, wo) {
-            Some((_, wi_p, wo_p)) => self.inner.pdf(ctx, wi_p, wo_p),
-            None => 0.0,
-        }
+        let n = self.texel_normal(ctx.uv);
+        self.rules().pdf(&self.inner, ctx, n, wi, wo)
     }
 
     fn sample(
@@ -167,15 +273,9 @@ impl super::BsdfModel for NormalMap {
         u2: Vec2,
         lobes: Lobes,
     ) -> Option<BsdfSample> {
-        let f = self.local_frame(ctx.uv, wi)?;
-        let mut s = self.inner.sample(ctx, f.to_local(wi), u1, u2, lobes)?;
-        let wo = f.to_world(s.wo);
-        if s.wo.z * wo.z <= 0.0 {
-            return None;
-        }
-        s.wo = wo;
-        s.weight *= self.shadowing(f.n, wo);
-        Some(s)
+        let n = self.texel_normal(ctx.uv);
+        self.rules()
+            .sample(&self.inner, ctx, n, wi, u1, u2, lobes)
     }
 
     fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {
@@ -194,12 +294,11 @@ fn mueller_to_parent(mut v: MuellerValue, f: &Frame) -> MuellerValue {
 
 impl PolarizedBsdf for NormalMap {
     fn eval_mueller(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> MuellerValue {
-        let (Ok(inner), Some((f, wi_p, wo_p))) = (self.inner.polarized(), self.perturb(ctx, wi, wo))
-        else {
+        let Ok(inner) = self.inner.polarized() else {
             return MuellerValue::ZERO;
         };
-        let v = inner.eval_mueller(ctx, wi_p, wo_p).scaled(self.shadowing(f.n, wo));
-        mueller_to_parent(v, &f)
+        let n = self.texel_normal(ctx.uv);
+        self.rules().eval_mueller(inner, ctx, n, wi, wo)
     }
 
     fn sample_mueller(
@@ -211,16 +310,9 @@ impl PolarizedBsdf for NormalMap {
         lobes: Lobes,
     ) -> Option<(BsdfSample, MuellerValue)> {
         let inner = self.inner.polarized().ok()?;
-        let f = self.local_frame(ctx.uv, wi)?;
-        let (mut s, v) = inner.sample_mueller(ctx, f.to_local(wi), u1, u2, lobes)?;
-        let wo = f.to_world(s.wo);
-        if s.wo.z * wo.z <= 0.0 {
-            return None;
-        }
-        let g = self.shadowing(f.n, wo);
-        s.wo = wo;
-        s.weight *= g;
-        Some((s, mueller_to_parent(v.scaled(g), &f)))
+        let n = self.texel_normal(ctx.uv);
+        self.rules()
+            .sample_mueller(inner, ctx, n, wi, u1, u2, lobes)
     }
 }
 
@@ -317,7 +409,10 @@ mod tests {
         let kept = mapped(rgb, diffuse(0.8), false, false);
         assert!(flipped.eval(&ctx, wi, wo)[0] > 0.0);
         assert_eq!(kept.eval(&ctx, wi, wo)[0], 0.0);
-        let f = flipped.local_frame(ctx.uv, wi).unwrap();
+        let f = flipped
+            .rules()
+            .frame(flipped.texel_normal(ctx.uv), wi)
+            .unwrap();
         assert!(f.n.x < 0.0 && wi.dot(f.n) > 0.0, "{:?}", f.n);
         // wo above the macro surface but below the perturbed normal (and the converse).
         let (wi, below_n) = (dir(10.0, 0.0), dir(80.0, 180.0));

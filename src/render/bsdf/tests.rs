@@ -214,18 +214,23 @@ fn cell_of(w: Vec3) -> usize {
 /// χ² test (pbrt-v4 `Chi2Test`): returns the p-value.
 pub(super) fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) -> f64 {
     let wl = wl();
-    let ctx = ShadingCtx {
-        wl: &wl,
-        uv: Vec2::ZERO,
-        segment: 0.0,
-        color: glam::Vec3::ONE,
-    };
+    chi2_pvalue_in(bsdf, &ctx_of(&wl), wi, n_samples, seed)
+}
+
+/// [`chi2_pvalue`] at shading point `ctx`.
+pub(super) fn chi2_pvalue_in(
+    bsdf: &Bsdf,
+    ctx: &ShadingCtx,
+    wi: Vec3,
+    n_samples: usize,
+    seed: u64,
+) -> f64 {
     let mut observed = vec![0.0f64; THETA_BINS * PHI_BINS];
     let mut sampler = Sampler::from_seed(seed);
     for _ in 0..n_samples {
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
-        if let Some(s) = bsdf.sample(&ctx, wi, u1, u2, Lobes::ALL) {
+        if let Some(s) = bsdf.sample(ctx, wi, u1, u2, Lobes::ALL) {
             if !s.is_delta() {
                 observed[cell_of(s.wo)] += 1.0;
             }
@@ -248,7 +253,7 @@ pub(super) fn chi2_pvalue(bsdf: &Bsdf, wi: Vec3, n_samples: usize, seed: u64) ->
                         (theta.sin() * phi.sin()) as f32,
                         theta.cos() as f32,
                     );
-                    sum += bsdf.pdf(&ctx, wi, w) as f64 * theta.sin();
+                    sum += bsdf.pdf(ctx, wi, w) as f64 * theta.sin();
                 }
             }
             let area = (PI / THETA_BINS as f64) * (2.0 * PI / PHI_BINS as f64) / (sub * sub) as f64;
@@ -334,6 +339,7 @@ fn chi2_rejects_a_wrong_pdf() {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     counters::take();
     let mut s = Sampler::from_seed(1);
@@ -354,18 +360,22 @@ fn chi2_rejects_a_wrong_pdf() {
 /// `b`'s non-delta samples have the pdf `pdf` gives and the weight eval / pdf.
 pub(super) fn assert_eval_pdf_sample_agree(name: &str, b: &Bsdf) {
     let wl = wl();
-    let ctx = ctx_of(&wl);
+    assert_eval_pdf_sample_agree_in(name, b, &ctx_of(&wl));
+}
+
+/// [`assert_eval_pdf_sample_agree`] at shading point `ctx`.
+pub(super) fn assert_eval_pdf_sample_agree_in(name: &str, b: &Bsdf, ctx: &ShadingCtx) {
     let mut s = Sampler::from_seed(11);
     for k in 0..2000 {
         let wi = dir(5.0 + 80.0 * s.next_1d(), 360.0 * s.next_1d());
-        let Some(smp) = b.sample(&ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) else {
+        let Some(smp) = b.sample(ctx, wi, s.next_1d(), s.next_2d(), Lobes::ALL) else {
             continue;
         };
         if smp.is_delta() {
             continue;
         }
-        let pdf = b.pdf(&ctx, wi, smp.wo);
-        let f = b.eval(&ctx, wi, smp.wo);
+        let pdf = b.pdf(ctx, wi, smp.wo);
+        let f = b.eval(ctx, wi, smp.wo);
         assert!(
             (pdf - smp.pdf).abs() <= 2e-3 * pdf.max(1.0),
             "{name} #{k}: pdf {pdf} vs sampled {}",
@@ -461,6 +471,7 @@ fn thin_film_conserves_energy_when_lossless() {
                 uv: Vec2::ZERO,
                 segment: 0.0,
                 color: glam::Vec3::ONE,
+                bump_normal: glam::Vec3::Z,
             };
             for cos in [1.0f32, 0.8, 0.5, 0.2, 0.05, 1e-3] {
                 let (r, t) = f.reflect_transmit(&ctx, cos);
@@ -490,6 +501,7 @@ fn zero_thickness_film_is_bare_substrate() {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     counters::take();
     for cos in [1.0f32, 0.6, 0.1] {
@@ -509,6 +521,7 @@ fn finite_at_grazing_and_degenerate_inputs() {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     counters::take();
     let mut all = test_bsdfs();
@@ -567,6 +580,7 @@ fn dielectric_sampling() {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     counters::take();
     let wi = dir(30.0, 0.0);
@@ -594,6 +608,7 @@ fn diffuse_white_furnace_weights() {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     };
     counters::take();
     let mut s = Sampler::from_seed(2);
@@ -614,6 +629,7 @@ pub(super) fn ctx_of(wl: &SampledWavelengths) -> ShadingCtx<'_> {
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
+        bump_normal: glam::Vec3::Z,
     }
 }
 

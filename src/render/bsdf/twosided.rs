@@ -139,6 +139,10 @@ impl BsdfModel for TwoSided {
     fn shading_frame(&self, si: &SurfaceInteraction) -> Frame {
         self.inner.shading_frame(si)
     }
+
+    fn perturbed_normal(&self, si: &SurfaceInteraction) -> glam::Vec3 {
+        self.inner.perturbed_normal(si)
+    }
 }
 
 impl PolarizedBsdf for TwoSided {

@@ -16,7 +16,7 @@
 
 use super::{Branch, Carrier, PathState, Requests, ShadowRequest};
 use crate::render::accel::Hit;
-use crate::render::bsdf::{Bsdf, BsdfFlags, BsdfSample, Lobes, ShadingCtx};
+use crate::render::bsdf::{Bsdf, BsdfFlags, BsdfSample, Lobes};
 use crate::render::camera::Ray;
 use crate::render::counters::{count, Counter};
 use crate::render::geometry::{mis_power, offset_ray_origin, SurfaceInteraction};
@@ -164,12 +164,7 @@ pub(super) fn cross_null<C: Carrier>(
                 return None;
             }
             let frame = bsdf.shading_frame(si);
-            let ctx = ShadingCtx {
-                wl,
-                uv: si.uv,
-                segment: si.t,
-                color: si.color,
-            };
+            let ctx = super::shading_ctx(wl, si, bsdf);
             let wi = frame.to_local(-dir);
             match bsdf.sample(&ctx, wi, sampler.next_1d(), Vec2::ZERO, Lobes::ALL) {
                 Some(s) if s.lobe.contains(BsdfFlags::DELTA_TRANSMISSION) => {
@@ -290,12 +285,7 @@ fn null_transmission(
         Bsdf::Null(_) => Some(Spec::ONE),
         Bsdf::ThinDielectric(_) => {
             let frame = bsdf.shading_frame(si);
-            let ctx = ShadingCtx {
-                wl,
-                uv: si.uv,
-                segment: si.t,
-                color: si.color,
-            };
+            let ctx = super::shading_ctx(wl, si, bsdf);
             // The transmitted lobe alone carries its full value, 1 − R'.
             let s = bsdf.sample(
                 &ctx,

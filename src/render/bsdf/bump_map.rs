@@ -120,6 +120,15 @@ impl super::BsdfPlugin for BumpMap {
     }
 }
 
+/// `ctx` for the nested model: this map's normal is consumed here, so a nested bump map
+/// sees none (it stays flat, as the classic form leaves it) rather than this one twice.
+fn inner_ctx<'a>(ctx: &ShadingCtx<'a>) -> ShadingCtx<'a> {
+    ShadingCtx {
+        bump_normal: Vec3::Z,
+        ..*ctx
+    }
+}
+
 impl super::BsdfModel for BumpMap {
     fn flags(&self) -> BsdfFlags {
         self.inner.flags()
@@ -133,14 +142,16 @@ impl super::BsdfModel for BumpMap {
         if self.classic() {
             return self.inner.eval(ctx, wi, wo);
         }
-        self.rules().eval(&self.inner, ctx, ctx.bump_normal, wi, wo)
+        self.rules()
+            .eval(&self.inner, &inner_ctx(ctx), ctx.bump_normal, wi, wo)
     }
 
     fn pdf(&self, ctx: &ShadingCtx, wi: Vec3, wo: Vec3) -> f32 {
         if self.classic() {
             return self.inner.pdf(ctx, wi, wo);
         }
-        self.rules().pdf(&self.inner, ctx, ctx.bump_normal, wi, wo)
+        self.rules()
+            .pdf(&self.inner, &inner_ctx(ctx), ctx.bump_normal, wi, wo)
     }
 
     fn sample(
@@ -156,7 +167,7 @@ impl super::BsdfModel for BumpMap {
         }
         let n = ctx.bump_normal;
         self.rules()
-            .sample(&self.inner, ctx, n, wi, u1, u2, lobes)
+            .sample(&self.inner, &inner_ctx(ctx), n, wi, u1, u2, lobes)
     }
 
     fn sample_split(
@@ -208,7 +219,7 @@ impl PolarizedBsdf for BumpMap {
             return MuellerValue::ZERO;
         };
         self.rules()
-            .eval_mueller(inner, ctx, ctx.bump_normal, wi, wo)
+            .eval_mueller(inner, &inner_ctx(ctx), ctx.bump_normal, wi, wo)
     }
 
     fn sample_mueller(
@@ -222,7 +233,7 @@ impl PolarizedBsdf for BumpMap {
         let inner = self.inner.polarized().ok()?;
         let n = ctx.bump_normal;
         self.rules()
-            .sample_mueller(inner, ctx, n, wi, u1, u2, lobes)
+            .sample_mueller(inner, &inner_ctx(ctx), n, wi, u1, u2, lobes)
     }
 }
 
@@ -336,6 +347,21 @@ mod tests {
         let (a, b) = (on.eval(&ctx, wi, wo)[0], off.eval(&ctx, wi, wo)[0]);
         assert!(b > 0.0 && (a / b - g).abs() < 1e-5, "{a} {b} {g}");
         assert!(g < 0.99);
+    }
+
+    /// A bump map nested in another does not apply the outer one's normal a second time.
+    #[test]
+    fn nested_map_sees_no_second_tilt() {
+        let wl = wl();
+        let ctx = ShadingCtx {
+            bump_normal: local_normal(Vec2::new(1.0, 0.0)),
+            ..ctx_of(&wl)
+        };
+        let single = bump(diffuse(0.8), true, true);
+        let nested = bump(bump(diffuse(0.8), true, true).into(), true, true);
+        let (wi, wo) = (dir(30.0, 10.0), dir(70.0, 200.0));
+        let (a, b) = (single.eval(&ctx, wi, wo), nested.eval(&ctx, wi, wo));
+        assert!(a[0] > 0.0 && (a - b).abs().max_element() < 1e-6, "{a} {b}");
     }
 
     /// A steep slope (normal tilted 60° towards −x): wi grazing from +x lies below it. With

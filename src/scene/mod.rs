@@ -393,6 +393,7 @@ pub mod gltf_scene;
 pub mod meshio;
 pub mod mitsuba;
 mod ply_binary;
+mod ply_scalar;
 pub mod serialized;
 pub mod shapes;
 pub mod sky;

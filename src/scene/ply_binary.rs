@@ -9,37 +9,12 @@
 //! index lists, a body shorter than its header says), which the general reader then reads
 //! or rejects with its own message.
 
+use super::ply_scalar::Ty;
 use super::TriangleMesh;
 use anyhow::{bail, Result};
 use glam::{Vec2, Vec3};
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Ty {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
 impl Ty {
-    fn parse(name: &str) -> Option<Ty> {
-        Some(match name {
-            "char" | "int8" => Ty::I8,
-            "uchar" | "uint8" => Ty::U8,
-            "short" | "int16" => Ty::I16,
-            "ushort" | "uint16" => Ty::U16,
-            "int" | "int32" => Ty::I32,
-            "uint" | "uint32" => Ty::U32,
-            "float" | "float32" => Ty::F32,
-            "double" | "float64" => Ty::F64,
-            _ => return None,
-        })
-    }
-
     /// The factor that maps a stored colour channel to [0, 1]: integer channels are
     /// normalised by their maximum (u8 / 255), floats are taken as stored.
     fn color_scale(self) -> f32 {
@@ -47,15 +22,6 @@ impl Ty {
             Ty::U8 => 1.0 / 255.0,
             Ty::U16 => 1.0 / 65535.0,
             _ => 1.0,
-        }
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Ty::I8 | Ty::U8 => 1,
-            Ty::I16 | Ty::U16 => 2,
-            Ty::I32 | Ty::U32 | Ty::F32 => 4,
-            Ty::F64 => 8,
         }
     }
 

@@ -9,6 +9,7 @@
 //! stored. (Mitsuba 3.9.1 takes integer colour properties unnormalised — 255 stays 255 — with
 //! a warning that colours are expected in [0, 1]; thinfilm keeps its reading of them.)
 
+use crate::scene::ply_scalar::Ty;
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::Path;
 
@@ -20,42 +21,7 @@ pub struct MeshAttribute {
     pub values: Vec<f32>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Ty {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
 impl Ty {
-    fn parse(s: &str) -> Option<Ty> {
-        Some(match s {
-            "char" | "int8" => Ty::I8,
-            "uchar" | "uint8" => Ty::U8,
-            "short" | "int16" => Ty::I16,
-            "ushort" | "uint16" => Ty::U16,
-            "int" | "int32" => Ty::I32,
-            "uint" | "uint32" => Ty::U32,
-            "float" | "float32" => Ty::F32,
-            "double" | "float64" => Ty::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Ty::I8 | Ty::U8 => 1,
-            Ty::I16 | Ty::U16 => 2,
-            Ty::I32 | Ty::U32 | Ty::F32 => 4,
-            Ty::F64 => 8,
-        }
-    }
-
     /// The maximum of an integer type (None for floats): Mitsuba's `Normalized` divisor.
     fn int_max(self) -> Option<f64> {
         Some(match self {

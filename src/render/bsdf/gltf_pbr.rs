@@ -404,11 +404,7 @@ impl GltfPbr {
             return None;
         }
         let pdf = self.pdf_oriented(p, &w, wi, wo);
-        if !(pdf > 0.0 && pdf.is_finite()) {
-            return None;
-        }
-        let value = self.eval_oriented(p, ctx, wi, wo);
-        let mut s = BsdfSample::smooth(wo, value / pdf, pdf, flag);
+        let mut s = BsdfSample::of_mixture(wo, pdf, || self.eval_oriented(p, ctx, wi, wo), flag)?;
         if flag == BsdfFlags::GLOSSY_TRANSMISSION && self.material.volume.is_some() {
             s.eta = p.eta;
         }

@@ -79,6 +79,22 @@ impl BsdfSample {
         }
     }
 
+    /// A sample drawn from one lobe of a mixture, weighted by the whole model's
+    /// `eval() / pdf` at `wo` (one-sample MIS over the lobes); `None` where the mixture's
+    /// pdf vanishes or overflows.
+    #[inline]
+    pub fn of_mixture(
+        wo: Vec3,
+        pdf: f32,
+        eval: impl FnOnce() -> Spec,
+        lobe: BsdfFlags,
+    ) -> Option<Self> {
+        if !(pdf > 0.0 && pdf.is_finite()) {
+            return None;
+        }
+        Some(BsdfSample::smooth(wo, eval() / pdf, pdf, lobe))
+    }
+
     /// A sample of the Dirac `lobe` with selection probability `pdf`.
     #[inline]
     pub fn delta(wo: Vec3, weight: Spec, pdf: f32, lobe: BsdfFlags) -> Self {

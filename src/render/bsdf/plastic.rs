@@ -306,15 +306,7 @@ impl BsdfModel for Plastic {
                     return None;
                 }
                 let pdf = self.pdf(ctx, wi, wo);
-                if !(pdf > 0.0 && pdf.is_finite()) {
-                    return None;
-                }
-                Some(BsdfSample::smooth(
-                    wo,
-                    self.eval(ctx, wi, wo) / pdf,
-                    pdf,
-                    lobe,
-                ))
+                BsdfSample::of_mixture(wo, pdf, || self.eval(ctx, wi, wo), lobe)
             }
         }
     }

@@ -209,15 +209,7 @@ impl BsdfModel for PolarizedPlastic {
             )
         };
         let pdf = self.pdf(ctx, wi, wo);
-        if !(pdf > 0.0 && pdf.is_finite()) {
-            return None;
-        }
-        Some(BsdfSample::smooth(
-            wo,
-            self.eval(ctx, wi, wo) / pdf,
-            pdf,
-            lobe,
-        ))
+        BsdfSample::of_mixture(wo, pdf, || self.eval(ctx, wi, wo), lobe)
     }
 
     fn polarized(&self) -> Result<&dyn PolarizedBsdf, &'static str> {

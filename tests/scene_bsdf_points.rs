@@ -27,12 +27,9 @@ fn vec3(v: &serde_json::Value) -> Vec3 {
     Vec3::new(a[0], a[1], a[2])
 }
 
-/// Within 1 % per wavelength (Mitsuba's Beckmann G1 is a rational fit, 0.35 % off; its
-/// upsampling table is its own fit of the same method as thinfilm's).
-#[test]
-fn rgb_indices_and_specular_factors_match_mitsuba() {
-    let doc: serde_json::Value =
-        serde_json::from_str(include_str!("references/bsdf_spectral_points.json")).unwrap();
+/// A reference file's JSON and the four wavelengths its values were taken at.
+fn reference_points(json: &str) -> (serde_json::Value, SampledWavelengths) {
+    let doc: serde_json::Value = serde_json::from_str(json).unwrap();
     let lambda: Vec<f32> = doc["wavelengths"]
         .as_array()
         .unwrap()
@@ -40,13 +37,26 @@ fn rgb_indices_and_specular_factors_match_mitsuba() {
         .map(|x| x.as_f64().unwrap() as f32)
         .collect();
     let wl = SampledWavelengths::new([lambda[0], lambda[1], lambda[2], lambda[3]], [1.0; 4]);
-    let ctx = ShadingCtx {
-        wl: &wl,
+    (doc, wl)
+}
+
+/// A shading context at `wl` with no texture, vertex colour or bump.
+fn ctx_at(wl: &SampledWavelengths) -> ShadingCtx<'_> {
+    ShadingCtx {
+        wl,
         uv: Vec2::ZERO,
         segment: 0.0,
         color: glam::Vec3::ONE,
         bump_normal: glam::Vec3::Z,
-    };
+    }
+}
+
+/// Within 1 % per wavelength (Mitsuba's Beckmann G1 is a rational fit, 0.35 % off; its
+/// upsampling table is its own fit of the same method as thinfilm's).
+#[test]
+fn rgb_indices_and_specular_factors_match_mitsuba() {
+    let (doc, wl) = reference_points(include_str!("references/bsdf_spectral_points.json"));
+    let ctx = ctx_at(&wl);
     let points = doc["points"].as_array().unwrap();
     assert!(points.len() >= 16);
     for (k, p) in points.iter().enumerate() {
@@ -60,7 +70,7 @@ fn rgb_indices_and_specular_factors_match_mitsuba() {
             assert!(
                 (v - r).abs() <= 0.01 * r + 1e-5,
                 "#{k} {xml} λ={}: eval {v} vs Mitsuba {r}",
-                lambda[i]
+                wl.lambda[i]
             );
         }
         let pdf = b.pdf(&ctx, wi, wo) as f64;
@@ -123,22 +133,8 @@ fn textured_factor_and_roughness_vary_over_the_surface() {
 fn mueller_matrices_match_mitsuba() {
     use thinfilm::render::bsdf::MuellerValue;
     use thinfilm::render::polarization::{stokes_basis, Mueller};
-    let doc: serde_json::Value =
-        serde_json::from_str(include_str!("references/bsdf_mueller_points.json")).unwrap();
-    let lambda: Vec<f32> = doc["wavelengths"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap() as f32)
-        .collect();
-    let wl = SampledWavelengths::new([lambda[0], lambda[1], lambda[2], lambda[3]], [1.0; 4]);
-    let ctx = ShadingCtx {
-        wl: &wl,
-        uv: Vec2::ZERO,
-        segment: 0.0,
-        color: glam::Vec3::ONE,
-        bump_normal: glam::Vec3::Z,
-    };
+    let (doc, wl) = reference_points(include_str!("references/bsdf_mueller_points.json"));
+    let ctx = ctx_at(&wl);
     let points = doc["points"].as_array().unwrap();
     assert!(points.len() >= 8);
     let mut polarizing = 0;
@@ -167,7 +163,7 @@ fn mueller_matrices_match_mitsuba() {
                     assert!(
                         (got - want(i, j)).abs() <= tol,
                         "#{k} {xml} λ={} M[{i}][{j}]: {got} vs Mitsuba {}",
-                        lambda[w],
+                        wl.lambda[w],
                         want(i, j)
                     );
                 }

@@ -406,45 +406,25 @@ type TriRef = (u32, u32);
 /// how many triangles were dropped (degenerate, non-finite or repeated); errors name the
 /// mesh whose normals, uvs or indices do not fit its vertices.
 fn collect_triangles(scene: &Scene) -> anyhow::Result<(Vec<TriRef>, Vec<SphereGeom>, usize)> {
-    // Exact capacity: for millions of triangles a doubling Vec's spare half was ~100 MB of
-    // the peak.
-    let n_tris: usize = (scene.shapes.iter())
-        .map(|s| match &s.geometry {
-            Geometry::Mesh(m) => m.indices.len(),
-            Geometry::Sphere { .. } => 0,
-        })
-        .sum();
-    let mut tri_ref = Vec::with_capacity(n_tris);
+    use rayon::prelude::*;
+    // Hittable triangles with their repeat key, in scene order (shape, then index): checked
+    // in parallel, one chunk of a mesh per task.
+    let mut candidates: Vec<(TriRef, u64)> = Vec::new();
     let mut spheres = Vec::new();
-    let mut dropped = 0usize;
-    let mut repeats = RepeatFilter::default();
+    let mut n_tris = 0usize;
     for (si, shape) in scene.shapes.iter().enumerate() {
         match &shape.geometry {
             Geometry::Mesh(m) => {
                 check_mesh(m, shape.name.as_deref().unwrap_or("<unnamed>"), si)?;
-                for (ti, idx) in m.indices.iter().enumerate() {
+                n_tris += m.indices.len();
+                let hittable = (m.indices.par_iter().enumerate()).filter_map(|(ti, idx)| {
                     let [a, b, c] = idx.map(|i| m.positions[i as usize]);
                     let area2 = (b - a).cross(c - a).length();
-                    if !(a.is_finite() && b.is_finite() && c.is_finite())
-                        || area2 <= 0.0
-                        || !area2.is_finite()
-                        || repeats.seen_before([a, b, c], tri_ref.len(), |k| {
-                            let (s, t) = tri_ref[k];
-                            match &scene.shapes[s as usize].geometry {
-                                Geometry::Mesh(m) => {
-                                    m.indices[t as usize].map(|i| m.positions[i as usize])
-                                }
-                                Geometry::Sphere { .. } => {
-                                    unreachable!("kept triangles are mesh triangles")
-                                }
-                            }
-                        })
-                    {
-                        dropped += 1;
-                        continue;
-                    }
-                    tri_ref.push((si as u32, ti as u32));
-                }
+                    let finite = a.is_finite() && b.is_finite() && c.is_finite();
+                    (finite && area2 > 0.0 && area2.is_finite())
+                        .then(|| ((si as u32, ti as u32), repeat_hash(&repeat_key([a, b, c]))))
+                });
+                candidates.par_extend(hittable);
             }
             Geometry::Sphere {
                 center,
@@ -465,7 +445,64 @@ fn collect_triangles(scene: &Scene) -> anyhow::Result<(Vec<TriRef>, Vec<SphereGe
             }
         }
     }
-    Ok((tri_ref, spheres, dropped))
+    let vertices = |&(s, t): &TriRef| match &scene.shapes[s as usize].geometry {
+        Geometry::Mesh(m) => m.indices[t as usize].map(|i| m.positions[i as usize]),
+        Geometry::Sphere { .. } => unreachable!("candidates are mesh triangles"),
+    };
+    let repeated = repeats(&candidates, |k| repeat_key(vertices(&candidates[k].0)));
+    // Exact capacity: for millions of triangles a doubling Vec's spare half was ~100 MB of
+    // the peak.
+    let kept = candidates.len() - repeated.iter().filter(|&&r| r).count();
+    let mut tri_ref = Vec::with_capacity(kept);
+    tri_ref.extend((candidates.iter().zip(&repeated)).filter_map(|(c, &r)| (!r).then_some(c.0)));
+    Ok((tri_ref, spheres, n_tris - kept))
+}
+
+/// A triangle's vertices as bit patterns, in a fixed order: equal for the same triangle
+/// listed with its vertices in any order (a repeat), different for any other triangle.
+fn repeat_key(v: [Vec3; 3]) -> [[u32; 3]; 3] {
+    let mut k = v.map(|p| p.to_array().map(f32::to_bits));
+    k.sort_unstable();
+    k
+}
+
+/// FNV-1a over a [`repeat_key`]'s 36 bytes: a sort key only; equal hashes are compared in full.
+fn repeat_hash(k: &[[u32; 3]; 3]) -> u64 {
+    (k.iter().flatten()).fold(0xcbf2_9ce4_8422_2325u64, |h, &w| {
+        (h ^ w as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// Which of `items` (anything, with a [`repeat_hash`] each, in scene order) repeat an
+/// earlier item: exact repeats of a triangle already kept (a polygon fan over three
+/// vertices, a glTF primitive listed 20 000 times, an instance placed twice at one spot). A
+/// copy adds nothing a ray could see, and PLOC pairs identical boxes one merge per pass:
+/// 20 000 copies took 15 s of CPU to build (quadratic). They are dropped like degenerate
+/// triangles; the first of each group is kept.
+///
+/// Sorting (hash, position) pairs finds them in O(n log n) on all cores with 16 bytes per
+/// triangle; the hash map this replaced probed memory at random (0.6 s and 71 MB for 2M
+/// triangles). `key(i)` gives item i's full key: items whose hashes collide are compared in full.
+fn repeats<T: Sync>(items: &[(T, u64)], key: impl Fn(usize) -> [[u32; 3]; 3]) -> Vec<bool> {
+    use rayon::prelude::*;
+    let mut order: Vec<(u64, u32)> = (items.par_iter().enumerate())
+        .map(|(i, (_, h))| (*h, i as u32))
+        .collect();
+    order.par_sort_unstable();
+    let mut repeated = vec![false; items.len()];
+    for run in order.chunk_by(|a, b| a.0 == b.0).filter(|r| r.len() > 1) {
+        // Within a run, positions ascend: each item is compared with the kept ones before it.
+        let mut kept: Vec<[[u32; 3]; 3]> = Vec::new();
+        for &(_, i) in run {
+            let k = key(i as usize);
+            if kept.contains(&k) {
+                repeated[i as usize] = true;
+            } else {
+                kept.push(k);
+            }
+        }
+    }
+    repeated
 }
 
 /// Normals, uvs and colours per vertex (or none), indices within the vertices.
@@ -588,42 +625,6 @@ fn build_bvh(
     // The node array was reserved at one node per triangle (80 bytes each); ~1/8 is used.
     bvh.nodes.shrink_to_fit();
     bvh
-}
-
-/// Exact repeats of a triangle already kept (a polygon fan over three vertices, a glTF
-/// primitive listed 20 000 times, an instance placed twice at one spot). A copy adds nothing
-/// a ray could see, and PLOC pairs identical boxes one merge per pass: 20 000 copies took
-/// 15 s of CPU to build (quadratic). They are dropped like degenerate triangles.
-#[derive(Default)]
-struct RepeatFilter(std::collections::HashMap<u64, u32>);
-
-impl RepeatFilter {
-    /// Whether `v` (in any vertex order) equals a kept triangle (`kept(k)`: the vertices of
-    /// kept triangle k); otherwise records that it is about to be kept as number `next`.
-    fn seen_before(
-        &mut self,
-        v: [Vec3; 3],
-        next: usize,
-        kept: impl FnOnce(usize) -> [Vec3; 3],
-    ) -> bool {
-        let key = |v: [Vec3; 3]| {
-            let mut k = v.map(|p| p.to_array().map(f32::to_bits));
-            k.sort_unstable();
-            k
-        };
-        let k = key(v);
-        // FNV-1a over the 36 bytes: a map key only; equal keys are compared in full.
-        let hash = k.iter().flatten().fold(0xcbf2_9ce4_8422_2325u64, |h, &w| {
-            (h ^ w as u64).wrapping_mul(0x0100_0000_01b3)
-        });
-        match self.0.entry(hash) {
-            std::collections::hash_map::Entry::Occupied(e) => key(kept(*e.get() as usize)) == k,
-            std::collections::hash_map::Entry::Vacant(e) => {
-                e.insert(next as u32);
-                false
-            }
-        }
-    }
 }
 
 /// Whether many distinct triangles share one build box (a hostile input: e.g. triangles
@@ -1374,6 +1375,87 @@ mod tests {
             hits += a.is_some() as u32;
         }
         assert!(hits > 1_000, "{hits} hits");
+    }
+
+    /// Repeats are found as a quadratic scan finds them — the first of each group kept, every
+    /// later equal triangle (vertices in any order) dropped — also when every hash collides.
+    #[test]
+    fn repeats_are_the_later_copies_of_equal_triangles() {
+        let mut state = 0x9e37_79b9_u32;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        };
+        // Vertices from a pool of 6 points: many triangles repeat, in rotated and mirrored
+        // vertex orders.
+        let pool: Vec<Vec3> = (0..6)
+            .map(|i| Vec3::new(i as f32, (i * i) as f32, 1.0))
+            .collect();
+        let tris: Vec<[Vec3; 3]> = (0..400)
+            .map(|_| [0, 1, 2].map(|_| pool[next() as usize % pool.len()]))
+            .collect();
+        let expected: Vec<bool> = (0..tris.len())
+            .map(|i| (0..i).any(|j| repeat_key(tris[j]) == repeat_key(tris[i])))
+            .collect();
+        assert!(expected.iter().filter(|&&r| r).count() > 100);
+        for constant_hash in [false, true] {
+            let items: Vec<((), u64)> = (tris.iter())
+                .map(|&t| {
+                    (
+                        (),
+                        if constant_hash {
+                            7
+                        } else {
+                            repeat_hash(&repeat_key(t))
+                        },
+                    )
+                })
+                .collect();
+            assert_eq!(repeats(&items, |i| repeat_key(tris[i])), expected);
+        }
+    }
+
+    /// The BVH's triangles: degenerate, non-finite and repeated triangles (also across shapes)
+    /// are dropped and counted, the rest kept in scene order.
+    #[test]
+    fn collect_triangles_drops_degenerate_and_repeated_triangles() {
+        let p = [
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(f32::NAN, 0.0, 0.0),
+        ];
+        let mesh = |indices: Vec<[u32; 3]>| crate::scene::TriangleMesh {
+            positions: p.to_vec(),
+            indices,
+            ..Default::default()
+        };
+        let mut scene = crate::figure::teapot_scene(&Default::default());
+        let template = scene.shapes[0].clone();
+        scene.shapes.clear();
+        for m in [
+            mesh(vec![
+                [0, 1, 2],
+                [2, 0, 1],
+                [0, 1, 3],
+                [0, 1, 4],
+                [1, 2, 3],
+                [2, 1, 0],
+            ]),
+            mesh(vec![[1, 0, 2], [1, 3, 2]]),
+        ] {
+            scene.shapes.push(crate::scene::Shape {
+                geometry: Geometry::Mesh(m),
+                ..template.clone()
+            });
+        }
+        let (kept, spheres, dropped) = collect_triangles(&scene).unwrap();
+        assert_eq!(kept, vec![(0, 0), (0, 4)]);
+        assert!(spheres.is_empty());
+        assert_eq!(dropped, 6);
     }
 
     fn tri_vertices(t: &Triangle) -> [Vec3; 3] {

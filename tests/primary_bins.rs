@@ -86,7 +86,7 @@ fn compare_with_bvh(p: &PreparedScene, bins: &PrimaryBins, per_pixel: u32) -> (u
 
 #[test]
 fn teapot_camera_rays_find_the_bvh_hit() {
-    let p = teapot(64, 1);
+    let p = teapot(64, 64);
     let bins = p.primary_bins().expect("bins for the teapot");
     let stats = bins.stats();
     assert_eq!(stats.crossing, 0);
@@ -258,15 +258,23 @@ fn bins_step_aside_when_many_triangles_cross_the_camera_plane() {
     assert!(out.image.pixels.iter().flatten().all(|v| v.is_finite()));
 }
 
+/// Too few camera rays per triangle to pay for binning (a 64² one-sample preview of the 36k
+/// teapot: 4096 rays): no bins, and they come back at 64 samples per pixel.
+#[test]
+fn bins_step_aside_for_few_camera_rays_per_triangle() {
+    assert!(teapot(64, 1).primary_bins().is_none());
+    assert!(teapot(64, 64).primary_bins().is_some());
+}
+
 /// The bins are an acceleration only: the image is the BVH-only image.
 #[test]
 fn render_with_bins_equals_render_without() {
-    let with = teapot(48, 4);
+    let with = teapot(48, 64);
     assert!(with.primary_bins().is_some());
-    let mut without = teapot(48, 4);
+    let mut without = teapot(48, 64);
     without.use_bvh_for_camera_rays();
-    let a = render_prepared(&with, &options(48, 4)).unwrap();
-    let b = render_prepared(&without, &options(48, 4)).unwrap();
+    let a = render_prepared(&with, &options(48, 64)).unwrap();
+    let b = render_prepared(&without, &options(48, 64)).unwrap();
     assert_eq!(a.stats.rays, b.stats.rays);
     let differing = a
         .image

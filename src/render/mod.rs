@@ -415,7 +415,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     // Screen bins need camera rays from one pinhole (`lights` hook: not for lens cameras).
     let primary_bins = camera
         .pinhole()
-        .and_then(|c| primary::PrimaryBins::build(&accel, c, width, height));
+        .and_then(|c| primary::PrimaryBins::build(&accel, c, width, height, samples));
     effects.decisions.push(effects::Decision {
         effect: effects::Effect::CameraRays,
         on: primary_bins.is_some(),

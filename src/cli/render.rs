@@ -249,6 +249,9 @@ pub fn run(args: Args, report: Output) -> Result<()> {
         eprintln!("{}", resume_hint(&args, &out, &path, &resume));
         return Err(Interrupted.into());
     }
+    // The process ends here: returning the scene's and the BVH's pages one allocation at a
+    // time (~0.1 s for 2M triangles) is work the exit does at once.
+    std::mem::forget((prepared, scene, out));
     Ok(())
 }
 

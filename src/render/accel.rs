@@ -62,7 +62,7 @@ impl Accel {
     /// Builds the BVH. Degenerate, non-finite and repeated triangles are dropped (they cannot
     /// be hit, or add nothing to their twin); the count is returned so the caller can report it.
     /// `samples` (pixels × samples per pixel to render) picks the build's effort, see
-    /// [`build_params`].
+    /// [`build_effort`].
     ///
     /// Memory: at 2M triangles the peak is obvhs' BVH2 → CWBVH conversion (a 7-entry cost
     /// table per BVH2 node, ~110 bytes per triangle, beside the BVH2's own 64). Nothing else of
@@ -80,7 +80,7 @@ impl Accel {
         let (bvh, rt_tris, tri_ref) = if tri_ref.is_empty() {
             (None, Vec::new(), tri_ref)
         } else {
-            let bvh = build_bvh(&tri_ref, vertices, build_params(samples, tri_ref.len()));
+            let bvh = build_bvh(&tri_ref, vertices, build_effort(samples, tri_ref.len()));
             // Reorder once so leaf primitive ids index the triangle arrays directly.
             let order = &bvh.primitive_indices;
             let rt_tris = (order.iter())
@@ -557,8 +557,9 @@ fn check_mesh(m: &TriangleMesh, name: &str, si: usize) -> anyhow::Result<()> {
 fn build_bvh(
     tris: &[TriRef],
     vertices: impl Fn(&TriRef) -> [Vec3; 3],
-    params: obvhs::BvhBuildParams,
+    effort: BuildEffort,
 ) -> CwBvh {
+    let params = effort.params;
     use obvhs::aabb::Aabb;
     use obvhs::ploc::PlocSearchDistance as D;
     let plain_box = |i: usize| Aabb::from_points(&vertices(&tris[i]).map(Into::into));
@@ -619,7 +620,7 @@ fn build_bvh(
     let mut bvh = obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(
         &bvh2,
         params.max_prims_per_leaf.clamp(1, 3),
-        true,
+        effort.order_children,
         false,
     );
     // The node array was reserved at one node per triangle (80 bytes each); ~1/8 is used.
@@ -662,20 +663,35 @@ fn widen_box(b: obvhs::aabb::Aabb, i: usize) -> obvhs::aabb::Aabb {
     }
 }
 
+/// How much work the BVH build does: obvhs' parameters, and whether the BVH2 → CWBVH
+/// conversion orders each node's children by ray octant (front-to-back traversal).
+#[derive(Debug, Clone, Copy)]
+struct BuildEffort {
+    params: obvhs::BvhBuildParams,
+    order_children: bool,
+}
+
 /// BVH build effort for `tris` triangles and `samples` camera samples. obvhs' slow_build
 /// (pre-split, wider PLOC search, more reinsertion) traces ~20 % faster than medium_build on
 /// the 36k-triangle teapot for ~50 ms more set-up, but its reinsertion pass grows faster
 /// than the triangle count: on a 2M-triangle sphere it took 4.3 s of CPU against 1.9 s for
-/// the whole render with fast_build (256², 4 spp). A closest hit does not depend on the BVH
-/// except at exact ties (smaller id in BVH order), so this trades time, not images.
-fn build_params(samples: u64, tris: usize) -> obvhs::BvhBuildParams {
+/// the whole render with fast_build (256², 4 spp). Below two samples per triangle the
+/// children are not ordered either: the ordering (a fifth of the conversion) saved less
+/// render time than it cost (2M-triangle sphere, 256², 4 spp: 1.93–2.24 s of CPU for the
+/// whole render without, 2.24–2.44 s with). A closest hit does not depend on the BVH except
+/// at exact ties (smaller id in BVH order), so this trades time, not images.
+fn build_effort(samples: u64, tris: usize) -> BuildEffort {
     let per_tri = samples as f64 / tris.max(1) as f64;
-    if per_tri >= 16.0 {
+    let params = if per_tri >= 16.0 {
         obvhs::BvhBuildParams::slow_build()
     } else if per_tri >= 2.0 {
         obvhs::BvhBuildParams::medium_build()
     } else {
         obvhs::BvhBuildParams::fast_build()
+    };
+    BuildEffort {
+        params,
+        order_children: per_tri >= 2.0,
     }
 }
 
@@ -1354,7 +1370,11 @@ mod tests {
         let params = obvhs::BvhBuildParams::fast_build();
         let mut time = std::time::Duration::default();
         let refs: Vec<TriRef> = (0..tris.len() as u32).map(|i| (0, i)).collect();
-        let with_boxes = build_bvh(&refs, |&(_, i)| tri_vertices(&tris[i as usize]), params);
+        let effort = BuildEffort {
+            params,
+            order_children: true,
+        };
+        let with_boxes = build_bvh(&refs, |&(_, i)| tri_vertices(&tris[i as usize]), effort);
         let with_tris = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut time);
         let rt = |bvh: &CwBvh| -> Vec<RtTriangle> {
             (bvh.primitive_indices.iter())
@@ -1475,12 +1495,64 @@ mod tests {
             obvhs::BvhBuildParams::medium_build(),
             obvhs::BvhBuildParams::slow_build(),
         ] {
-            let ours = build_bvh(&refs, vertices, params);
+            let effort = BuildEffort {
+                params,
+                order_children: true,
+            };
+            let ours = build_bvh(&refs, vertices, effort);
             let mut time = std::time::Duration::default();
             let theirs = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut time);
             assert_eq!(ours.primitive_indices, theirs.primitive_indices);
             assert!(ours.nodes == theirs.nodes);
         }
+    }
+
+    /// A BVH whose children are not ordered by octant (the fast build) finds the same closest
+    /// hits (t bit for bit, the same triangle) and occlusion answers as the ordered one.
+    #[test]
+    fn unordered_children_find_the_same_hits() {
+        let mut tris: Vec<Triangle> = obvhs::test_util::geometry::icosphere(4);
+        tris.extend(obvhs::test_util::geometry::PLANE);
+        let refs: Vec<TriRef> = (0..tris.len() as u32).map(|i| (0, i)).collect();
+        let vertices = |&(_, i): &TriRef| tri_vertices(&tris[i as usize]);
+        let params = obvhs::BvhBuildParams::fast_build();
+        let build = |order_children| {
+            let bvh = build_bvh(
+                &refs,
+                vertices,
+                BuildEffort {
+                    params,
+                    order_children,
+                },
+            );
+            let rt: Vec<RtTriangle> = (bvh.primitive_indices.iter())
+                .map(|&i| RtTriangle::from(&tris[i as usize]))
+                .collect();
+            (bvh, rt)
+        };
+        let ((ordered, rt_o), (unordered, rt_u)) = (build(true), build(false));
+        assert!(
+            ordered.nodes != unordered.nodes,
+            "the ordering changes the nodes"
+        );
+        let mut rng = crate::render::sampler::Sampler::from_seed(5);
+        let mut hits = 0;
+        for i in 0..5_000 {
+            // From a 6-unit cube towards a point near the sphere's centre.
+            let o = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) * 6.0 - 3.0;
+            let target = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) - 0.5;
+            let d = (target - o).normalize();
+            let r = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, f32::INFINITY);
+            let original = |h: Option<(f32, u32)>, bvh: &CwBvh| {
+                h.map(|(t, k)| (t.to_bits(), bvh.primitive_indices[k as usize]))
+            };
+            let a = original(closest_hit(&ordered, &rt_o, r), &ordered);
+            let b = original(closest_hit(&unordered, &rt_u, r), &unordered);
+            assert_eq!(a, b, "ray {i}");
+            assert_eq!(any_hit(&unordered, &rt_u, r), a.is_some(), "ray {i}");
+            hits += a.is_some() as u32;
+        }
+        assert!(hits > 1_000, "{hits} hits");
     }
 
     /// Axis-aligned rays onto an axis-aligned flat quad (a zero-thickness box, infinite

@@ -672,17 +672,21 @@ struct BuildEffort {
 }
 
 /// BVH build effort for `tris` triangles and `samples` camera samples. obvhs' slow_build
-/// (pre-split, wider PLOC search, more reinsertion) traces ~20 % faster than medium_build on
-/// the 36k-triangle teapot for ~50 ms more set-up, but its reinsertion pass grows faster
-/// than the triangle count: on a 2M-triangle sphere it took 4.3 s of CPU against 1.9 s for
-/// the whole render with fast_build (256², 4 spp). Below two samples per triangle the
-/// children are not ordered either: the ordering (a fifth of the conversion) saved less
-/// render time than it cost (2M-triangle sphere, 256², 4 spp: 1.93–2.24 s of CPU for the
-/// whole render without, 2.24–2.44 s with). A closest hit does not depend on the BVH except
-/// at exact ties (smaller id in BVH order), so this trades time, not images.
+/// (pre-split, wider PLOC search, more reinsertion) took ~25 ms more than medium_build on
+/// the 36k-triangle teapot, on the render's critical path, and rendered no faster: one thread,
+/// 256², 64 spp (114 samples per triangle), six alternating runs, CPU s slow / medium:
+/// diffuse 2.07 / 1.93, thin film 0.81 / 0.82, gold 0.88 / 0.87 (medians); at 256 spp
+/// diffuse 6.27 / 6.27, thin film 2.82 / 2.89. It is kept for renders of more than 1024
+/// samples per triangle, whose build is a small part of them whatever it costs. Its
+/// reinsertion pass grows faster than the triangle count (2M-triangle sphere: 4.3 s of CPU
+/// against 1.9 s for the whole render with fast_build at 256², 4 spp). Below two samples per
+/// triangle the children are not ordered either: the ordering (a fifth of the conversion)
+/// saved less render time than it cost (2M-triangle sphere, 256², 4 spp: 1.93–2.24 s of CPU
+/// for the whole render without, 2.24–2.44 s with). A closest hit does not depend on the BVH
+/// except at exact ties (smaller id in BVH order), so this trades time, not images.
 fn build_effort(samples: u64, tris: usize) -> BuildEffort {
     let per_tri = samples as f64 / tris.max(1) as f64;
-    let params = if per_tri >= 16.0 {
+    let params = if per_tri >= 1024.0 {
         obvhs::BvhBuildParams::slow_build()
     } else if per_tri >= 2.0 {
         obvhs::BvhBuildParams::medium_build()

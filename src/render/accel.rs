@@ -82,14 +82,15 @@ impl Accel {
         } else {
             let bvh = build_bvh(&tri_ref, vertices, build_effort(samples, tri_ref.len()));
             // Reorder once so leaf primitive ids index the triangle arrays directly.
+            use rayon::prelude::*;
             let order = &bvh.primitive_indices;
-            let rt_tris = (order.iter())
+            let rt_tris = (order.par_iter())
                 .map(|&i| {
                     let [a, b, c] = vertices(&tri_ref[i as usize]);
                     RtTriangle::new(a.into(), b.into(), c.into())
                 })
                 .collect();
-            let tri_ref = order.iter().map(|&i| tri_ref[i as usize]).collect();
+            let tri_ref = order.par_iter().map(|&i| tri_ref[i as usize]).collect();
             (Some(bvh), rt_tris, tri_ref)
         };
         let meshes = (scene.shapes.iter())

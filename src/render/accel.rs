@@ -618,12 +618,15 @@ fn build_bvh(
         None,
     );
     bvh2.parents = Vec::new();
-    let mut bvh = obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(
-        &bvh2,
-        params.max_prims_per_leaf.clamp(1, 3),
-        effort.order_children,
-        false,
-    );
+    let mut bvh = match effort.conversion {
+        Conversion::Sah => obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(
+            &bvh2,
+            params.max_prims_per_leaf.clamp(1, 3),
+            true,
+            false,
+        ),
+        Conversion::Greedy => super::bvh_collapse::collapse(&bvh2),
+    };
     // The node array was reserved at one node per triangle (80 bytes each); ~1/8 is used.
     bvh.nodes.shrink_to_fit();
     bvh
@@ -664,12 +667,21 @@ fn widen_box(b: obvhs::aabb::Aabb, i: usize) -> obvhs::aabb::Aabb {
     }
 }
 
-/// How much work the BVH build does: obvhs' parameters, and whether the BVH2 → CWBVH
-/// conversion orders each node's children by ray octant (front-to-back traversal).
+/// How much work the BVH build does: obvhs' parameters, and how the BVH2 becomes the
+/// 8-wide CWBVH the renderer traverses.
 #[derive(Debug, Clone, Copy)]
 struct BuildEffort {
     params: obvhs::BvhBuildParams,
-    order_children: bool,
+    conversion: Conversion,
+}
+
+/// How the BVH2 becomes a CWBVH.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Conversion {
+    /// obvhs' converter: children chosen by SAH dynamic programming and ordered by octant.
+    Sah,
+    /// [`super::bvh_collapse`]: open the largest child, no cost table, no ordering.
+    Greedy,
 }
 
 /// BVH build effort for `tris` triangles and `samples` camera samples. obvhs' slow_build
@@ -696,7 +708,11 @@ fn build_effort(samples: u64, tris: usize) -> BuildEffort {
     };
     BuildEffort {
         params,
-        order_children: per_tri >= 2.0,
+        conversion: if per_tri >= 2.0 {
+            Conversion::Sah
+        } else {
+            Conversion::Greedy
+        },
     }
 }
 
@@ -1377,7 +1393,7 @@ mod tests {
         let refs: Vec<TriRef> = (0..tris.len() as u32).map(|i| (0, i)).collect();
         let effort = BuildEffort {
             params,
-            order_children: true,
+            conversion: Conversion::Sah,
         };
         let with_boxes = build_bvh(&refs, |&(_, i)| tri_vertices(&tris[i as usize]), effort);
         let with_tris = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut time);
@@ -1502,7 +1518,7 @@ mod tests {
         ] {
             let effort = BuildEffort {
                 params,
-                order_children: true,
+                conversion: Conversion::Sah,
             };
             let ours = build_bvh(&refs, vertices, effort);
             let mut time = std::time::Duration::default();
@@ -1512,52 +1528,75 @@ mod tests {
         }
     }
 
-    /// A BVH whose children are not ordered by octant (the fast build) finds the same closest
-    /// hits (t bit for bit, the same triangle) and occlusion answers as the ordered one.
+    /// The greedy collapse of the fast build finds the closest hits (t bit for bit, the same
+    /// triangle) and occlusion answers of obvhs' SAH conversion, with every triangle in
+    /// exactly one leaf: on a sphere with a plane, a soup of random triangles, and meshes of
+    /// one, two and three triangles (a root that is itself a leaf slot).
     #[test]
-    fn unordered_children_find_the_same_hits() {
-        let mut tris: Vec<Triangle> = obvhs::test_util::geometry::icosphere(4);
-        tris.extend(obvhs::test_util::geometry::PLANE);
-        let refs: Vec<TriRef> = (0..tris.len() as u32).map(|i| (0, i)).collect();
-        let vertices = |&(_, i): &TriRef| tri_vertices(&tris[i as usize]);
-        let params = obvhs::BvhBuildParams::fast_build();
-        let build = |order_children| {
-            let bvh = build_bvh(
-                &refs,
-                vertices,
-                BuildEffort {
-                    params,
-                    order_children,
-                },
-            );
-            let rt: Vec<RtTriangle> = (bvh.primitive_indices.iter())
-                .map(|&i| RtTriangle::from(&tris[i as usize]))
-                .collect();
-            (bvh, rt)
-        };
-        let ((ordered, rt_o), (unordered, rt_u)) = (build(true), build(false));
-        assert!(
-            ordered.nodes != unordered.nodes,
-            "the ordering changes the nodes"
-        );
+    fn greedy_collapse_finds_the_hits_of_obvhs_conversion() {
         let mut rng = crate::render::sampler::Sampler::from_seed(5);
-        let mut hits = 0;
-        for i in 0..5_000 {
-            // From a 6-unit cube towards a point near the sphere's centre.
-            let o = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) * 6.0 - 3.0;
-            let target = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) - 0.5;
-            let d = (target - o).normalize();
-            let r = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, f32::INFINITY);
-            let original = |h: Option<(f32, u32)>, bvh: &CwBvh| {
-                h.map(|(t, k)| (t.to_bits(), bvh.primitive_indices[k as usize]))
+        let mut v = || Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) * 2.0 - 1.0;
+        let mut sphere: Vec<Triangle> = obvhs::test_util::geometry::icosphere(4);
+        sphere.extend(obvhs::test_util::geometry::PLANE);
+        let soup: Vec<Triangle> = (0..3000)
+            .map(|_| {
+                let c = v();
+                Triangle {
+                    v0: c.into(),
+                    v1: (c + v() * 0.2).into(),
+                    v2: (c + v() * 0.2).into(),
+                }
+            })
+            .collect();
+        let mut rng = crate::render::sampler::Sampler::from_seed(9);
+        for tris in [
+            sphere,
+            soup.clone(),
+            soup[..1].to_vec(),
+            soup[..2].to_vec(),
+            soup[..3].to_vec(),
+        ] {
+            let refs: Vec<TriRef> = (0..tris.len() as u32).map(|i| (0, i)).collect();
+            let vertices = |&(_, i): &TriRef| tri_vertices(&tris[i as usize]);
+            let params = obvhs::BvhBuildParams::fast_build();
+            let build = |conversion| {
+                let bvh = build_bvh(&refs, vertices, BuildEffort { params, conversion });
+                let rt: Vec<RtTriangle> = (bvh.primitive_indices.iter())
+                    .map(|&i| RtTriangle::from(&tris[i as usize]))
+                    .collect();
+                (bvh, rt)
             };
-            let a = original(closest_hit(&ordered, &rt_o, r), &ordered);
-            let b = original(closest_hit(&unordered, &rt_u, r), &unordered);
-            assert_eq!(a, b, "ray {i}");
-            assert_eq!(any_hit(&unordered, &rt_u, r), a.is_some(), "ray {i}");
-            hits += a.is_some() as u32;
+            let ((sah, rt_s), (greedy, rt_g)) = (build(Conversion::Sah), build(Conversion::Greedy));
+            let mut prims = greedy.primitive_indices.clone();
+            prims.sort_unstable();
+            assert_eq!(prims, (0..tris.len() as u32).collect::<Vec<_>>());
+            let mut hits = 0;
+            for i in 0..4_000 {
+                // From a 6-unit cube towards a point inside the geometry's box.
+                let o = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) * 6.0 - 3.0;
+                let target = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) * 2.0 - 1.0;
+                let d = (target - o).normalize();
+                let r = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, f32::INFINITY);
+                let original = |h: Option<(f32, u32)>, bvh: &CwBvh| {
+                    h.map(|(t, k)| (t.to_bits(), bvh.primitive_indices[k as usize]))
+                };
+                let a = original(closest_hit(&sah, &rt_s, r), &sah);
+                let b = original(closest_hit(&greedy, &rt_g, r), &greedy);
+                assert_eq!(a, b, "{} triangles, ray {i}", tris.len());
+                assert_eq!(any_hit(&greedy, &rt_g, r), a.is_some(), "ray {i}");
+                #[cfg(target_arch = "x86_64")]
+                if cpu_has_avx2() {
+                    // SAFETY: AVX2 (and popcnt/lzcnt) checked just above.
+                    let c = unsafe { x86::closest_hit_avx2(&greedy, &rt_g, r) };
+                    assert_eq!(original(c, &greedy), a, "AVX2, ray {i}");
+                }
+                hits += a.is_some() as u32;
+            }
+            assert!(hits > 0, "{} triangles: no hits", tris.len());
+            if tris.len() > 100 {
+                assert!(hits > 1_000, "{hits} hits");
+            }
         }
-        assert!(hits > 1_000, "{hits} hits");
     }
 
     /// Axis-aligned rays onto an axis-aligned flat quad (a zero-thickness box, infinite

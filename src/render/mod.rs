@@ -15,6 +15,7 @@
 pub mod accel;
 pub mod batch;
 pub mod bsdf;
+mod bvh_collapse;
 pub mod camera;
 pub mod counters;
 pub mod effects;

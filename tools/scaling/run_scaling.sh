@@ -1,12 +1,19 @@
 #!/bin/sh
 # Scaling tables of docs/performance.md: whole-process time, set-up, render stage and peak
-# memory of `thinfilm render` against triangle count (UV spheres from make_sphere.py),
-# resolution, threads and max depth. Usage: tools/scaling/run_scaling.sh [THINFILM] [OUTDIR]
+# memory of `thinfilm render` against triangle count (Newell's teapot subdivided, written by
+# `cargo run --release --example teapot_ply`, in the teapot_diffuse scene: studio
+# environment, diffuse), beside the `mitsuba` command line on the same files; then
+# resolution, threads and max depth on the 100k-triangle teapot.
+# Usage: tools/scaling/run_scaling.sh [THINFILM] [OUTDIR] (from the repository root; MITSUBA=
+# empty skips the Mitsuba column).
 set -eu
 BIN=${1:-target/release/thinfilm}
 OUT=${2:-/tmp/thinfilm-scaling}
-HERE=$(dirname "$0")
+MITSUBA=${MITSUBA-mitsuba}
+export DRJIT_LIBLLVM_PATH=${DRJIT_LIBLLVM_PATH:-/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1}
 mkdir -p "$OUT"
+cargo build --release --quiet --example teapot_ply
+ROOT=$(pwd)
 
 # One render: prints "wall_s cpu_s setup_s render_s peak_MB".
 run() {
@@ -15,15 +22,34 @@ run() {
          /^TIME/ { printf "%.2f %.2f %s %s %.0f\n", $2, $3 + $4, s, r, $5 / 1024 }' "$OUT/log"
 }
 
-echo "| triangles | wall s | CPU s | set-up s | render s | peak MB | bytes / triangle |"
-echo "|---:|---:|---:|---:|---:|---:|---:|"
-for n in 1000 10000 100000 1000000 5000000; do
-    python3 "$HERE/make_sphere.py" --triangles $n --out "$OUT/s$n" >/dev/null
-    set -- $(run "$OUT/s$n/scene.xml" --spp 4)
-    echo "| $n | $1 | $2 | $3 | $4 | $5 | $(awk "BEGIN { printf \"%.0f\", $5 * 1048576 / $n }") |"
+# The teapot scene with an N-subdivision teapot: $OUT/tN/scene.xml.
+teapot() {
+    d="$OUT/t$1"
+    if [ ! -f "$d/meshes/teapot.ply" ]; then
+        mkdir -p "$d/meshes"
+        target/release/examples/teapot_ply "$1" "$d/meshes/teapot.ply" >/dev/null
+        cp scenes/teapot_diffuse.xml "$d/scene.xml"
+        ln -sfn "$ROOT/scenes/textures" "$d/textures"
+    fi
+    echo "$d/scene.xml"
+}
+
+echo "| triangles | wall s | CPU s | set-up s | render s | peak MB | bytes / triangle | Mitsuba wall s | Mitsuba peak MB |"
+echo "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+# 32·2·N² − 8·N triangles: 992, 10,712, 102,080, 999,000, 2,003,640, 5,015,360.
+for n in 4 13 40 125 177 280; do
+    s=$(teapot $n)
+    tris=$((64 * n * n - 8 * n))
+    set -- $(run "$s" --spp 4)
+    m="– | –"
+    if [ -n "$MITSUBA" ]; then
+        m=$( (cd "$(dirname "$s")" && /usr/bin/time -f "TIME %e %M" "$MITSUBA" scene.xml -D spp=4 -o "$OUT/m.exr" 2>&1 >/dev/null) |
+            awk '/^TIME/ { printf "%.2f | %.0f", $2, $3 / 1024 }')
+    fi
+    echo "| $tris | $1 | $2 | $3 | $4 | $5 | $(awk "BEGIN { printf \"%.0f\", $5 * 1048576 / $tris }") | $m |"
 done
 
-S="$OUT/s100000/scene.xml"
+S=$(teapot 40)
 echo
 echo "| resolution (100k triangles, 16 spp) | wall s | render s | µs / sample |"
 echo "|---|---:|---:|---:|"

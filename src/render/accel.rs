@@ -126,7 +126,7 @@ impl Accel {
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         if self.is_small() {
-            let mut hit = Vec::with_capacity(1);
+            let mut hit = [None];
             self.intersect_small(std::slice::from_ref(ray), &mut hit);
             return hit[0];
         }
@@ -168,8 +168,9 @@ impl Accel {
     pub fn intersect_batch(&self, rays: &[Ray], hits: &mut Vec<Option<Hit>>) {
         hits.clear();
         if self.is_small() {
-            for chunk in rays.chunks(PACKET) {
-                self.intersect_small(chunk, hits);
+            hits.resize(rays.len(), None);
+            for (chunk, out) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+                self.intersect_small(chunk, out);
             }
             return;
         }
@@ -243,23 +244,23 @@ impl Accel {
         self.bvh.is_some() && self.rt_tris.len() <= SMALL_SCENE
     }
 
-    /// Closest hits of up to [`PACKET`] rays of a small scene ([`Self::is_small`]), pushed
-    /// to `hits`: the rays in SIMD lanes against every triangle in id order, with the BVH's
+    /// Closest hits of up to [`PACKET`] rays of a small scene ([`Self::is_small`]), in
+    /// `hits[i]` for `rays[i]`: the rays in SIMD lanes against every triangle in id order, with the BVH's
     /// triangle test and [`closer`] rule, so the nearest hit, ties included, is the one a
     /// traversal finds wherever the traversal's node test does not cull it: a box the ray
     /// leaves within the node test's epsilon (1e-4) of its origin (a ray leaving a floor
-    /// within 1e-4 of a wall passes through the wall there), so a hit nearer than
+    /// within 1e-4 of a wall can pass through the wall there), so a hit nearer than
     /// [`NEAR_HIT`] is traced again by the BVH. Each lane's answer depends on its own ray
     /// only: a ray gets the same hit in any batch, and alone.
-    fn intersect_small(&self, rays: &[Ray], hits: &mut Vec<Option<Hit>>) {
+    fn intersect_small(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         let mut lanes = RayLanes::of_rays(rays);
         let mut best = [u32::MAX; PACKET];
         for (id, tri) in self.rt_tris.iter().enumerate() {
             lanes.test_triangle(&TriScalars::of(tri), id as u32, &mut best);
         }
-        hits.extend(rays.iter().enumerate().map(|(i, r)| {
+        for (i, (r, h)) in rays.iter().zip(hits.iter_mut()).enumerate() {
             let t = lanes.tmax[i];
-            if best[i] == u32::MAX {
+            *h = if best[i] == u32::MAX {
                 self.closest_sphere(r, t, None)
             } else if t < NEAR_HIT {
                 self.intersect_bvh(r)
@@ -269,8 +270,8 @@ impl Accel {
                     prim: Prim::Triangle(best[i]),
                 };
                 self.closest_sphere(r, t, Some(hit))
-            }
-        }));
+            };
+        }
     }
 
     /// [`Self::occluded`] of every ray (`out[i]` for `rays[i]`), [`PACKET`] rays at a time
@@ -281,15 +282,16 @@ impl Accel {
             out.extend(rays.iter().map(|r| self.occluded_bvh(r)));
             return;
         }
-        for chunk in rays.chunks(PACKET) {
-            self.occluded_small(chunk, out);
+        out.resize(rays.len(), false);
+        for (chunk, blocked) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            self.occluded_small(chunk, blocked);
         }
     }
 
-    /// Whether each of up to [`PACKET`] shadow rays of a small scene is blocked, pushed to
-    /// `out`: the rays in SIMD lanes against every triangle until each is blocked; a ray
+    /// Whether each of up to [`PACKET`] shadow rays of a small scene is blocked, in `out[i]`
+    /// for `rays[i]`: the rays in SIMD lanes against every triangle until each is blocked; a ray
     /// blocked only nearer than [`NEAR_HIT`] asks the BVH (see [`Self::intersect_small`]).
-    fn occluded_small(&self, rays: &[Ray], out: &mut Vec<bool>) {
+    fn occluded_small(&self, rays: &[Ray], out: &mut [bool]) {
         let lanes = RayLanes::of_rays(rays);
         let (mut sure, mut unsure) = ([false; PACKET], [false; PACKET]);
         for tris in self.rt_tris.chunks(4) {
@@ -300,12 +302,12 @@ impl Accel {
                 break;
             }
         }
-        out.extend(rays.iter().enumerate().map(|(i, r)| {
-            sure[i]
+        for (i, (r, o)) in rays.iter().zip(out.iter_mut()).enumerate() {
+            *o = sure[i]
                 || (self.spheres.iter())
                     .any(|s| sphere_intersect(s, r.origin, r.dir, r.tmin, r.tmax) < r.tmax)
-                || (unsure[i] && self.occluded_bvh(r))
-        }));
+                || (unsure[i] && self.occluded_bvh(r));
+        }
     }
 
     /// `best` (closest hit so far, at `tmax`) improved by the analytic spheres.
@@ -357,7 +359,7 @@ impl Accel {
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
         if self.is_small() {
-            let mut blocked = Vec::with_capacity(1);
+            let mut blocked = [false];
             self.occluded_small(std::slice::from_ref(ray), &mut blocked);
             return blocked[0];
         }

@@ -26,6 +26,13 @@ pub const PACKET: usize = 16;
 /// Packets are formed of rays whose directions are within this cosine of the first's.
 pub const PACKET_MIN_COS: f32 = 0.9;
 
+/// Scenes with at most this many triangles test rays against all of them in SIMD lanes
+/// instead of traversing the BVH (a Cornell box: 36).
+const SMALL_SCENE: usize = 64;
+/// Hits nearer than this are left to the BVH in a small scene (twice the node test's
+/// epsilon, see [`Accel::intersect_small`]).
+const NEAR_HIT: f32 = 2e-4;
+
 /// What a closest-hit query found.
 #[derive(Debug, Clone, Copy)]
 pub struct Hit {
@@ -119,6 +126,17 @@ impl Accel {
     /// Closest hit in (tmin, tmax).
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        if self.is_small() {
+            let mut hit = [None];
+            self.intersect_small(std::slice::from_ref(ray), &mut hit);
+            return hit[0];
+        }
+        self.intersect_bvh(ray)
+    }
+
+    /// [`Self::intersect`] through the BVH.
+    #[inline]
+    fn intersect_bvh(&self, ray: &Ray) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         let mut tmax = ray.tmax;
         if let Some(bvh) = &self.bvh {
@@ -150,6 +168,13 @@ impl Accel {
     /// packet traversal; rays left alone are traced one by one.
     pub fn intersect_batch(&self, rays: &[Ray], hits: &mut Vec<Option<Hit>>) {
         hits.clear();
+        if self.is_small() {
+            hits.resize(rays.len(), None);
+            for (chunk, out) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
+                self.intersect_small(chunk, out);
+            }
+            return;
+        }
         #[cfg(target_arch = "x86_64")]
         if let (Some(bvh), true) = (&self.bvh, self.avx2) {
             hits.resize(rays.len(), None);
@@ -178,7 +203,7 @@ impl Accel {
                         }
                     }
                     if m == 1 {
-                        hits[base + first] = self.intersect(&window[first]);
+                        hits[base + first] = self.intersect_bvh(&window[first]);
                         continue;
                     }
                     let mut packet =
@@ -210,6 +235,80 @@ impl Accel {
             return;
         }
         hits.extend(rays.iter().map(|r| self.intersect(r)));
+    }
+
+    /// At most [`SMALL_SCENE`] triangles: every closest-hit and any-hit query tests the ray
+    /// against all triangles in SIMD lanes ([`Self::intersect_small`],
+    /// [`Self::occluded_small`]) instead of traversing the BVH.
+    #[inline]
+    fn is_small(&self) -> bool {
+        self.bvh.is_some() && self.rt_tris.len() <= SMALL_SCENE
+    }
+
+    /// Closest hits of up to [`PACKET`] rays of a small scene ([`Self::is_small`]), in
+    /// `hits[i]` for `rays[i]`: the rays in SIMD lanes against every triangle in id order, with the BVH's
+    /// triangle test and [`closer`] rule, so the nearest hit, ties included, is the one a
+    /// traversal finds wherever the traversal's node test does not cull it: a box the ray
+    /// leaves within the node test's epsilon (1e-4) of its origin (a ray leaving a floor
+    /// within 1e-4 of a wall can pass through the wall there), so a hit nearer than
+    /// [`NEAR_HIT`] is traced again by the BVH. Each lane's answer depends on its own ray
+    /// only: a ray gets the same hit in any batch, and alone.
+    fn intersect_small(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        let mut lanes = RayLanes::of_rays(rays);
+        let mut best = [u32::MAX; PACKET];
+        for (id, tri) in self.rt_tris.iter().enumerate() {
+            lanes.test_triangle(&TriScalars::of(tri), id as u32, &mut best);
+        }
+        for (i, (r, h)) in rays.iter().zip(hits.iter_mut()).enumerate() {
+            let t = lanes.tmax[i];
+            *h = if best[i] == u32::MAX {
+                self.closest_sphere(r, t, None)
+            } else if t < NEAR_HIT {
+                self.intersect_bvh(r)
+            } else {
+                let hit = Hit {
+                    t,
+                    prim: Prim::Triangle(best[i]),
+                };
+                self.closest_sphere(r, t, Some(hit))
+            };
+        }
+    }
+
+    /// [`Self::occluded`] of every ray (`out[i]` for `rays[i]`), [`PACKET`] rays at a time
+    /// in a small scene ([`Self::occluded_small`]).
+    pub fn occluded_batch(&self, rays: &[Ray], out: &mut Vec<bool>) {
+        out.clear();
+        if !self.is_small() {
+            out.extend(rays.iter().map(|r| self.occluded_bvh(r)));
+            return;
+        }
+        out.resize(rays.len(), false);
+        for (chunk, blocked) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            self.occluded_small(chunk, blocked);
+        }
+    }
+
+    /// Whether each of up to [`PACKET`] shadow rays of a small scene is blocked, in `out[i]`
+    /// for `rays[i]`: the rays in SIMD lanes against every triangle until each is blocked; a ray
+    /// blocked only nearer than [`NEAR_HIT`] asks the BVH (see [`Self::intersect_small`]).
+    fn occluded_small(&self, rays: &[Ray], out: &mut [bool]) {
+        let lanes = RayLanes::of_rays(rays);
+        let (mut sure, mut unsure) = ([false; PACKET], [false; PACKET]);
+        for tris in self.rt_tris.chunks(4) {
+            for tri in tris {
+                lanes.blocked_by(&TriScalars::of(tri), &mut sure, &mut unsure);
+            }
+            if sure.iter().all(|&f| f) {
+                break;
+            }
+        }
+        for (i, (r, o)) in rays.iter().zip(out.iter_mut()).enumerate() {
+            *o = sure[i]
+                || (self.spheres.iter())
+                    .any(|s| sphere_intersect(s, r.origin, r.dir, r.tmin, r.tmax) < r.tmax)
+                || (unsure[i] && self.occluded_bvh(r));
+        }
     }
 
     /// `best` (closest hit so far, at `tmax`) improved by the analytic spheres.
@@ -260,6 +359,17 @@ impl Accel {
     /// True if anything blocks the segment (tmin, tmax) (shadow rays; early exit).
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
+        if self.is_small() {
+            let mut blocked = [false];
+            self.occluded_small(std::slice::from_ref(ray), &mut blocked);
+            return blocked[0];
+        }
+        self.occluded_bvh(ray)
+    }
+
+    /// [`Self::occluded`] through the BVH.
+    #[inline]
+    fn occluded_bvh(&self, ray: &Ray) -> bool {
         for s in &self.spheres {
             if sphere_intersect(s, ray.origin, ray.dir, ray.tmin, ray.tmax) < ray.tmax {
                 return true;
@@ -847,6 +957,45 @@ impl RayLanes {
         self.tmax[i]
     }
 
+    /// Lanes of up to [`PACKET`] rays (unused lanes repeat ray 0).
+    fn of_rays(rays: &[Ray]) -> Self {
+        let mut l = RayLanes {
+            o: [[0.0; PACKET]; 3],
+            d: [[0.0; PACKET]; 3],
+            tmin: [0.0; PACKET],
+            tmax: [0.0; PACKET],
+        };
+        for i in 0..PACKET {
+            let r = rays.get(i).unwrap_or(&rays[0]);
+            for k in 0..3 {
+                l.o[k][i] = r.origin[k];
+                l.d[k][i] = r.dir[k];
+            }
+            l.tmin[i] = r.tmin;
+            l.tmax[i] = r.tmax;
+        }
+        l
+    }
+
+    /// Marks the lanes whose segment (tmin, tmax) `tri` blocks (the any-hit test `t < tmax`
+    /// of [`any_hit`]): in `sure` where the BVH is sure to find the blocker too (at least
+    /// [`NEAR_HIT`] away), in `unsure` otherwise.
+    #[inline(always)]
+    fn blocked_by(&self, tri: &TriScalars, sure: &mut [bool; PACKET], unsure: &mut [bool; PACKET]) {
+        for i in 0..PACKET {
+            let t = triangle_distance(
+                tri,
+                [self.o[0][i], self.o[1][i], self.o[2][i]],
+                [self.d[0][i], self.d[1][i], self.d[2][i]],
+                self.tmin[i],
+                self.tmax[i],
+            );
+            let hit = t < self.tmax[i];
+            sure[i] |= hit && t >= NEAR_HIT;
+            unsure[i] |= hit && t < NEAR_HIT;
+        }
+    }
+
     fn new(rays: &[obvhs::ray::Ray]) -> Self {
         let mut l = RayLanes {
             o: [[0.0; PACKET]; 3],
@@ -1366,6 +1515,53 @@ mod tests {
             hits > 2_000 && occluded > 2_000,
             "{hits} hits, {occluded} occluded"
         );
+    }
+
+    /// In a small scene (the Cornell box: 36 triangles) the all-triangle SIMD queries find
+    /// the BVH traversal's closest hits and blockers, bit for bit, and a ray's answer is the
+    /// same alone and in a batch.
+    #[test]
+    fn small_scene_queries_match_the_bvh() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.xml");
+        let scene = crate::scene::load(&path, &[]).unwrap();
+        let (accel, _) = Accel::build(&scene, 1).unwrap();
+        assert!(accel.is_small());
+        let mut rng = crate::render::sampler::Sampler::from_seed(11);
+        let rays: Vec<Ray> = (0..20_000)
+            .map(|i| {
+                let u = |rng: &mut crate::render::sampler::Sampler| rng.next_1d() * 2.0 - 1.0;
+                let origin = Vec3::new(u(&mut rng), u(&mut rng), u(&mut rng)) * 0.99;
+                let dir = Vec3::new(u(&mut rng), u(&mut rng), u(&mut rng)).normalize();
+                let tmax = if i % 3 == 0 { 0.7 } else { f32::INFINITY };
+                Ray {
+                    origin,
+                    dir,
+                    tmin: 0.0,
+                    tmax,
+                }
+            })
+            .collect();
+        let key = |h: Option<Hit>| {
+            h.map(|h| match h.prim {
+                Prim::Triangle(id) => (h.t.to_bits(), id),
+                Prim::Sphere(_) => unreachable!("no spheres in the scene"),
+            })
+        };
+        let (mut batch, mut blocked) = (Vec::new(), Vec::new());
+        accel.intersect_batch(&rays, &mut batch);
+        accel.occluded_batch(&rays, &mut blocked);
+        let (mut hits, mut occluded) = (0, 0);
+        for (i, r) in rays.iter().enumerate() {
+            let bvh = accel.intersect_bvh(r);
+            assert_eq!(key(accel.intersect(r)), key(bvh), "ray {i}");
+            assert_eq!(key(batch[i]), key(bvh), "ray {i} in a batch");
+            let occ = accel.occluded_bvh(r);
+            assert_eq!(accel.occluded(r), occ, "ray {i}");
+            assert_eq!(blocked[i], occ, "ray {i} in a batch");
+            hits += bvh.is_some() as u32;
+            occluded += occ as u32;
+        }
+        assert!(hits > 10_000 && occluded > 5_000 && occluded < 19_000);
     }
 
     /// Distinct triangles sharing one bounding box (a hostile mesh that made PLOC quadratic) are

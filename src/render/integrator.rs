@@ -402,6 +402,8 @@ pub struct PathScratch<C> {
     rays: Vec<Ray>,
     lane_of: Vec<u32>,
     hits: Vec<Option<Hit>>,
+    /// Whether each shadow ray of the batch is blocked.
+    occluded: Vec<bool>,
     dirs: Vec<Vec3>,
     lambdas: Vec<Spec>,
     d65s: Vec<Spec>,
@@ -424,6 +426,7 @@ impl<C> Default for PathScratch<C> {
             rays: Vec::new(),
             lane_of: Vec::new(),
             hits: Vec::new(),
+            occluded: Vec::new(),
             dirs: Vec::new(),
             lambdas: Vec::new(),
             d65s: Vec::new(),
@@ -535,6 +538,7 @@ pub(super) fn trace_lanes<C: Carrier>(
         rays,
         lane_of,
         hits,
+        occluded,
         ..
     } = scratch;
     let n = lanes.len();
@@ -587,15 +591,27 @@ pub(super) fn trace_lanes<C: Carrier>(
         }
         resolve_env_samples(scene, env_samples, env_drawn, env_le, shadow);
     }
-    for r in shadow.iter() {
+    if scene.media().is_none() {
+        // One batched any-hit query for the batch's shadow rays (a small scene tests them in
+        // SIMD lanes).
+        rays.clear();
+        rays.extend(shadow.iter().map(|r| r.ray));
+        scene.accel.occluded_batch(rays, occluded);
+    }
+    for (k, r) in shadow.iter().enumerate() {
         if scene.media().is_some() {
             // Media hook: transmittance through media and null interfaces.
             let lane = &mut lanes[r.lane as usize];
             lane.radiance += r.contribution * media::shadow_transmittance(scene, r, &lane.wl);
             continue;
         }
-        // gltf branch hook: shadow rays pass alpha cut-outs (`lights::shadow_transmittance`).
-        let tr = super::lights::shadow_transmittance(scene, &r.ray);
+        // gltf branch hook: shadow rays pass alpha cut-outs
+        // (`lights::blocked_shadow_transmittance`).
+        let tr = if occluded[k] {
+            super::lights::blocked_shadow_transmittance(scene, &r.ray)
+        } else {
+            1.0
+        };
         if tr > 0.0 {
             lanes[r.lane as usize].radiance += r.contribution * tr;
         }
@@ -941,7 +957,7 @@ fn advance<C: Carrier>(
         return false;
     };
     // gltf branch hook: passing an alpha cut-out (a null interaction that shadow rays also
-    // pass, `lights::shadow_transmittance`) keeps the MIS state of the vertex before it.
+    // pass, `lights::blocked_shadow_transmittance`) keeps the MIS state of the vertex before it.
     if bs.lobe.contains(super::bsdf::BsdfFlags::NULL)
         && super::lights::passes_shadow_rays(scene, si.shape)
     {

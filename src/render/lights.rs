@@ -814,6 +814,9 @@ impl EnvMap {
 pub enum AreaGeometry {
     Triangles {
         tris: Vec<[Vec3; 3]>,
+        /// Each triangle's unit normal, computed once (per sample it was a cross product,
+        /// a square root and a division on the light sample's critical path).
+        normals: Vec<Vec3>,
         dist: Distribution1D,
         area: f32,
     },
@@ -1227,7 +1230,12 @@ impl Light {
             } => {
                 let mut uv = Vec2::ZERO;
                 let (q, n, pdf) = match geometry {
-                    AreaGeometry::Triangles { tris, dist, area } => {
+                    AreaGeometry::Triangles {
+                        tris,
+                        normals,
+                        dist,
+                        area,
+                    } => {
                         let (x, _, i) = dist.sample(u.x);
                         // Reuse the fractional position inside the chosen cell for one barycentric.
                         let n_cells = dist.len() as f32;
@@ -1238,8 +1246,7 @@ impl Light {
                         if let Some(t) = texture {
                             uv = t.uv_at(i, b);
                         }
-                        let n = (bb - a).cross(c - a).normalize();
-                        (q, n, LightPdf::Area(1.0 / area))
+                        (q, normals[i], LightPdf::Area(1.0 / area))
                     }
                     AreaGeometry::Sphere {
                         center,
@@ -1346,7 +1353,7 @@ pub struct LightSet {
     pub shape_light: Vec<Option<u32>>,
     /// Indices of infinite lights (seen when a ray escapes).
     pub infinite: Vec<u32>,
-    /// Some material has alpha cut-outs that shadow rays pass ([`shadow_transmittance`]).
+    /// Some material has alpha cut-outs that shadow rays pass ([`blocked_shadow_transmittance`]).
     pub see_through: bool,
 }
 
@@ -1492,6 +1499,9 @@ impl LightSet {
                 }
                 AreaGeometry::Triangles {
                     dist: Distribution1D::new(&areas),
+                    normals: (tris.iter())
+                        .map(|[a, b, c]| (*b - *a).cross(*c - *a).normalize())
+                        .collect(),
                     tris,
                     area,
                 }
@@ -1672,17 +1682,15 @@ pub(crate) fn passes_shadow_rays(scene: &super::PreparedScene, shape: u32) -> bo
     scene.lights().see_through && alpha_coverage(bsdf, Vec2::ZERO).is_some()
 }
 
-/// The fraction of light a shadow ray carries to its end: 1 if nothing is in the way, the
-/// product of (1 − coverage) over the alpha-cut-out surfaces it crosses otherwise (0 at an
-/// opaque one). A MASK surface is absent where alpha < cutoff and BLEND is stochastic
+/// The fraction of light a blocked shadow ray carries to its end: the product of
+/// (1 − coverage) over the alpha-cut-out surfaces it crosses (0 at an opaque one). A MASK surface is absent where alpha < cutoff and BLEND is stochastic
 /// opacity, which the BSDF samples as a null lobe of weight 1 − coverage: the light
 /// sample's (1 − coverage) is that lobe's expected value, so light sampling and BSDF
 /// sampling see the same light through holes (the integrator keeps the MIS state of the
-/// vertex before a null interaction). The common case costs one any-hit query as before.
-pub(crate) fn shadow_transmittance(scene: &super::PreparedScene, ray: &Ray) -> f32 {
-    if !scene.occluded(ray) {
-        return 1.0;
-    }
+/// vertex before a null interaction). The common case costs one any-hit query as before:
+/// this function is called only for a ray that query found blocked (the batch's shadow rays
+/// are tested together, [`super::accel::Accel::occluded_batch`]).
+pub(crate) fn blocked_shadow_transmittance(scene: &super::PreparedScene, ray: &Ray) -> f32 {
     if !scene.lights().see_through {
         return 0.0;
     }

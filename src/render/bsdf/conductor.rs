@@ -12,7 +12,7 @@ use super::microfacet::{
     opaque_reflector_methods, Distribution, Microfacet, OpaqueReflector,
 };
 use super::roughness::Roughness;
-use super::{fresnel::fresnel_conductor, BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
+use super::{fresnel::fresnel_conductor4, BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
 use crate::optics::Ior;
 use crate::render::geometry::{Frame, SurfaceInteraction};
 use crate::render::polarization::{specular_reflection_conductor, Mueller};
@@ -70,10 +70,9 @@ impl OpaqueReflector for Conductor {
 
     #[inline]
     fn reflectance(&self, ctx: &ShadingCtx, cos_i: f32) -> Spec {
-        Spec::from_array(ctx.wl.lambda.map(|l| {
-            let n = self.eta.at(l as f64);
-            fresnel_conductor(cos_i, n.re as f32, n.im as f32)
-        })) * self.specular.eval(ctx)
+        let n = ctx.wl.lambda.map(|l| self.eta.at(l as f64));
+        let r = fresnel_conductor4(cos_i, n.map(|n| n.re as f32), n.map(|n| n.im as f32));
+        Spec::from_array(r) * self.specular.eval(ctx)
     }
 
     #[inline]

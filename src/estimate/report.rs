@@ -351,47 +351,55 @@ pub fn write_outputs(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) ->
 
 fn write_outputs_into(out: &Path, set: &CaptureSet, fit: &Fit, json: &FitFile) -> Result<()> {
     let (w, h) = (fit.width, fit.height);
-    write_colormap_png(
-        &out.join("thickness.png"),
-        &fit.thickness_nm,
-        w,
-        h,
-        "thickness (nm)",
-    )
-    .context("writing thickness.png")?;
-    let chi2_red: Vec<f32> = fit
-        .chi2
-        .iter()
-        .zip(&fit.samples)
-        .zip(&fit.thickness_nm)
-        .map(|((&s, &c), d)| {
-            if d.is_finite() && c > 0 {
-                s / c as f32
-            } else {
-                f32::NAN
-            }
-        })
-        .collect();
-    write_colormap_png(
-        &out.join("residual.png"),
-        &chi2_red,
-        w,
-        h,
-        "residual χ²/sample (1 = noise level)",
-    )
-    .context("writing residual.png")?;
-    fitted_material(set, fit).write_files_with_provenance(
-        out,
-        &format!("thinfilm estimate ({})", fit.method),
-        &fit.provenance.attributes(),
-    )?;
-    crate::image_io::write_exr_channels(
-        &out.join(THICKNESS_SIGMA_EXR),
-        w,
-        h,
-        &[("thickness_sigma", &fit.thickness_sigma_nm)],
-    )
-    .with_context(|| format!("writing {THICKNESS_SIGMA_EXR}"))?;
+    let chi2_red = || -> Vec<f32> {
+        (fit.chi2.iter().zip(&fit.samples).zip(&fit.thickness_nm))
+            .map(|((&s, &c), d)| {
+                if d.is_finite() && c > 0 {
+                    s / c as f32
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect()
+    };
+    // Independent files, written side by side: the two colour-mapped PNGs (deflate) and the
+    // EXRs were most of a 1-megapixel fit's writing, one after the other.
+    let writers: [&(dyn Fn() -> Result<()> + Sync); 4] = [
+        &|| {
+            write_colormap_png(
+                &out.join("thickness.png"),
+                &fit.thickness_nm,
+                w,
+                h,
+                "thickness (nm)",
+            )
+            .context("writing thickness.png")
+        },
+        &|| {
+            let label = "residual χ²/sample (1 = noise level)";
+            write_colormap_png(&out.join("residual.png"), &chi2_red(), w, h, label)
+                .context("writing residual.png")
+        },
+        &|| {
+            fitted_material(set, fit).write_files_with_provenance(
+                out,
+                &format!("thinfilm estimate ({})", fit.method),
+                &fit.provenance.attributes(),
+            )
+        },
+        &|| {
+            let sigma = [("thickness_sigma", &fit.thickness_sigma_nm[..])];
+            crate::image_io::write_exr_channels(&out.join(THICKNESS_SIGMA_EXR), w, h, &sigma)
+                .with_context(|| format!("writing {THICKNESS_SIGMA_EXR}"))
+        },
+    ];
+    {
+        use rayon::prelude::*;
+        writers
+            .par_iter()
+            .map(|write| write())
+            .collect::<Result<Vec<()>>>()?;
+    }
     if let Some(names) = &set.pixel_names {
         // Point spectra: one line per spectrum.
         let mut csv = String::from("spectrum,thickness_nm,thickness_sigma_nm\n");

@@ -34,7 +34,7 @@ teapot() {
     echo "$d/scene.xml"
 }
 
-echo "| triangles | wall s | CPU s | set-up s | render s | peak MB | bytes / triangle | Mitsuba wall s | Mitsuba peak MB |"
+echo "| triangles | wall s | CPU s | set-up s | render s | peak MiB | bytes / triangle | Mitsuba wall s | Mitsuba peak MiB |"
 echo "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
 # 32·2·N² − 8·N triangles: 992, 10,712, 102,080, 999,000, 2,003,640, 5,015,360.
 for n in 4 13 40 125 177 280; do

@@ -959,6 +959,16 @@ impl RayLanes {
 
     /// Lanes of up to [`PACKET`] rays (unused lanes repeat ray 0).
     fn of_rays(rays: &[Ray]) -> Self {
+        Self::from_parts(rays.len(), |i| {
+            let r = &rays[i];
+            (r.origin.to_array(), r.dir.to_array(), r.tmin, r.tmax)
+        })
+    }
+
+    /// Lanes of `n` ≥ 1 rays, ray i given as (origin, direction, tmin, tmax); lanes past
+    /// `n` (up to [`PACKET`]) repeat ray 0.
+    #[inline(always)]
+    fn from_parts(n: usize, ray: impl Fn(usize) -> ([f32; 3], [f32; 3], f32, f32)) -> Self {
         let mut l = RayLanes {
             o: [[0.0; PACKET]; 3],
             d: [[0.0; PACKET]; 3],
@@ -966,13 +976,13 @@ impl RayLanes {
             tmax: [0.0; PACKET],
         };
         for i in 0..PACKET {
-            let r = rays.get(i).unwrap_or(&rays[0]);
+            let (o, d, tmin, tmax) = ray(if i < n { i } else { 0 });
             for k in 0..3 {
-                l.o[k][i] = r.origin[k];
-                l.d[k][i] = r.dir[k];
+                l.o[k][i] = o[k];
+                l.d[k][i] = d[k];
             }
-            l.tmin[i] = r.tmin;
-            l.tmax[i] = r.tmax;
+            l.tmin[i] = tmin;
+            l.tmax[i] = tmax;
         }
         l
     }
@@ -997,22 +1007,10 @@ impl RayLanes {
     }
 
     fn new(rays: &[obvhs::ray::Ray]) -> Self {
-        let mut l = RayLanes {
-            o: [[0.0; PACKET]; 3],
-            d: [[0.0; PACKET]; 3],
-            tmin: [0.0; PACKET],
-            tmax: [0.0; PACKET],
-        };
-        for i in 0..PACKET {
-            let r = rays.get(i).unwrap_or(&rays[0]);
-            for k in 0..3 {
-                l.o[k][i] = r.origin[k];
-                l.d[k][i] = r.direction[k];
-            }
-            l.tmin[i] = r.tmin;
-            l.tmax[i] = r.tmax;
-        }
-        l
+        Self::from_parts(rays.len(), |i| {
+            let r = &rays[i];
+            (r.origin.to_array(), r.direction.to_array(), r.tmin, r.tmax)
+        })
     }
 
     /// [`triangle_distance`] of every lane, then the [`closer`] update of each lane's

@@ -7,7 +7,17 @@
 use anyhow::{bail, Context, Result};
 use thinfilm::scene::{meshio, teapot};
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [n, out] = args.as_slice() else {
         bail!("usage: teapot_ply N OUT.ply (N subdivisions per patch edge, 1 to 400)");

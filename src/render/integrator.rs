@@ -784,13 +784,9 @@ fn vertex<C: Carrier>(
             for &li in &lights.infinite {
                 let light = &lights.lights[li as usize];
                 let uv = requests.env_uv;
-                let w = b.path.emitter_hit_weight(|prev_p| {
-                    sel_pdf
-                        * match (uv, light) {
-                            (Some(uv), super::lights::Light::Env(e)) => e.pdf_uv(uv),
-                            _ => light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO),
-                        }
-                });
+                let w = b
+                    .path
+                    .emitter_hit_weight(|prev_p| sel_pdf * light.pdf_escaped(prev_p, ray.dir, uv));
                 requests.env.push(EnvRequest {
                     lane: requests.lane,
                     light: li,

@@ -1181,6 +1181,16 @@ impl Light {
         }
     }
 
+    /// [`Self::pdf_direction`] of a ray that escaped the scene along `dir` from `p`, from its
+    /// texture coordinates `uv` on this environment map when they are already known.
+    #[inline]
+    pub fn pdf_escaped(&self, p: Vec3, dir: Vec3, uv: Option<Vec2>) -> f32 {
+        match (uv, self) {
+            (Some(uv), Light::Env(e)) => e.pdf_uv(uv),
+            _ => self.pdf_direction(p, dir, f32::INFINITY, Vec3::ZERO),
+        }
+    }
+
     /// Solid-angle pdf of sampling `dir` from `p` (hit at distance `dist` with normal `n_light`
     /// for area lights); without the light-selection probability.
     #[inline]

@@ -337,6 +337,9 @@ struct EnvRequest {
     lane: u32,
     light: u32,
     dir: Vec3,
+    /// The texture coordinates of `dir` on the scene's only environment map, if already
+    /// computed ([`super::lights::LightSet::sole_env`]).
+    uv: Option<Vec2>,
     factor: Spec,
 }
 
@@ -382,6 +385,9 @@ struct Requests<'a, C> {
     env: &'a mut Vec<EnvRequest>,
     env_samples: &'a mut Vec<EnvSample<C>>,
     shadow: &'a mut Vec<ShadowRequest>,
+    /// The texture coordinates of the lane's ray on the sole environment map, if it escaped
+    /// and they were computed for the round's escaped rays together.
+    env_uv: Option<Vec2>,
 }
 
 /// The paths of a batch and the reusable buffers of [`trace_lanes`] (one set per worker
@@ -410,6 +416,9 @@ pub struct PathScratch<C> {
     le: Vec<Spec>,
     gathered: Vec<u32>,
     le_gathered: Vec<Spec>,
+    /// A round's escaped directions and their environment-map texture coordinates.
+    escaped_dirs: Vec<Vec3>,
+    escaped_uvs: Vec<Vec2>,
 }
 
 impl<C> Default for PathScratch<C> {
@@ -433,6 +442,8 @@ impl<C> Default for PathScratch<C> {
             le: Vec::new(),
             gathered: Vec::new(),
             le_gathered: Vec::new(),
+            escaped_dirs: Vec::new(),
+            escaped_uvs: Vec::new(),
         }
     }
 }
@@ -539,6 +550,11 @@ pub(super) fn trace_lanes<C: Carrier>(
         lane_of,
         hits,
         occluded,
+        escaped_dirs,
+        escaped_uvs,
+        dirs,
+        lambdas,
+        d65s,
         ..
     } = scratch;
     let n = lanes.len();
@@ -556,12 +572,20 @@ pub(super) fn trace_lanes<C: Carrier>(
             env,
             env_samples,
             shadow,
+            env_uv: None,
         };
         lane.active = step(scene, setup, lane, hit, &mut requests);
     }
     // A lane makes at most one light sample per round, so finishing the environment samples
     // after each round keeps every lane's shadow terms in its own vertex order.
-    resolve_env_samples(scene, env_samples, env_drawn, env_le, shadow);
+    let mut env_buf = EnvBuffers {
+        drawn: env_drawn,
+        le: env_le,
+        dirs,
+        lambdas,
+        d65s,
+    };
+    resolve_env_samples(scene, env_samples, &mut env_buf, shadow);
     loop {
         rays.clear();
         lane_of.clear();
@@ -576,8 +600,22 @@ pub(super) fn trace_lanes<C: Carrier>(
         }
         count(Counter::Rays, rays.len() as u64);
         scene.intersect_batch(rays, hits);
-        // perf: the environment lookups of escaped rays start before any lane waits on one.
-        scene.lights().prefetch_escaped(rays, hits);
+        // perf: the environment lookups of escaped rays start before any lane waits on one;
+        // with a sole environment map their texture coordinates are computed once, together
+        // in SIMD lanes, for both lookups (MIS pdf, radiance).
+        let sole_env = scene.lights().sole_env();
+        escaped_uvs.clear();
+        match sole_env {
+            Some(e) => {
+                escaped_dirs.clear();
+                let escaped = rays.iter().zip(hits.iter()).filter(|(_, h)| h.is_none());
+                escaped_dirs.extend(escaped.map(|(r, _)| r.dir));
+                escaped_uvs.resize(escaped_dirs.len(), Vec2::ZERO);
+                e.uvs_prefetch(escaped_dirs, escaped_uvs);
+            }
+            None => scene.lights().prefetch_escaped(rays, hits),
+        }
+        let mut escaped_uv = escaped_uvs.iter();
         for (&i, &hit) in lane_of.iter().zip(hits.iter()) {
             let i = i as usize;
             let mut requests = Requests {
@@ -586,10 +624,15 @@ pub(super) fn trace_lanes<C: Carrier>(
                 env,
                 env_samples,
                 shadow,
+                env_uv: if hit.is_none() {
+                    escaped_uv.next().copied()
+                } else {
+                    None
+                },
             };
             lanes[i].active = step(scene, setup, &mut lanes[i], hit, &mut requests);
         }
-        resolve_env_samples(scene, env_samples, env_drawn, env_le, shadow);
+        resolve_env_samples(scene, env_samples, &mut env_buf, shadow);
     }
     if scene.media().is_none() {
         // One batched any-hit query for the batch's shadow rays (a small scene tests them in
@@ -632,6 +675,7 @@ fn resolve_env<C>(scene: &PreparedScene, scratch: &mut PathScratch<C>) {
         le,
         gathered,
         le_gathered,
+        escaped_uvs: uvs,
         ..
     } = scratch;
     if env.is_empty() {
@@ -640,25 +684,39 @@ fn resolve_env<C>(scene: &PreparedScene, scratch: &mut PathScratch<C>) {
     le.clear();
     le.resize(env.len(), Spec::ZERO);
     let lights = scene.lights();
-    for &li in &lights.infinite {
-        gathered.clear();
-        dirs.clear();
-        lambdas.clear();
-        d65s.clear();
-        for (k, r) in env.iter().enumerate() {
-            if r.light == li {
-                let lane = &lanes[r.lane as usize];
-                gathered.push(k as u32);
-                dirs.push(r.dir);
-                lambdas.push(Spec::from_array(lane.wl.lambda));
-                d65s.push(lane.d65);
+    // The requests whose texture coordinates are known (sole environment map), then the
+    // others (by direction); each request's value is the same either way.
+    for known_uv in [true, false] {
+        for &li in &lights.infinite {
+            gathered.clear();
+            dirs.clear();
+            uvs.clear();
+            lambdas.clear();
+            d65s.clear();
+            for (k, r) in env.iter().enumerate() {
+                if r.light == li && r.uv.is_some() == known_uv {
+                    let lane = &lanes[r.lane as usize];
+                    gathered.push(k as u32);
+                    dirs.push(r.dir);
+                    uvs.extend(r.uv);
+                    lambdas.push(Spec::from_array(lane.wl.lambda));
+                    d65s.push(lane.d65);
+                }
             }
-        }
-        le_gathered.clear();
-        le_gathered.resize(gathered.len(), Spec::ZERO);
-        lights.lights[li as usize].add_env_batch(dirs, lambdas, d65s, le_gathered);
-        for (&k, &l) in gathered.iter().zip(le_gathered.iter()) {
-            le[k as usize] = l;
+            if gathered.is_empty() {
+                continue;
+            }
+            le_gathered.clear();
+            le_gathered.resize(gathered.len(), Spec::ZERO);
+            match (known_uv, &lights.lights[li as usize]) {
+                (true, super::lights::Light::Env(e)) => {
+                    e.add_batch_uv(uvs, lambdas, d65s, le_gathered)
+                }
+                (_, light) => light.add_env_batch(dirs, lambdas, d65s, le_gathered),
+            }
+            for (&k, &l) in gathered.iter().zip(le_gathered.iter()) {
+                le[k as usize] = l;
+            }
         }
     }
     for (r, &l) in env.iter().zip(le.iter()) {
@@ -725,13 +783,15 @@ fn vertex<C: Carrier>(
         if !hide_emitter {
             for &li in &lights.infinite {
                 let light = &lights.lights[li as usize];
-                let w = b.path.emitter_hit_weight(|prev_p| {
-                    sel_pdf * light.pdf_direction(prev_p, ray.dir, f32::INFINITY, Vec3::ZERO)
-                });
+                let uv = requests.env_uv;
+                let w = b
+                    .path
+                    .emitter_hit_weight(|prev_p| sel_pdf * light.pdf_escaped(prev_p, ray.dir, uv));
                 requests.env.push(EnvRequest {
                     lane: requests.lane,
                     light: li,
                     dir: ray.dir,
+                    uv,
                     factor: b.carrier.s0() * w,
                 });
             }
@@ -882,16 +942,33 @@ fn shadow_term<C: Carrier>(
     Some((ls.shadow_ray(p, ng), f * ls.radiance * (w / light_pdf)))
 }
 
+/// The buffers [`resolve_env_samples`] reuses from round to round.
+struct EnvBuffers<'a> {
+    /// Directions and pdfs, then radiances, of the samples.
+    drawn: &'a mut Vec<Option<(Vec3, f32)>>,
+    le: &'a mut Vec<Spec>,
+    /// The radiance lookups' directions, wavelengths and D65 factors.
+    dirs: &'a mut Vec<Vec3>,
+    lambdas: &'a mut Vec<Spec>,
+    d65s: &'a mut Vec<Spec>,
+}
+
 /// Finishes a round's environment light samples ([`EnvSample`]) stage by stage — all
 /// directions, then all radiances, then the shadow terms — so that the cache misses of
 /// different samples overlap; the values are [`super::lights::Light::sample`]'s.
 fn resolve_env_samples<C: Carrier>(
     scene: &PreparedScene,
     samples: &mut Vec<EnvSample<C>>,
-    drawn: &mut Vec<Option<(Vec3, f32)>>,
-    le: &mut Vec<Spec>,
+    buf: &mut EnvBuffers,
     shadow: &mut Vec<ShadowRequest>,
 ) {
+    let EnvBuffers {
+        drawn,
+        le,
+        dirs,
+        lambdas,
+        d65s,
+    } = buf;
     if samples.is_empty() {
         return;
     }
@@ -909,10 +986,29 @@ fn resolve_env_samples<C: Carrier>(
         .for_each(|s| env(s).prefetch_sample_guided(s.u));
     drawn.extend((samples.iter()).map(|s| env(s).sample_direction_prefetch(s.u)));
     le.clear();
-    le.extend((samples.iter().zip(drawn.iter())).map(|(s, d)| match d {
-        Some((wi, _)) => env(s).eval(*wi, &s.wl),
-        None => Spec::ZERO,
-    }));
+    match lights.sole_env() {
+        // perf: the radiances in SIMD lanes ([`super::lights::EnvMap::add_batch`], the
+        // values of `eval` bit for bit); a sample that drew nothing adds nothing below.
+        Some(e) => {
+            dirs.clear();
+            lambdas.clear();
+            d65s.clear();
+            for (s, d) in samples.iter().zip(drawn.iter()) {
+                dirs.push(d.map_or(Vec3::Z, |(wi, _)| wi));
+                lambdas.push(Spec::from_array(s.wl.lambda));
+                d65s.push(Spec::from_array(
+                    s.wl.lambda
+                        .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
+                ));
+            }
+            le.resize(samples.len(), Spec::ZERO);
+            e.add_batch(dirs, lambdas, d65s, le);
+        }
+        None => le.extend((samples.iter().zip(drawn.iter())).map(|(s, d)| match d {
+            Some((wi, _)) => env(s).eval(*wi, &s.wl),
+            None => Spec::ZERO,
+        })),
+    }
     let sel_pdf = lights.selection_pdf();
     for ((s, d), &radiance) in samples.iter().zip(drawn.iter()).zip(le.iter()) {
         let Some((wi, pdf)) = *d else { continue };

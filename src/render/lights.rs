@@ -220,21 +220,6 @@ impl Distribution2D {
     }
 }
 
-/// [`crate::spectrum::RgbSigmoidPolynomial::eval`] at four wavelengths at once (SIMD lanes).
-/// Same operations in the same order (IEEE `sqrt`/`/` are exact in both forms), so the
-/// result is bit-identical to four scalar calls; the envmap lookup is a hot spot (4 texels
-/// × 4 wavelengths per escaped ray). Infinite polynomial values (black/white coefficients)
-/// take the scalar path, which maps S(±∞) to 1 or 0.
-#[inline]
-fn sigmoid_poly4(poly: &crate::spectrum::RgbSigmoidPolynomial, lambda: Spec) -> Spec {
-    let [c0, c1, c2] = poly.c;
-    let x = (Spec::splat(c0) * lambda + Spec::splat(c1)) * lambda + Spec::splat(c2);
-    if !x.is_finite() {
-        return Spec::from_array(lambda.to_array().map(|l| poly.eval(l)));
-    }
-    Spec::splat(0.5) + x / (Spec::splat(2.0) * (Spec::ONE + x * x).sqrt())
-}
-
 /// Coefficients of the odd polynomial z·P(z²) ≈ atan z on [0, 1] used by [`atan2_fast`].
 const ATAN_C: [f32; 8] = [
     0.999_999_34,
@@ -522,15 +507,26 @@ impl EnvMap {
         active: &[bool; LANES],
         out: &mut [[f32; LANES]; 4],
     ) {
-        let (uv, mut scalar) = self.uv_lanes(dir);
-        let (mut spec, bad) = self.eval_lanes(&uv, lambda, d65);
+        self.add_uv_lanes(&self.uv_lanes_exact(dir), lambda, d65, active, out);
+    }
+
+    /// [`Self::add_lanes`] at texture coordinates already known (`uv[axis][lane]`, from
+    /// [`Self::uv_lanes_exact`]): lanes whose uv is NaN or whose sigmoid argument is not
+    /// finite take the scalar [`Self::eval_uv`], the others are its operations in SIMD lanes.
+    fn add_uv_lanes(
+        &self,
+        uv: &[[f32; LANES]; 2],
+        lambda: &[[f32; LANES]; 4],
+        d65: &[[f32; LANES]; 4],
+        active: &[bool; LANES],
+        out: &mut [[f32; LANES]; 4],
+    ) {
+        let (mut spec, bad) = self.eval_lanes(uv, lambda, d65);
         for i in 0..LANES {
-            scalar[i] |= bad[i];
-        }
-        for i in 0..LANES {
-            if active[i] && scalar[i] {
+            let scalar = bad[i] || uv[0][i].is_nan() || uv[1][i].is_nan();
+            if active[i] && scalar {
                 let wl = SampledWavelengths::new([0, 1, 2, 3].map(|k| lambda[k][i]), [1.0; 4]);
-                let v = self.eval(Vec3::new(dir[0][i], dir[1][i], dir[2][i]), &wl);
+                let v = self.eval_uv(Vec2::new(uv[0][i], uv[1][i]), &wl);
                 for (k, row) in spec.iter_mut().enumerate() {
                     row[i] = v[k];
                 }
@@ -541,6 +537,71 @@ impl EnvMap {
                 if active[i] {
                     out[k][i] += spec[k][i];
                 }
+            }
+        }
+    }
+
+    /// [`Self::uv_of`] on [`LANES`] directions, every lane bit-identical to it: SIMD lanes,
+    /// and the scalar `uv_of` for the lanes needing its special cases.
+    #[inline]
+    fn uv_lanes_exact(&self, dir: &[[f32; LANES]; 3]) -> [[f32; LANES]; 2] {
+        let (mut uv, scalar) = self.uv_lanes(dir);
+        for i in 0..LANES {
+            if scalar[i] {
+                let t = self.uv_of(Vec3::new(dir[0][i], dir[1][i], dir[2][i]));
+                (uv[0][i], uv[1][i]) = (t.x, t.y);
+            }
+        }
+        uv
+    }
+
+    /// [`Self::uv_of`] of `dirs` into `uvs` ([`LANES`] at a time in SIMD lanes, bit-identical),
+    /// starting the loads of what the lookups at them read: the sampling pdf's cell
+    /// ([`Self::pdf_uv`], for MIS) and the texel rows ([`Self::eval_uv`]).
+    pub fn uvs_prefetch(&self, dirs: &[Vec3], uvs: &mut [Vec2]) {
+        for (dirs, uvs) in dirs.chunks(LANES).zip(uvs.chunks_mut(LANES)) {
+            let mut d = [[0.0f32; LANES]; 3];
+            d[0] = [1.0; LANES];
+            for (i, v) in dirs.iter().enumerate() {
+                (d[0][i], d[1][i], d[2][i]) = (v.x, v.y, v.z);
+            }
+            let uv = self.uv_lanes_exact(&d);
+            for (i, t) in uvs.iter_mut().enumerate() {
+                *t = Vec2::new(uv[0][i], uv[1][i]);
+                self.dist.prefetch_pdf(*t);
+                let [(a, _), _, (b, _), _] = self.bilinear_texels(t.x, t.y);
+                prefetch(&self.texel_rows[a]);
+                prefetch(&self.texel_rows[b]);
+            }
+        }
+    }
+
+    /// [`Self::add_batch`] at texture coordinates already known (`uvs[i]` =
+    /// [`Self::uv_of`] of the direction): the same values, without computing them again.
+    pub fn add_batch_uv(&self, uvs: &[Vec2], lambda: &[Spec], d65: &[Spec], out: &mut [Spec]) {
+        for (((uvs, lambdas), d65s), out) in uvs
+            .chunks(LANES)
+            .zip(lambda.chunks(LANES))
+            .zip(d65.chunks(LANES))
+            .zip(out.chunks_mut(LANES))
+        {
+            let n = uvs.len();
+            let mut uv = [[0.5f32; LANES]; 2];
+            let mut l = [[500.0f32; LANES]; 4];
+            let mut w = [[0.0f32; LANES]; 4];
+            for i in 0..n {
+                (uv[0][i], uv[1][i]) = (uvs[i].x, uvs[i].y);
+                for k in 0..4 {
+                    l[k][i] = lambdas[i][k];
+                    w[k][i] = d65s[i][k];
+                }
+            }
+            let mut active = [false; LANES];
+            active[..n].fill(true);
+            let mut sum = [[0.0f32; LANES]; 4];
+            self.add_uv_lanes(&uv, &l, &w, &active, &mut sum);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o += Spec::new(sum[0][i], sum[1][i], sum[2][i], sum[3][i]);
             }
         }
     }
@@ -731,7 +792,7 @@ impl EnvMap {
             let [c0, c1, c2, scale] = self.texel_rows[index];
             if wgt > 0.0 && scale > 0.0 {
                 let poly = crate::spectrum::RgbSigmoidPolynomial { c: [c0, c1, c2] };
-                out += sigmoid_poly4(&poly, lambda) * (wgt * scale);
+                out += poly.eval4(lambda) * (wgt * scale);
             }
         }
         out *= d65;
@@ -800,7 +861,12 @@ impl EnvMap {
 
     #[inline]
     pub fn pdf_direction(&self, dir: Vec3) -> f32 {
-        let uv = self.uv_of(dir);
+        self.pdf_uv(self.uv_of(dir))
+    }
+
+    /// [`Self::pdf_direction`] of the direction whose texture coordinates are `uv`.
+    #[inline]
+    pub fn pdf_uv(&self, uv: Vec2) -> f32 {
         let st = (PI * uv.y).sin();
         if st <= 0.0 {
             return 0.0;
@@ -1112,6 +1178,16 @@ impl Light {
                 }
             }
             _ => {}
+        }
+    }
+
+    /// [`Self::pdf_direction`] of a ray that escaped the scene along `dir` from `p`, from its
+    /// texture coordinates `uv` on this environment map when they are already known.
+    #[inline]
+    pub fn pdf_escaped(&self, p: Vec3, dir: Vec3, uv: Option<Vec2>) -> f32 {
+        match (uv, self) {
+            (Some(uv), Light::Env(e)) => e.pdf_uv(uv),
+            _ => self.pdf_direction(p, dir, f32::INFINITY, Vec3::ZERO),
         }
     }
 
@@ -1552,6 +1628,18 @@ impl LightSet {
         })
     }
 
+    /// The environment map that is the scene's only infinite light, if it is one: the
+    /// escaped rays' texture coordinates can then be computed once for every lookup.
+    pub fn sole_env(&self) -> Option<&EnvMap> {
+        match self.infinite.as_slice() {
+            [li] => match &self.lights[*li as usize] {
+                Light::Env(e) => Some(e),
+                _ => None,
+            },
+            _ => None,
+        }
+    }
+
     /// Starts the environment lookups (MIS pdf, radiance) of the rays that escaped the
     /// scene (`hits[i]` is None), before the lanes' vertices wait on them one by one.
     pub fn prefetch_escaped(&self, rays: &[Ray], hits: &[Option<super::accel::Hit>]) {
@@ -1653,8 +1741,7 @@ impl TexturedEmission {
         if rgb == [0.0; 3] {
             return Spec::ZERO;
         }
-        let s = RgbIlluminantSpectrum::new(rgb);
-        Spec::from_array(wl.lambda.map(|l| s.eval(l)))
+        RgbIlluminantSpectrum::new(rgb).eval4(Spec::from_array(wl.lambda))
     }
 }
 
@@ -1777,29 +1864,6 @@ mod tests {
     }
 
     #[test]
-    fn sigmoid_poly4_is_bit_identical_to_scalar() {
-        use crate::spectrum::RgbSigmoidPolynomial;
-        let lambda = Spec::new(360.0, 451.3, 612.9, 830.0);
-        let mut polys = vec![RgbSigmoidPolynomial::BLACK, RgbSigmoidPolynomial::WHITE];
-        for rgb in [
-            [0.9, 0.1, 0.2],
-            [0.0, 0.5, 1.0],
-            [0.3, 0.3, 0.31],
-            [1.0, 0.0, 0.0],
-        ] {
-            polys.push(RgbIlluminantSpectrum::new(rgb).poly);
-        }
-        polys.push(RgbSigmoidPolynomial {
-            c: [1e-3, -0.9, 180.0],
-        });
-        for poly in polys {
-            let fast = sigmoid_poly4(&poly, lambda).to_array();
-            let scalar = lambda.to_array().map(|l| poly.eval(l));
-            assert_eq!(fast.map(f32::to_bits), scalar.map(f32::to_bits), "{poly:?}");
-        }
-    }
-
-    #[test]
     fn distribution_1d_guide_search_equals_bisection() {
         // Smooth, peaked, zero runs, all-zero and one-cell functions; u on a fine grid plus
         // the edges and cdf values themselves (ties decide which cell a sample lands in).
@@ -1912,17 +1976,26 @@ mod tests {
                         &d65[start..end],
                         &mut out,
                     );
-                    for (i, o) in out.iter().enumerate() {
+                    // The same lookups at texture coordinates computed in SIMD lanes.
+                    let mut uvs = vec![Vec2::ZERO; end - start];
+                    env.uvs_prefetch(&dirs[start..end], &mut uvs);
+                    let mut out_uv = vec![Spec::splat(0.25); end - start];
+                    env.add_batch_uv(&uvs, &lambda[start..end], &d65[start..end], &mut out_uv);
+                    let same =
+                        |a: f32, b: f32| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+                    for (i, (o, o_uv)) in out.iter().zip(&out_uv).enumerate() {
                         let d = dirs[start + i];
                         let want = Spec::splat(0.25) + env.eval(d, &wls[start + i]);
-                        let (a, b) = (o.to_array(), want.to_array());
-                        assert!(
-                            a.iter()
-                                .zip(&b)
-                                .all(|(x, y)| x.to_bits() == y.to_bits()
-                                    || (x.is_nan() && y.is_nan())),
-                            "{d:?}: batched {a:?} vs scalar {b:?}"
-                        );
+                        let b = want.to_array();
+                        for a in [o.to_array(), o_uv.to_array()] {
+                            assert!(
+                                a.iter().zip(&b).all(|(x, y)| same(*x, *y)),
+                                "{d:?}: batched {a:?} vs scalar {b:?}"
+                            );
+                        }
+                        let (uv, want_uv) = (uvs[i], env.uv_of(d));
+                        assert!(same(uv.x, want_uv.x) && same(uv.y, want_uv.y), "{d:?}");
+                        assert!(same(env.pdf_uv(uv), env.pdf_direction(d)), "{d:?}");
                     }
                 }
             }

@@ -59,13 +59,13 @@ impl Spectrum {
     pub fn eval(&self, wl: &SampledWavelengths) -> Spec {
         match self {
             Spectrum::Constant(v) => Spec::splat(*v),
-            Spectrum::Albedo(p, _) => Spec::from_array(wl.lambda.map(|l| p.eval(l))),
-            Spectrum::Illuminant(s, _) => Spec::from_array(wl.lambda.map(|l| s.eval(l))),
+            Spectrum::Albedo(p, _) => p.eval4(Spec::from_array(wl.lambda)),
+            Spectrum::Illuminant(s, _) => s.eval4(Spec::from_array(wl.lambda)),
             Spectrum::Tabulated(t) => Spec::from_array(wl.lambda.map(|l| tabulated(t, l))),
             Spectrum::D65(scale) => {
                 // RGB (1,1,1) as an illuminant is the normalised D65 curve (scale 2, flat 0.5).
                 let white = RgbIlluminantSpectrum::new([1.0; 3]);
-                Spec::from_array(wl.lambda.map(|l| scale * white.eval(l)))
+                Spec::splat(*scale) * white.eval4(Spec::from_array(wl.lambda))
             }
         }
     }
@@ -162,7 +162,7 @@ impl Texture {
                     Spec::splat(c.x)
                 } else {
                     let p = srgb_reflectance(c.to_array());
-                    Spec::from_array(ctx.wl.lambda.map(|l| p.eval(l)))
+                    p.eval4(Spec::from_array(ctx.wl.lambda))
                 }
             }
             _ => self.eval(ctx.uv, ctx.wl),
@@ -181,7 +181,7 @@ impl Texture {
                         Spec::splat(rgb[0])
                     } else {
                         let p = srgb_reflectance(rgb);
-                        Spec::from_array(wl.lambda.map(|l| p.eval(l)))
+                        p.eval4(Spec::from_array(wl.lambda))
                     }
                 } else {
                     Spec::splat(v[0])

@@ -30,6 +30,7 @@
 //! table); with our film that constant would render white as 0.99891. We keep Mitsuba's intent
 //! (white emitter → white pixel) rather than its digits; the two agree within 0.11 %.
 
+use super::Spec;
 use std::sync::OnceLock;
 
 /// Σ ȳ·D65 / Σ ȳ over the 1 nm tables: D65 divided by this has luminance 1 under the film's
@@ -65,6 +66,21 @@ impl RgbSigmoidPolynomial {
             return if x > 0.0 { 1.0 } else { 0.0 };
         }
         0.5 + x / (2.0 * (1.0 + x * x).sqrt())
+    }
+
+    /// [`Self::eval`] at four wavelengths at once (SIMD lanes). Same operations in the same
+    /// order per lane (IEEE `sqrt` and `/` are exact in both forms), so the result is
+    /// bit-identical to four scalar calls: the four wavelengths' chains of a square root and
+    /// a division overlap instead of running one after another. Infinite or NaN polynomial
+    /// values (black/white coefficients) take the scalar path, which maps S(±∞) to 1 or 0.
+    #[inline]
+    pub fn eval4(&self, lambda: Spec) -> Spec {
+        let [c0, c1, c2] = self.c;
+        let x = (Spec::splat(c0) * lambda + Spec::splat(c1)) * lambda + Spec::splat(c2);
+        if !x.is_finite() {
+            return Spec::from_array(lambda.to_array().map(|l| self.eval(l)));
+        }
+        Spec::splat(0.5) + x / (Spec::splat(2.0) * (Spec::ONE + x * x).sqrt())
     }
 }
 
@@ -246,6 +262,96 @@ impl<const ILLUMINANT: bool> RgbScaledSpectrum<ILLUMINANT> {
             v * (super::d65(lambda_nm as f64) / RGB_ILLUMINANT_D65_NORM) as f32
         } else {
             v
+        }
+    }
+
+    /// [`Self::eval`] at four wavelengths at once: the sigmoid in SIMD lanes
+    /// ([`RgbSigmoidPolynomial::eval4`]), the same operations per lane, bit-identical.
+    #[inline]
+    pub fn eval4(&self, lambda: Spec) -> Spec {
+        if self.scale == 0.0 {
+            return Spec::ZERO;
+        }
+        let v = Spec::splat(self.scale) * self.poly.eval4(lambda);
+        if ILLUMINANT {
+            let d65 = lambda
+                .to_array()
+                .map(|l| (super::d65(l as f64) / RGB_ILLUMINANT_D65_NORM) as f32);
+            v * Spec::from_array(d65)
+        } else {
+            v
+        }
+    }
+}
+
+#[cfg(test)]
+mod simd_tests {
+    use super::*;
+
+    /// Polynomials covering black, white, greys, saturated and large-argument sigmoids.
+    fn polys() -> Vec<RgbSigmoidPolynomial> {
+        let mut polys = vec![RgbSigmoidPolynomial::BLACK, RgbSigmoidPolynomial::WHITE];
+        for rgb in [
+            [0.9, 0.1, 0.2],
+            [0.0, 0.5, 1.0],
+            [0.3, 0.3, 0.31],
+            [1.0, 0.0, 0.0],
+            [0.75, 0.45, 0.2],
+            [0.5, 0.5, 0.5],
+        ] {
+            polys.push(srgb_reflectance(rgb));
+            polys.push(RgbIlluminantSpectrum::new(rgb).poly);
+        }
+        polys.push(RgbSigmoidPolynomial {
+            c: [1e-3, -0.9, 180.0],
+        });
+        polys.push(RgbSigmoidPolynomial {
+            c: [f32::NAN, 0.0, 0.0],
+        });
+        polys
+    }
+
+    const LAMBDAS: [[f32; 4]; 3] = [
+        [360.0, 451.3, 612.9, 830.0],
+        [555.5, 400.25, 700.125, 380.0],
+        [0.0, 1e4, 589.3, 486.1],
+    ];
+
+    #[test]
+    fn sigmoid_eval4_is_bit_identical_to_scalar() {
+        for poly in polys() {
+            for l in LAMBDAS {
+                let fast = poly.eval4(Spec::from_array(l)).to_array();
+                let scalar = l.map(|l| poly.eval(l));
+                assert_eq!(fast.map(f32::to_bits), scalar.map(f32::to_bits), "{poly:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn scaled_spectrum_eval4_is_bit_identical_to_scalar() {
+        for rgb in [
+            [0.0, 0.0, 0.0],
+            [1.0, 1.0, 1.0],
+            [0.75, 0.45, 0.2],
+            [3.0, 0.5, 0.0],
+            [0.2, 7.5, 1.25],
+        ] {
+            let (r, e) = (
+                RgbUnboundedSpectrum::new(rgb),
+                RgbIlluminantSpectrum::new(rgb),
+            );
+            for l in LAMBDAS {
+                let fast = [r.eval4(Spec::from_array(l)), e.eval4(Spec::from_array(l))];
+                let scalar = [l.map(|l| r.eval(l)), l.map(|l| e.eval(l))];
+                for (f, s) in fast.iter().zip(scalar) {
+                    assert_eq!(
+                        f.to_array().map(f32::to_bits),
+                        s.map(f32::to_bits),
+                        "{rgb:?}"
+                    );
+                }
+            }
         }
     }
 }

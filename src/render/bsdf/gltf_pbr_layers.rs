@@ -271,7 +271,7 @@ fn metal_film_base(f0: Spec) -> [Complex32; 4] {
 /// A reflectance spectrum at the path's wavelengths.
 #[inline]
 fn spectrum(p: &RgbSigmoidPolynomial, ctx: &ShadingCtx) -> Spec {
-    Spec::from_array(ctx.wl.lambda.map(|l| p.eval(l)))
+    p.eval4(Spec::from_array(ctx.wl.lambda))
 }
 
 /// Linear RGB `factor` × texture (if any) at the shading point, upsampled.

@@ -465,34 +465,16 @@ impl EnvMap {
     /// (`tests::batched_lookup_is_bit_identical`); lanes needing a special case (NaN, a
     /// pole, a non-finite sigmoid argument) take the scalar path.
     pub fn add_batch(&self, dirs: &[Vec3], lambda: &[Spec], d65: &[Spec], out: &mut [Spec]) {
-        for (((dirs, lambdas), d65s), out) in dirs
-            .chunks(LANES)
-            .zip(lambda.chunks(LANES))
-            .zip(d65.chunks(LANES))
-            .zip(out.chunks_mut(LANES))
-        {
-            let n = dirs.len();
+        in_lanes(dirs, lambda, d65, out, |dirs, l, w, active, sum| {
             let mut d = [[0.0f32; LANES]; 3];
             d[0] = [1.0; LANES];
-            let mut l = [[500.0f32; LANES]; 4];
-            let mut w = [[0.0f32; LANES]; 4];
-            for i in 0..n {
+            for (i, dir) in dirs.iter().enumerate() {
                 for c in 0..3 {
-                    d[c][i] = dirs[i][c];
-                }
-                for k in 0..4 {
-                    l[k][i] = lambdas[i][k];
-                    w[k][i] = d65s[i][k];
+                    d[c][i] = dir[c];
                 }
             }
-            let mut active = [false; LANES];
-            active[..n].fill(true);
-            let mut sum = [[0.0f32; LANES]; 4];
-            self.add_lanes(&d, &l, &w, &active, &mut sum);
-            for (i, o) in out.iter_mut().enumerate() {
-                *o += Spec::new(sum[0][i], sum[1][i], sum[2][i], sum[3][i]);
-            }
-        }
+            self.add_lanes(&d, l, w, active, sum);
+        });
     }
 
     /// [`Self::add_batch`] on one group of [`LANES`] lookups already in struct-of-arrays
@@ -579,31 +561,13 @@ impl EnvMap {
     /// [`Self::add_batch`] at texture coordinates already known (`uvs[i]` =
     /// [`Self::uv_of`] of the direction): the same values, without computing them again.
     pub fn add_batch_uv(&self, uvs: &[Vec2], lambda: &[Spec], d65: &[Spec], out: &mut [Spec]) {
-        for (((uvs, lambdas), d65s), out) in uvs
-            .chunks(LANES)
-            .zip(lambda.chunks(LANES))
-            .zip(d65.chunks(LANES))
-            .zip(out.chunks_mut(LANES))
-        {
-            let n = uvs.len();
+        in_lanes(uvs, lambda, d65, out, |uvs, l, w, active, sum| {
             let mut uv = [[0.5f32; LANES]; 2];
-            let mut l = [[500.0f32; LANES]; 4];
-            let mut w = [[0.0f32; LANES]; 4];
-            for i in 0..n {
-                (uv[0][i], uv[1][i]) = (uvs[i].x, uvs[i].y);
-                for k in 0..4 {
-                    l[k][i] = lambdas[i][k];
-                    w[k][i] = d65s[i][k];
-                }
+            for (i, p) in uvs.iter().enumerate() {
+                (uv[0][i], uv[1][i]) = (p.x, p.y);
             }
-            let mut active = [false; LANES];
-            active[..n].fill(true);
-            let mut sum = [[0.0f32; LANES]; 4];
-            self.add_uv_lanes(&uv, &l, &w, &active, &mut sum);
-            for (i, o) in out.iter_mut().enumerate() {
-                *o += Spec::new(sum[0][i], sum[1][i], sum[2][i], sum[3][i]);
-            }
-        }
+            self.add_uv_lanes(&uv, l, w, active, sum);
+        });
     }
 
     /// [`Self::uv_of`] on [`LANES`] directions; `true` marks lanes whose atan2 needs the
@@ -1799,6 +1763,47 @@ pub(crate) fn blocked_shadow_transmittance(scene: &super::PreparedScene, ray: &R
         }
     }
     0.0
+}
+
+/// Environment lookups `items[i]` (directions or (u, v)), with the path's wavelengths
+/// `lambda[i]` and D65 weights `d65[i]`, in groups of [`LANES`]: `lanes(group, λ, w,
+/// active, sum)` adds the group's radiances to `sum` (struct-of-arrays; lanes past the
+/// group are inactive, with λ = 500 nm and w = 0), which `out[i]` then accumulates.
+fn in_lanes<T>(
+    items: &[T],
+    lambda: &[Spec],
+    d65: &[Spec],
+    out: &mut [Spec],
+    mut lanes: impl FnMut(
+        &[T],
+        &[[f32; LANES]; 4],
+        &[[f32; LANES]; 4],
+        &[bool; LANES],
+        &mut [[f32; LANES]; 4],
+    ),
+) {
+    for (((items, lambdas), d65s), out) in (items.chunks(LANES))
+        .zip(lambda.chunks(LANES))
+        .zip(d65.chunks(LANES))
+        .zip(out.chunks_mut(LANES))
+    {
+        let n = items.len();
+        let mut l = [[500.0f32; LANES]; 4];
+        let mut w = [[0.0f32; LANES]; 4];
+        for i in 0..n {
+            for k in 0..4 {
+                l[k][i] = lambdas[i][k];
+                w[k][i] = d65s[i][k];
+            }
+        }
+        let mut active = [false; LANES];
+        active[..n].fill(true);
+        let mut sum = [[0.0f32; LANES]; 4];
+        lanes(items, &l, &w, &active, &mut sum);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o += Spec::new(sum[0][i], sum[1][i], sum[2][i], sum[3][i]);
+        }
+    }
 }
 
 #[cfg(test)]

@@ -16,6 +16,8 @@
 //!   keeps radiance 1 (image mean within four standard errors, each < 0.3 %).
 //! - Scenes the media support refuses, naming the plugin.
 
+mod common;
+
 use std::path::Path;
 use thinfilm::render::{render, RenderOptions};
 use thinfilm::scene::mitsuba::load_str;
@@ -39,43 +41,7 @@ fn compare(name: &str, spp: u32, mean_tol: f64, block_tol: f64) {
     assert!(scene.media.is_some(), "{name}: media are rendered");
     let reference = thinfilm::image_io::read_exr_rgb(&dir.join(format!("{name}.exr"))).unwrap();
     let out = render_scene(&scene, spp);
-    let (w, h) = (out.width, out.height);
-    assert_eq!((w, h), (reference.width, reference.height), "{name}: size");
-    let mean =
-        |px: &[[f32; 3]], c: usize| px.iter().map(|p| p[c] as f64).sum::<f64>() / px.len() as f64;
-    for c in 0..3 {
-        let (got, want) = (mean(&out.pixels, c), mean(&reference.pixels, c));
-        let ratio = got / want;
-        println!("{name}: channel {c}: thinfilm {got:.5}, Mitsuba {want:.5}, ratio {ratio:.4}");
-        assert!(
-            (ratio - 1.0).abs() <= mean_tol,
-            "{name}: channel {c} mean ratio {ratio:.4}"
-        );
-    }
-    let block = |px: &[[f32; 3]], bx: usize, by: usize| {
-        let mut s = 0.0f64;
-        for y in by * 8..(by * 8 + 8).min(h) {
-            for x in bx * 8..(bx * 8 + 8).min(w) {
-                s += px[y * w + x].iter().map(|v| *v as f64).sum::<f64>();
-            }
-        }
-        s
-    };
-    let image_mean: f64 = (0..3).map(|c| mean(&reference.pixels, c)).sum::<f64>() * 64.0;
-    let mut worst = 0.0f64;
-    for by in 0..h.div_ceil(8) {
-        for bx in 0..w.div_ceil(8) {
-            let (got, want) = (block(&out.pixels, bx, by), block(&reference.pixels, bx, by));
-            if want > 0.25 * image_mean {
-                let r = got / want;
-                worst = worst.max((r - 1.0).abs());
-                assert!(
-                    (r - 1.0).abs() <= block_tol,
-                    "{name}: block ({bx}, {by}) ratio {r:.3}"
-                );
-            }
-        }
-    }
+    let worst = common::assert_means_and_blocks(name, &out, &reference, mean_tol, block_tol);
     println!("{name}: worst bright-block deviation {worst:.3}");
 }
 

@@ -365,10 +365,9 @@ pub fn capture_figure(
     let bands = set.bands();
     let measured = capture_colour_image(&set, angle_index, |p| {
         angle.valid[p].then(|| {
-            angle.reflectance[p * bands..(p + 1) * bands]
-                .iter()
-                .map(|&v| v as f64)
-                .collect()
+            let mut y = vec![0f32; bands];
+            angle.reflectance.pixel(p, &mut y);
+            y.iter().map(|&v| v as f64).collect()
         })
     });
     let cos1 = angle.incident_deg.to_radians().cos();

@@ -115,7 +115,7 @@ fn raw_counts_with_references_and_every_invalid_cause() {
     );
     let set = load_capture_set(d.path()).unwrap();
     assert_eq!(set.ambient_ior, 1.0);
-    let r = &set.angles[0].reflectance;
+    let r = &set.angles[0].reflectance.to_vec();
     // R = (raw − dark)/(white − dark): band 0 span 1000, band 1 span 2000.
     assert_eq!(r[0], 0.0);
     assert!((r[1] - 0.0).abs() < 1e-7);
@@ -126,7 +126,8 @@ fn raw_counts_with_references_and_every_invalid_cause() {
     assert!(r.chunks(3).all(|px| px[2].is_nan())); // bad reference band
     assert!(set.angles[0].valid.iter().all(|&v| !v));
     let f = &set.angles[1];
-    assert!(f.reflectance[0].is_nan() && f.reflectance[5].is_nan() && f.reflectance[6].is_nan());
+    let fr = |i| f.reflectance.at(i);
+    assert!(fr(0).is_nan() && fr(5).is_nan() && fr(6).is_nan());
     assert_eq!(f.valid, vec![false, false, false, true, true, true]);
     assert_eq!(
         set.invalid,
@@ -227,44 +228,157 @@ fn malformed_sets_are_clear_errors() {
     assert!(e.contains("nowl.hdr") && e.contains("wavelength"), "{e}");
 }
 
-/// A float32 BIP cube is read in place (its samples are the file's mapping, no decoding
-/// pass); masking a sample writes NaN into the loaded set, never into the file; the same
-/// data as BSQ (decoded and transposed) loads to the same samples and mask.
+/// Float32 cubes in this machine's byte order are read in place, whatever their
+/// interleave (their samples are the file's mapping: no decoding pass, no copy); masking a
+/// sample writes NaN into the loaded set, never into the file; the same data big-endian
+/// (decoded and transposed in memory) loads to the same samples, masks and counts.
 #[test]
-fn float_bip_cubes_are_read_in_place_and_equal_their_bsq_twins() {
+fn float_cubes_are_read_in_place_and_equal_their_decoded_twins() {
     let d = tempfile::tempdir().unwrap();
     let (w, h) = (3, 2);
     let mut data: Vec<f32> = (0..w * h * 3).map(|i| 0.1 + i as f32 * 0.01).collect();
     data[4] = f32::INFINITY; // pixel 1
     data[9] = -1.0; // pixel 3: the ignore value
-    for (name, il) in [
-        ("bip", envi::Interleave::Bip),
-        ("bsq", envi::Interleave::Bsq),
-    ] {
+    let layouts = [
+        ("bip", envi::Interleave::Bip, false),
+        ("bsq", envi::Interleave::Bsq, false),
+        ("bil", envi::Interleave::Bil, false),
+        ("bsq_be", envi::Interleave::Bsq, true),
+    ];
+    for (name, il, big_endian) in layouts {
         let mut o = WriteOptions::new(w, h, 3);
         o.wavelengths_nm = Some(WL.to_vec());
         o.ignore_value = Some(-1.0);
         o.interleave = il;
+        o.big_endian = big_endian;
         envi::write_cube(&d.path().join(format!("{name}.hdr")), &data, &o).unwrap();
     }
-    let bytes_before = std::fs::read(d.path().join("bip.img")).unwrap();
+    let bytes_before: Vec<Vec<u8>> = (layouts.iter())
+        .map(|l| std::fs::read(d.path().join(format!("{}.img", l.0))).unwrap())
+        .collect();
+    let angles: Vec<String> = (layouts.iter().enumerate())
+        .map(|(i, l)| {
+            format!(
+                r#"{{"incident_deg": {}, "cube": "{}.hdr"}}"#,
+                10 * (i + 1),
+                l.0
+            )
+        })
+        .collect();
     json(
         d.path(),
-        r#"{"format": "thinfilm-capture/1", "polarization": "s", "substrate": 1.64,
-            "angles": [{"incident_deg": 10, "cube": "bip.hdr"}, {"incident_deg": 20, "cube": "bsq.hdr"}]}"#,
+        &format!(
+            r#"{{"format": "thinfilm-capture/1", "polarization": "s", "substrate": 1.64, "angles": [{}]}}"#,
+            angles.join(", ")
+        ),
     );
     let set = load_capture_set(d.path()).unwrap();
-    let (bip, bsq) = (&set.angles[0], &set.angles[1]);
-    assert!(bip.reflectance.is_mapped() && !bsq.reflectance.is_mapped());
-    let bits = |s: &[f32]| s.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-    assert_eq!(bits(&bip.reflectance), bits(&bsq.reflectance));
-    assert!(bip.reflectance[9].is_nan() && bip.reflectance[10] == data[10]);
+    let mapped: Vec<bool> = set
+        .angles
+        .iter()
+        .map(|a| a.reflectance.is_mapped())
+        .collect();
+    assert_eq!(mapped, vec![true, true, true, false]);
+    let bits = |a: &thinfilm::capture::AngleCapture| {
+        let v = a.reflectance.to_vec();
+        v.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    };
+    let bip = &set.angles[0];
+    for other in &set.angles[1..] {
+        assert_eq!(bits(bip), bits(other), "{}°", other.incident_deg);
+        assert_eq!(bip.valid, other.valid, "{}°", other.incident_deg);
+    }
+    assert!(bip.reflectance.at(9).is_nan() && bip.reflectance.at(10) == data[10]);
     assert_eq!(bip.valid, vec![true, false, true, false, true, true]);
-    assert_eq!(bip.valid, bsq.valid);
-    assert_eq!(set.invalid.non_finite, 2);
-    assert_eq!(set.invalid.ignore_value, 2);
-    assert_eq!(
-        std::fs::read(d.path().join("bip.img")).unwrap(),
-        bytes_before
+    assert_eq!(set.invalid.non_finite, 4);
+    assert_eq!(set.invalid.ignore_value, 4);
+    for (l, before) in layouts.iter().zip(&bytes_before) {
+        let now = std::fs::read(d.path().join(format!("{}.img", l.0))).unwrap();
+        assert_eq!(&now, before, "{} was written", l.0);
+    }
+}
+
+/// A planar (BSQ/BIL) float32 cube read in place gives every pixel exactly as decoding it
+/// to BIP does, in any order of reading: row after row (tiles transposed), backwards and
+/// scattered (pixels gathered alone), interleaved across more cubes than a thread keeps
+/// tiles of, on a width that is not a multiple of the tile, from several threads.
+#[test]
+fn planar_cubes_read_in_place_match_their_decoded_twins_in_any_order() {
+    use rayon::prelude::*;
+    let d = tempfile::tempdir().unwrap();
+    let (w, h, nb) = (301, 5, 11);
+    let wl: Vec<f64> = (0..nb).map(|b| 450.0 + 20.0 * b as f64).collect();
+    let mut angles = Vec::new();
+    for k in 0..10 {
+        // A different cube per angle: reading one in another's tile would show.
+        let data: Vec<f32> = (0..w * h * nb)
+            .map(|i| ((i * 7919 + k * 104_729) % 100_003) as f32 * 1e-5 + 0.01)
+            .collect();
+        for (name, il, big) in [
+            ("p", envi::Interleave::Bsq, false),
+            ("d", envi::Interleave::Bsq, true),
+        ] {
+            let il = if k % 2 == 1 && name == "p" {
+                envi::Interleave::Bil
+            } else {
+                il
+            };
+            let mut o = WriteOptions::new(w, h, nb);
+            o.wavelengths_nm = Some(wl.clone());
+            o.interleave = il;
+            o.big_endian = big;
+            envi::write_cube(&d.path().join(format!("{name}{k}.hdr")), &data, &o).unwrap();
+        }
+        angles.push(format!(
+            r#"{{"incident_deg": {}, "cube": "p{k}.hdr"}}"#,
+            5 * k
+        ));
+        angles.push(format!(
+            r#"{{"incident_deg": {}, "cube": "d{k}.hdr"}}"#,
+            5 * k + 1
+        ));
+    }
+    json(
+        d.path(),
+        &format!(
+            r#"{{"format": "thinfilm-capture/1", "polarization": "s", "substrate": 1.5, "angles": [{}]}}"#,
+            angles.join(", ")
+        ),
     );
+    let set = load_capture_set(d.path()).unwrap();
+    let pairs: Vec<_> = set.angles.chunks(2).map(|c| (&c[0], &c[1])).collect();
+    for (planar, decoded) in &pairs {
+        assert!(planar.reflectance.as_bip().is_none() && decoded.reflectance.as_bip().is_some());
+    }
+    let n = w * h;
+    let sequential: Vec<usize> = (0..n).collect();
+    let backwards: Vec<usize> = (0..n).rev().collect();
+    let scattered: Vec<usize> = (0..n).map(|i| (i * 7_877) % n).collect();
+    let check = |order: &[usize]| {
+        let (mut a, mut b) = (vec![0f32; nb], vec![0f32; nb]);
+        for &p in order {
+            for (planar, decoded) in &pairs {
+                planar.reflectance.pixel(p, &mut a);
+                decoded.reflectance.pixel(p, &mut b);
+                assert_eq!(a, b, "pixel {p}, {}°", planar.incident_deg);
+            }
+        }
+    };
+    for order in [&sequential, &backwards, &scattered] {
+        check(order);
+    }
+    // Rows on several threads, each with its own tiles.
+    (0..h)
+        .into_par_iter()
+        .for_each(|y| check(&sequential[y * w..(y + 1) * w]));
+    for (planar, decoded) in &pairs {
+        assert_eq!(planar.reflectance.to_vec(), decoded.reflectance.to_vec());
+        for i in [0, 5 * nb + 3, (w * h - 1) * nb + nb - 1] {
+            assert_eq!(planar.reflectance.at(i), decoded.reflectance.at(i));
+        }
+    }
+    let rows = set.rows(2, 4);
+    for pair in rows.angles.chunks(2) {
+        assert_eq!(pair[0].reflectance.to_vec(), pair[1].reflectance.to_vec());
+    }
 }

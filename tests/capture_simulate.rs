@@ -60,7 +60,7 @@ fn point_sampled_capture_equals_the_optics_core() {
                 let d = gt.thickness_nm[p] as f64;
                 for (b, &l) in set.wavelengths_nm.iter().enumerate() {
                     let want = point_reflectance(&cfg, d, l, a.incident_deg);
-                    worst = worst.max((a.reflectance[p * nb + b] as f64 - want).abs());
+                    worst = worst.max((a.reflectance.at(p * nb + b) as f64 - want).abs());
                 }
             }
         }
@@ -222,7 +222,7 @@ fn raw_counts_recover_reflectance_within_shot_noise() {
     let (mut sum_z2, mut n, mut worst_z) = (0.0, 0.0, 0f64);
     for (a, angle) in set.angles.iter().enumerate() {
         let clean = sim.clean_cube(a, None);
-        for (i, (&got, &want)) in angle.reflectance.iter().zip(&clean).enumerate() {
+        for (i, (&got, &want)) in angle.reflectance.to_vec().iter().zip(&clean).enumerate() {
             // Shot + read noise of one reading, divided by the white signal (the white
             // reference itself is averaged over 600 samples: negligible).
             let lambda = cfg.wavelengths_nm[i % nb];
@@ -259,6 +259,7 @@ fn additive_noise_has_the_requested_sigma_and_is_seeded() {
         let clean = sim.clean_cube(0, None);
         let diff: Vec<f64> = set.angles[0]
             .reflectance
+            .to_vec()
             .iter()
             .zip(&clean)
             .map(|(a, b)| (a - b) as f64)

@@ -139,8 +139,8 @@ fn flat_peakless_and_broken_spectra_give_finite_json() {
     spec.thickness_variation_nm = 0.0;
     let (mut set, _) = synth::capture(&spec);
     let nb = set.bands();
-    set.angles[0].reflectance[3 * nb] = f32::NAN;
-    set.angles[1].reflectance[5 * nb + 2] = f32::INFINITY;
+    set.angles[0].reflectance.as_bip_mut().unwrap()[3 * nb] = f32::NAN;
+    set.angles[1].reflectance.as_bip_mut().unwrap()[5 * nb + 2] = f32::INFINITY;
     set.angles[2].valid[7] = false;
     for a in &mut set.angles {
         a.valid[11] = false;
@@ -172,7 +172,9 @@ fn flat_peakless_and_broken_spectra_give_finite_json() {
     }
     // Completely flat spectra (no film signal at all, constant reflectance).
     for a in &mut set.angles {
-        a.reflectance.iter_mut().for_each(|v| *v = 0.05);
+        (a.reflectance.as_bip_mut().unwrap())
+            .iter_mut()
+            .for_each(|v| *v = 0.05);
         a.valid.iter_mut().for_each(|v| *v = true);
     }
     for method in [Method::Full, Method::Paper] {

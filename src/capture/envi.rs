@@ -739,7 +739,7 @@ impl EnviFile {
         } = self;
         match Samples::mapped(map, offset, len) {
             Ok(mut samples) => {
-                let rows = samples
+                let rows = (samples.as_bip_mut().expect("a BIP mapping"))
                     .par_chunks_mut(row_len.max(1))
                     .enumerate()
                     .map(|(y, row)| per_row(y, row))
@@ -756,6 +756,36 @@ impl EnviFile {
                 (data.into(), rows)
             }
         }
+    }
+
+    /// The samples of a float32 band-sequential or band-interleaved-by-line cube in this
+    /// machine's byte order as the file's own mapping, read by tiles in BIP order
+    /// ([`Samples`]): no decoding pass and no copy. The file back for any other cube.
+    pub fn into_planar(self) -> std::result::Result<Samples, Box<EnviFile>> {
+        let h = &self.header;
+        let native = h.data_type == DataType::F32 && h.big_endian == cfg!(target_endian = "big");
+        let (w, l, nb) = (h.samples, h.lines, h.bands);
+        let strides = match h.interleave {
+            Interleave::Bsq => (w, w * l),
+            Interleave::Bil => (w * nb, w),
+            Interleave::Bip => return Err(Box::new(self)),
+        };
+        if !native || nb < 2 {
+            return Err(Box::new(self));
+        }
+        let offset = h.header_offset;
+        let EnviFile {
+            header,
+            binary_path,
+            map,
+        } = self;
+        Samples::planar(map, offset, (w, l, nb), strides).map_err(|map| {
+            Box::new(EnviFile {
+                header,
+                binary_path,
+                map,
+            })
+        })
     }
 
     fn decode_rows<D: Decode, T: Send>(

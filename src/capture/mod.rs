@@ -85,20 +85,15 @@ impl AngleCapture {
         }
     }
 
-    /// Copies the `out.len()` bands of pixel `p` into `out`; false (and `out` untouched)
-    /// when the pixel is not usable at this angle.
+    /// Copies the `out.len()` bands of pixel `p` into `out`; false when the pixel is not
+    /// usable at this angle (`out` is then untouched, or holds its non-finite samples).
     #[inline]
     pub fn pixel(&self, p: usize, out: &mut [f32]) -> bool {
-        let nb = out.len();
         if !self.valid.get(p).copied().unwrap_or(false) {
             return false;
         }
-        let src = &self.reflectance[p * nb..(p + 1) * nb];
-        if !src.iter().all(|v| v.is_finite()) {
-            return false;
-        }
-        out.copy_from_slice(src);
-        true
+        self.reflectance.pixel(p, out);
+        out.iter().all(|v| v.is_finite())
     }
 }
 
@@ -165,7 +160,7 @@ impl CaptureSet {
                     .incident_deg_map
                     .as_ref()
                     .map(|m| m[px.clone()].to_vec()),
-                reflectance: ang.reflectance[px.start * nb..px.end * nb].to_vec().into(),
+                reflectance: ang.reflectance.pixels_to_vec(px.clone(), nb).into(),
                 valid: ang.valid[px.clone()].to_vec(),
             })
             .collect();
@@ -195,12 +190,29 @@ impl InvalidCounts {
         self.non_finite + self.ignore_value + self.saturated + self.bad_reference
     }
 
+    /// The counter of `cause`.
+    pub(crate) fn of(&mut self, cause: Cause) -> &mut u64 {
+        match cause {
+            Cause::NonFinite => &mut self.non_finite,
+            Cause::IgnoreValue => &mut self.ignore_value,
+            Cause::Saturated => &mut self.saturated,
+        }
+    }
+
     pub fn add(&mut self, o: &InvalidCounts) {
         self.non_finite += o.non_finite;
         self.ignore_value += o.ignore_value;
         self.saturated += o.saturated;
         self.bad_reference += o.bad_reference;
     }
+}
+
+/// Why a raw sample was masked (the causes found before calibration).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Cause {
+    NonFinite,
+    IgnoreValue,
+    Saturated,
 }
 
 /// Ground truth written by `thinfilm simulate` in `DIR/ground_truth/`.

@@ -7,7 +7,7 @@
 //! cause in [`InvalidCounts`]; they are never an error.
 
 use super::envi::{self, EnviFile};
-use super::{AngleCapture, CaptureSet, GroundTruth, InvalidCounts, Polarization, Samples};
+use super::{AngleCapture, CaptureSet, Cause, GroundTruth, InvalidCounts, Polarization, Samples};
 use crate::optics::{Complex64, Ior};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -285,12 +285,8 @@ fn reflectance(
             }
             for (b, v) in px.iter_mut().enumerate() {
                 let raw = *v;
-                let cause = if !raw.is_finite() {
-                    Some(&mut c.non_finite)
-                } else if Some(raw) == ignore {
-                    Some(&mut c.ignore_value)
-                } else if sat.is_some_and(|s| raw >= s) {
-                    Some(&mut c.saturated)
+                let cause = if let Some(cause) = raw_sample_cause(raw, ignore, sat) {
+                    Some(c.of(cause))
                 } else if let Some((offset, scale)) = band_map[b] {
                     let r = ((raw as f64 - offset) * scale) as f32;
                     if r.is_finite() {
@@ -312,7 +308,10 @@ fn reflectance(
         (valid_row, c)
     };
     let (data, rows) = if identity {
-        file.into_bip_rows(per_row)
+        match file.into_planar() {
+            Ok(planar) => return mask_planar(planar, (w, lines, nb), ignore, sat),
+            Err(file) => (*file).into_bip_rows(per_row),
+        }
     } else {
         // Calibration writes every sample: decode (a mapping would copy every page).
         let (data, rows) = file.decode_bip_rows(per_row);
@@ -325,6 +324,67 @@ fn reflectance(
         counts.add(&c);
     }
     (data, valid, counts)
+}
+
+/// Why a raw sample is unusable before any calibration: not finite, the header's ignore
+/// value, or at or above the data type's saturation value.
+fn raw_sample_cause(raw: f32, ignore: Option<f32>, sat: Option<f32>) -> Option<Cause> {
+    if !raw.is_finite() {
+        Some(Cause::NonFinite)
+    } else if Some(raw) == ignore {
+        Some(Cause::IgnoreValue)
+    } else if sat.is_some_and(|s| raw >= s) {
+        Some(Cause::Saturated)
+    } else {
+        None
+    }
+}
+
+/// Masking of an uncalibrated planar (BSQ/BIL float32) cube read in place from its mapping:
+/// the same masks, counts and NaN samples as decoding it would give, from one pass over
+/// each line's band runs (a pixel is checked sample by sample only when a run flags it).
+fn mask_planar(
+    mut samples: Samples,
+    (w, lines, nb): (usize, usize, usize),
+    ignore: Option<f32>,
+    sat: Option<f32>,
+) -> (Samples, Vec<bool>, InvalidCounts) {
+    use rayon::prelude::*;
+    let ignore_v = ignore.unwrap_or(f32::NAN); // NaN never compares equal
+    let sat_v = sat.unwrap_or(f32::INFINITY); // inf is caught as non-finite anyway
+    let s = &samples;
+    let rows: Vec<(Vec<bool>, InvalidCounts, Vec<(usize, usize)>)> = (0..lines)
+        .into_par_iter()
+        .map(|y| {
+            let run = |b| s.planar_run(y, b).expect("a planar cube");
+            let mut bad = vec![false; w];
+            for b in 0..nb {
+                for (k, &v) in bad.iter_mut().zip(run(b)) {
+                    *k |= !v.is_finite() | (v == ignore_v) | (v >= sat_v);
+                }
+            }
+            let (mut c, mut masked) = (InvalidCounts::default(), Vec::new());
+            for x in (0..w).filter(|&x| bad[x]) {
+                for b in 0..nb {
+                    if let Some(cause) = raw_sample_cause(run(b)[x], ignore, sat) {
+                        *c.of(cause) += 1;
+                        masked.push((x, b));
+                    }
+                }
+            }
+            (bad.iter().map(|b| !b).collect(), c, masked)
+        })
+        .collect();
+    let mut valid = Vec::with_capacity(w * lines);
+    let mut counts = InvalidCounts::default();
+    for (y, (valid_row, c, masked)) in rows.into_iter().enumerate() {
+        valid.extend_from_slice(&valid_row);
+        counts.add(&c);
+        for (x, b) in masked {
+            samples.set_planar(y, x, b, f32::NAN);
+        }
+    }
+    (samples, valid, counts)
 }
 
 /// A per-pixel incidence map named in capture.json: degrees, the cube's size, each value

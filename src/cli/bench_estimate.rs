@@ -47,8 +47,9 @@ pub struct Args {
     /// the same index and checking the stitched thickness is bit-identical.
     #[arg(long, default_value_t = 0)]
     pub bands: usize,
-    /// ENVI interleave of the 1-megapixel capture's cubes (float32 `bip` is read in place,
-    /// without a decoding pass; `bsq` and `bil` are transposed as they are read).
+    /// ENVI interleave of the 1-megapixel capture's cubes (float32 in any interleave is read
+    /// in place from the file's mapping: `bip` as it is, `bsq` and `bil` transposed a tile
+    /// of pixels at a time as the fit reads them).
     #[arg(long, default_value = "bsq")]
     pub interleave: thinfilm::capture::envi::Interleave,
 }
@@ -455,10 +456,11 @@ fn robustness(args: &Args, md: &mut String) -> Result<()> {
     let nb = s.bands();
     let mut rng = synth::Rng::new(5);
     for a in &mut s.angles {
+        let r = (a.reflectance.as_bip_mut()).context("a simulated capture is BIP in memory")?;
         for _ in 0..(w * h / 20) {
             let p = (rng.next_u64() % (w * h) as u64) as usize;
             let b = (rng.next_u64() % nb as u64) as usize;
-            a.reflectance[p * nb + b] = if b % 2 == 0 { f32::NAN } else { f32::INFINITY };
+            r[p * nb + b] = if b % 2 == 0 { f32::NAN } else { f32::INFINITY };
             a.valid[p] = false;
         }
     }

@@ -288,8 +288,7 @@ mod tests {
         let (mut set, _) = synth::capture(&spec);
         // Noise 0.01 below 500 nm, 0.002 above.
         let mut rng = synth::Rng::new(3);
-        for (v, l) in set.angles[0]
-            .reflectance
+        for (v, l) in (set.angles[0].reflectance.as_bip_mut().unwrap())
             .iter_mut()
             .zip(&spec.wavelengths_nm)
         {

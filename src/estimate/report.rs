@@ -74,13 +74,12 @@ pub fn mean_delta_e(
         let per_pixel: Vec<(f64, usize)> = pixels
             .par_iter()
             .map_init(
-                || vec![0f32; nb],
-                |r, &p| {
+                || (vec![0f32; nb], vec![0f32; nb]),
+                |(y, r), &p| {
                     let (mut sum, mut count) = (0.0, 0usize);
                     let q = p + offset;
                     for (a, ang) in set.angles.iter().enumerate() {
-                        let y = &ang.reflectance[q * nb..(q + 1) * nb];
-                        if !ang.valid[q] || y.iter().any(|v| !v.is_finite()) {
+                        if !ang.pixel(q, y) {
                             continue;
                         }
                         model.spectrum(a, fit.thickness_nm[p] as f64, r);

@@ -143,8 +143,8 @@ pub fn fit_hash(set: &CaptureSet, film_ior: f64, options: &super::Options) -> u6
     );
     for a in &set.angles {
         let _ = write!(h, "|{:?}", a.incident_deg);
-        for v in a.reflectance.iter().step_by(4099) {
-            let _ = write!(h, ",{:x}", v.to_bits());
+        for i in (0..a.reflectance.len()).step_by(4099) {
+            let _ = write!(h, ",{:x}", a.reflectance.at(i).to_bits());
         }
         for v in a.valid.iter().step_by(4099) {
             let _ = write!(h, "{}", *v as u8);

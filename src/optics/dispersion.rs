@@ -65,17 +65,6 @@ impl Material {
 }
 
 fn interpolate(rows: &[(f64, f64, f64)], lambda_nm: f64) -> Complex64 {
-    interpolate_from(rows, lambda_nm, || guess_row_above(rows, lambda_nm))
-}
-
-/// [`interpolate`] with the row search starting at `guess()` (any row in 1..len; the walk of
-/// [`walk_to_row_above`] then finds the row a binary search finds).
-#[inline]
-fn interpolate_from(
-    rows: &[(f64, f64, f64)],
-    lambda_nm: f64,
-    guess: impl FnOnce() -> usize,
-) -> Complex64 {
     let first = rows[0];
     let last = rows[rows.len() - 1];
     if lambda_nm.is_nan() {
@@ -87,7 +76,7 @@ fn interpolate_from(
     if lambda_nm >= last.0 {
         return Complex64::new(last.1, last.2);
     }
-    let hi = walk_to_row_above(rows, lambda_nm, guess());
+    let hi = walk_to_row_above(rows, lambda_nm, guess_row_above(rows, lambda_nm));
     let (l0, n0, k0) = rows[hi - 1];
     let (l1, n1, k1) = rows[hi];
     let t = (lambda_nm - l0) / (l1 - l0);
@@ -129,60 +118,165 @@ fn walk_to_row_above(rows: &[(f64, f64, f64)], lambda_nm: f64, hi: usize) -> usi
 }
 
 /// `n + ik` of a material at a hero sample's four wavelengths, as f32 (what the renderer's
-/// Fresnel terms take): [`Material::nk`] with its tabulated rows found in a uniform grid over
-/// λ built once per material, so a gold conductor's lookup makes one f64 division per
-/// wavelength (the interpolation's own, kept so the values are [`Material::nk`]'s bit for
-/// bit) instead of five (the 1/λ row guess of [`guess_row_above`]: 7.5 % of a gold teapot's
-/// render). Formula models evaluate [`Material::nk`] as before.
+/// Fresnel terms take): [`Material::nk`] bit for bit, with a table's interval found in a
+/// uniform grid over λ built once per material. [`interpolate`]'s 1/λ row guess costs four
+/// f64 divisions and its walks mispredict, all in one dependent chain per wavelength (7.5 %
+/// of a gold teapot's render); here a wavelength's interval is two loads and a select, the
+/// four wavelengths' chains have no branches between them and overlap, and only the
+/// interpolation's own division is left (kept so that the values are [`Material::nk`]'s).
+/// Formula models evaluate [`Material::nk`] as before.
 #[derive(Debug, Clone)]
 pub struct Nk4 {
     material: &'static Material,
-    /// For tabulated materials: the rows' start λ, 1 / cell width and, per cell, the first
-    /// row above the cell's lower edge.
-    grid: Option<(f64, f64, Vec<u32>)>,
+    grid: Option<TableGrid>,
+}
+
+/// Row interval `i` of a table (rows i and i + 1): its ends and the rises of n and k over it
+/// (the differences [`interpolate`] forms, so the same values).
+#[derive(Debug, Clone, Copy)]
+struct Interval {
+    l0: f64,
+    l1: f64,
+    n0: f64,
+    dn: f64,
+    k0: f64,
+    dk: f64,
+}
+
+/// One grid cell: λ below `split` lies in interval `below`, from `split` on in `below + 1`
+/// (a cell no wider than half the narrowest interval holds at most one row).
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    split: f64,
+    below: u32,
+}
+
+#[derive(Debug, Clone)]
+struct TableGrid {
+    lo: f64,
+    inv_width: f64,
+    cells: Vec<Cell>,
+    intervals: Vec<Interval>,
+}
+
+impl TableGrid {
+    /// Cells no wider than half the narrowest row interval, at most 4096 (a table with
+    /// equal neighbours, or finer than that, takes [`interpolate`]'s search where the cell
+    /// answer is not the interval).
+    fn new(rows: &[(f64, f64, f64)]) -> Self {
+        let (lo, hi) = (rows[0].0, rows[rows.len() - 1].0);
+        let narrowest = (rows.windows(2).map(|w| w[1].0 - w[0].0)).fold(hi - lo, f64::min);
+        let n_cells = ((2.0 * (hi - lo) / narrowest).ceil() as usize).clamp(1, 4096);
+        let inv_width = n_cells as f64 / (hi - lo);
+        let last_interval = rows.len() - 2;
+        let cells = (0..n_cells)
+            .map(|c| {
+                let edge = lo + c as f64 / inv_width;
+                let below = (rows.partition_point(|r| r.0 <= edge).max(1) - 1).min(last_interval);
+                let split = if below < last_interval {
+                    rows[below + 1].0
+                } else {
+                    f64::INFINITY
+                };
+                Cell {
+                    split,
+                    below: below as u32,
+                }
+            })
+            .collect();
+        let intervals = (rows.windows(2))
+            .map(|w| Interval {
+                l0: w[0].0,
+                l1: w[1].0,
+                n0: w[0].1,
+                dn: w[1].1 - w[0].1,
+                k0: w[0].2,
+                dk: w[1].2 - w[0].2,
+            })
+            .collect();
+        TableGrid {
+            lo,
+            inv_width,
+            cells,
+            intervals,
+        }
+    }
+
+    /// The interval [`interpolate`]'s search finds, where the cell's answer is not it (the
+    /// cell's rounding at its edge, or a cell holding two rows); kept out of line so that
+    /// its divisions are not hoisted into every lookup.
+    #[cold]
+    #[inline(never)]
+    fn searched(&self, rows: &[(f64, f64, f64)], lambda_nm: f64) -> Interval {
+        let hi = walk_to_row_above(rows, lambda_nm, guess_row_above(rows, lambda_nm));
+        self.intervals[hi - 1]
+    }
+
+    /// [`interpolate`] at `lambda_nm`, without data-dependent branches where the cell's
+    /// answer is the interval (always, for a table without equal neighbours).
+    #[inline(always)]
+    fn at(&self, rows: &[(f64, f64, f64)], lambda_nm: f64) -> (f64, f64) {
+        let (first, last) = (rows[0], rows[rows.len() - 1]);
+        // `as usize` saturates (NaN, below the start → 0).
+        let c = (((lambda_nm - self.lo) * self.inv_width) as usize).min(self.cells.len() - 1);
+        let cell = self.cells[c];
+        // (+∞ would step past the last interval.)
+        let i = (cell.below as usize + (lambda_nm >= cell.split) as usize)
+            .min(self.intervals.len() - 1);
+        let mut iv = self.intervals[i];
+        let inside = (lambda_nm > first.0) & (lambda_nm < last.0);
+        if inside & !((iv.l0 <= lambda_nm) & (lambda_nm < iv.l1)) {
+            iv = self.searched(rows, lambda_nm);
+        }
+        let t = (lambda_nm - iv.l0) / (iv.l1 - iv.l0);
+        let (mut n, mut k) = (iv.n0 + t * iv.dn, iv.k0 + t * iv.dk);
+        // The ends and NaN as [`interpolate`] returns them (selects, not early exits).
+        if lambda_nm >= last.0 {
+            (n, k) = (last.1, last.2);
+        }
+        if lambda_nm <= first.0 {
+            (n, k) = (first.1, first.2);
+        }
+        if lambda_nm.is_nan() {
+            (n, k) = (f64::NAN, f64::NAN);
+        }
+        (n, k)
+    }
 }
 
 impl Nk4 {
-    /// The lookup of `material` (for a table: a grid with cells no wider than half its
-    /// narrowest row interval, at most 4096 cells).
+    /// The lookup of `material`.
     pub fn new(material: &'static Material) -> Self {
         let grid = match &material.model {
-            Model::Table(rows) if rows.len() >= 2 => {
-                let (lo, hi) = (rows[0].0, rows[rows.len() - 1].0);
-                let narrowest = (rows.windows(2).map(|w| w[1].0 - w[0].0)).fold(hi - lo, f64::min);
-                let cells = ((2.0 * (hi - lo) / narrowest).ceil() as usize).clamp(1, 4096);
-                let inv_width = cells as f64 / (hi - lo);
-                let start = (0..=cells)
-                    .map(|c| {
-                        let edge = lo + c as f64 / inv_width;
-                        rows.partition_point(|r| r.0 <= edge)
-                            .clamp(1, rows.len() - 1) as u32
-                    })
-                    .collect();
-                Some((lo, inv_width, start))
-            }
+            Model::Table(rows) if rows.len() >= 2 => Some(TableGrid::new(rows)),
             _ => None,
         };
         Nk4 { material, grid }
     }
 
     /// (n, k) at the four wavelengths (nm): [`Material::nk`] rounded to f32.
-    #[inline]
+    #[inline(always)]
     pub fn at(&self, lambda_nm: [f32; 4]) -> ([f32; 4], [f32; 4]) {
-        let nk = match (&self.grid, &self.material.model) {
-            (Some((lo, inv_width, start)), Model::Table(rows)) => {
-                lambda_nm.map(|l| {
-                    interpolate_from(rows, l as f64, || {
-                        // `as usize` saturates (NaN, below the start → 0); the walks below
-                        // correct any rounding of the cell.
-                        let cell = (((l as f64 - lo) * inv_width) as usize).min(start.len() - 1);
-                        start[cell] as usize
-                    })
-                })
+        match (&self.grid, &self.material.model) {
+            (Some(grid), Model::Table(rows)) => {
+                // Written out, so that the four chains interleave.
+                let [a, b, c, d] = lambda_nm.map(|l| l as f64);
+                let (a, b, c, d) = (
+                    grid.at(rows, a),
+                    grid.at(rows, b),
+                    grid.at(rows, c),
+                    grid.at(rows, d),
+                );
+                (
+                    [a.0 as f32, b.0 as f32, c.0 as f32, d.0 as f32],
+                    [a.1 as f32, b.1 as f32, c.1 as f32, d.1 as f32],
+                )
             }
-            _ => lambda_nm.map(|l| self.material.nk(l as f64)),
-        };
-        (nk.map(|c| c.re as f32), nk.map(|c| c.im as f32))
+            _ => {
+                let nk = lambda_nm.map(|l| self.material.nk(l as f64));
+                (nk.map(|c| c.re as f32), nk.map(|c| c.im as f32))
+            }
+        }
     }
 }
 

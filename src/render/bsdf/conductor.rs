@@ -76,8 +76,9 @@ fn nk4_of(eta: &Ior) -> Option<Nk4> {
 }
 
 impl Conductor {
-    /// (n, k) at the sample's four wavelengths, in f32.
-    #[inline]
+    /// (n, k) at the sample's four wavelengths, in f32 (inlined: the lanes go to the Fresnel
+    /// term in registers, not through four stores and one wide load).
+    #[inline(always)]
     fn nk(&self, ctx: &ShadingCtx) -> ([f32; 4], [f32; 4]) {
         match &self.eta4 {
             Some(lookup) => lookup.at(ctx.wl.lambda),

@@ -76,25 +76,38 @@ fn interpolate(rows: &[(f64, f64, f64)], lambda_nm: f64) -> Complex64 {
     if lambda_nm >= last.0 {
         return Complex64::new(last.1, last.2);
     }
-    let hi = first_row_above(rows, lambda_nm);
+    let hi = walk_to_row_above(rows, lambda_nm, guess_row_above(rows, lambda_nm));
     let (l0, n0, k0) = rows[hi - 1];
     let (l1, n1, k1) = rows[hi];
     let t = (lambda_nm - l0) / (l1 - l0);
     Complex64::new(n0 + t * (n1 - n0), k0 + t * (k1 - k0))
 }
 
-/// The first row with λ > `lambda_nm` (`rows.partition_point(|r| r.0 <= lambda_nm)`), for
-/// `rows[0].0 < lambda_nm < rows[last].0`. The metal tables are uniform in photon energy,
-/// i.e. in 1/λ, so the row interpolated in 1/λ is the answer or next to it; walking from it
-/// finds the same row as a binary search (rows ascend), in ~1 step instead of 6 (a gold
-/// conductor looks its index up at four wavelengths per hit: 7 % of a gold teapot's render).
-#[inline]
+/// The first row with λ > `lambda_nm` as [`interpolate`] finds it (tests).
+#[cfg(test)]
 fn first_row_above(rows: &[(f64, f64, f64)], lambda_nm: f64) -> usize {
+    walk_to_row_above(rows, lambda_nm, guess_row_above(rows, lambda_nm))
+}
+
+/// Where to start looking for the first row with λ > `lambda_nm`
+/// (`rows.partition_point(|r| r.0 <= lambda_nm)`). The metal tables are uniform in photon
+/// energy, i.e. in 1/λ, so the row interpolated in 1/λ is the answer or next to it; walking
+/// from it finds the same row as a binary search (rows ascend), in ~1 step instead of 6.
+#[inline]
+fn guess_row_above(rows: &[(f64, f64, f64)], lambda_nm: f64) -> usize {
     let n = rows.len();
     let (f, l) = (1.0 / rows[0].0, 1.0 / rows[n - 1].0);
     let t = (f - 1.0 / lambda_nm) / (f - l);
-    // `as usize` saturates (NaN → 0); the clamp keeps the walks in bounds.
-    let mut hi = ((t * (n - 1) as f64) as usize + 1).clamp(1, n - 1);
+    // `as usize` saturates (NaN → 0).
+    (t * (n - 1) as f64) as usize + 1
+}
+
+/// Walks from row `hi` to the first row with λ > `lambda_nm`, for
+/// `rows[0].0 < lambda_nm < rows[last].0` (rows ascend); the clamp keeps the walks in bounds.
+#[inline]
+fn walk_to_row_above(rows: &[(f64, f64, f64)], lambda_nm: f64, hi: usize) -> usize {
+    let n = rows.len();
+    let mut hi = hi.clamp(1, n - 1);
     while hi > 1 && rows[hi - 1].0 > lambda_nm {
         hi -= 1;
     }
@@ -102,6 +115,169 @@ fn first_row_above(rows: &[(f64, f64, f64)], lambda_nm: f64) -> usize {
         hi += 1;
     }
     hi
+}
+
+/// `n + ik` of a material at a hero sample's four wavelengths, as f32 (what the renderer's
+/// Fresnel terms take): [`Material::nk`] bit for bit, with a table's interval found in a
+/// uniform grid over λ built once per material. [`interpolate`]'s 1/λ row guess costs four
+/// f64 divisions and its walks mispredict, all in one dependent chain per wavelength (7.5 %
+/// of a gold teapot's render); here a wavelength's interval is two loads and a select, the
+/// four wavelengths' chains have no branches between them and overlap, and only the
+/// interpolation's own division is left (kept so that the values are [`Material::nk`]'s).
+/// Formula models evaluate [`Material::nk`] as before.
+#[derive(Debug, Clone)]
+pub struct Nk4 {
+    material: &'static Material,
+    grid: Option<TableGrid>,
+}
+
+/// Row interval `i` of a table (rows i and i + 1): its ends and the rises of n and k over it
+/// (the differences [`interpolate`] forms, so the same values).
+#[derive(Debug, Clone, Copy)]
+struct Interval {
+    l0: f64,
+    l1: f64,
+    n0: f64,
+    dn: f64,
+    k0: f64,
+    dk: f64,
+}
+
+/// One grid cell: λ below `split` lies in interval `below`, from `split` on in `below + 1`
+/// (a cell no wider than half the narrowest interval holds at most one row).
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    split: f64,
+    below: u32,
+}
+
+#[derive(Debug, Clone)]
+struct TableGrid {
+    lo: f64,
+    inv_width: f64,
+    cells: Vec<Cell>,
+    intervals: Vec<Interval>,
+}
+
+impl TableGrid {
+    /// Cells no wider than half the narrowest row interval, at most 4096 (a table with
+    /// equal neighbours, or finer than that, takes [`interpolate`]'s search where the cell
+    /// answer is not the interval).
+    fn new(rows: &[(f64, f64, f64)]) -> Self {
+        let (lo, hi) = (rows[0].0, rows[rows.len() - 1].0);
+        let narrowest = (rows.windows(2).map(|w| w[1].0 - w[0].0)).fold(hi - lo, f64::min);
+        let n_cells = ((2.0 * (hi - lo) / narrowest).ceil() as usize).clamp(1, 4096);
+        let inv_width = n_cells as f64 / (hi - lo);
+        let last_interval = rows.len() - 2;
+        let cells = (0..n_cells)
+            .map(|c| {
+                let edge = lo + c as f64 / inv_width;
+                let below = (rows.partition_point(|r| r.0 <= edge).max(1) - 1).min(last_interval);
+                let split = if below < last_interval {
+                    rows[below + 1].0
+                } else {
+                    f64::INFINITY
+                };
+                Cell {
+                    split,
+                    below: below as u32,
+                }
+            })
+            .collect();
+        let intervals = (rows.windows(2))
+            .map(|w| Interval {
+                l0: w[0].0,
+                l1: w[1].0,
+                n0: w[0].1,
+                dn: w[1].1 - w[0].1,
+                k0: w[0].2,
+                dk: w[1].2 - w[0].2,
+            })
+            .collect();
+        TableGrid {
+            lo,
+            inv_width,
+            cells,
+            intervals,
+        }
+    }
+
+    /// The interval [`interpolate`]'s search finds, where the cell's answer is not it (the
+    /// cell's rounding at its edge, or a cell holding two rows); kept out of line so that
+    /// its divisions are not hoisted into every lookup.
+    #[cold]
+    #[inline(never)]
+    fn searched(&self, rows: &[(f64, f64, f64)], lambda_nm: f64) -> Interval {
+        let hi = walk_to_row_above(rows, lambda_nm, guess_row_above(rows, lambda_nm));
+        self.intervals[hi - 1]
+    }
+
+    /// [`interpolate`] at `lambda_nm`, without data-dependent branches where the cell's
+    /// answer is the interval (always, for a table without equal neighbours).
+    #[inline(always)]
+    fn at(&self, rows: &[(f64, f64, f64)], lambda_nm: f64) -> (f64, f64) {
+        let (first, last) = (rows[0], rows[rows.len() - 1]);
+        // `as usize` saturates (NaN, below the start → 0).
+        let c = (((lambda_nm - self.lo) * self.inv_width) as usize).min(self.cells.len() - 1);
+        let cell = self.cells[c];
+        // (+∞ would step past the last interval.)
+        let i = (cell.below as usize + (lambda_nm >= cell.split) as usize)
+            .min(self.intervals.len() - 1);
+        let mut iv = self.intervals[i];
+        let inside = (lambda_nm > first.0) & (lambda_nm < last.0);
+        if inside & !((iv.l0 <= lambda_nm) & (lambda_nm < iv.l1)) {
+            iv = self.searched(rows, lambda_nm);
+        }
+        let t = (lambda_nm - iv.l0) / (iv.l1 - iv.l0);
+        let (mut n, mut k) = (iv.n0 + t * iv.dn, iv.k0 + t * iv.dk);
+        // The ends and NaN as [`interpolate`] returns them (selects, not early exits).
+        if lambda_nm >= last.0 {
+            (n, k) = (last.1, last.2);
+        }
+        if lambda_nm <= first.0 {
+            (n, k) = (first.1, first.2);
+        }
+        if lambda_nm.is_nan() {
+            (n, k) = (f64::NAN, f64::NAN);
+        }
+        (n, k)
+    }
+}
+
+impl Nk4 {
+    /// The lookup of `material`.
+    pub fn new(material: &'static Material) -> Self {
+        let grid = match &material.model {
+            Model::Table(rows) if rows.len() >= 2 => Some(TableGrid::new(rows)),
+            _ => None,
+        };
+        Nk4 { material, grid }
+    }
+
+    /// (n, k) at the four wavelengths (nm): [`Material::nk`] rounded to f32.
+    #[inline(always)]
+    pub fn at(&self, lambda_nm: [f32; 4]) -> ([f32; 4], [f32; 4]) {
+        match (&self.grid, &self.material.model) {
+            (Some(grid), Model::Table(rows)) => {
+                // Written out, so that the four chains interleave.
+                let [a, b, c, d] = lambda_nm.map(|l| l as f64);
+                let (a, b, c, d) = (
+                    grid.at(rows, a),
+                    grid.at(rows, b),
+                    grid.at(rows, c),
+                    grid.at(rows, d),
+                );
+                (
+                    [a.0 as f32, b.0 as f32, c.0 as f32, d.0 as f32],
+                    [a.1 as f32, b.1 as f32, c.1 as f32, d.1 as f32],
+                )
+            }
+            _ => {
+                let nk = lambda_nm.map(|l| self.material.nk(l as f64));
+                (nk.map(|c| c.re as f32), nk.map(|c| c.im as f32))
+            }
+        }
+    }
 }
 
 const DIELECTRICS: &str = include_str!("data/dielectrics.txt");
@@ -340,6 +516,69 @@ mod tests {
                 assert_eq!(first_row_above(rows, l), want, "λ = {l}");
             }
         }
+    }
+
+    /// The grid lookup gives `nk` rounded to f32, bit for bit: every built-in material (tables
+    /// and formulas) and made-up tables (uneven, equal neighbours, two rows), at every row, its
+    /// f32 neighbours, a dense sweep, the ends, beyond them, and non-finite wavelengths.
+    #[test]
+    fn four_lane_lookup_is_nk() {
+        let table = |rows: &[(f64, f64, f64)]| -> &'static Material {
+            Box::leak(Box::new(Material {
+                name: "test",
+                aliases: Vec::new(),
+                source: "test",
+                valid_range_nm: (rows[0].0, rows[rows.len() - 1].0),
+                model: Model::Table(rows.to_vec()),
+            }))
+        };
+        let made_up = [
+            table(&[
+                (300.0, 1.0, 0.5),
+                (301.0, 2.0, 0.1),
+                (700.0, 3.0, 0.0),
+                (900.0, 4.0, 2.0),
+            ]),
+            table(&[
+                (400.0, 1.0, 0.0),
+                (500.0, 2.0, 1.0),
+                (500.0, 3.0, 7.0),
+                (600.0, 4.0, 0.0),
+            ]),
+            table(&[(450.5, 1.5, 0.25), (451.25, 0.5, 4.0)]),
+        ];
+        let mut checked_tables = 0;
+        for m in all().iter().chain(made_up) {
+            let mut probes: Vec<f32> =
+                vec![f32::NAN, f32::INFINITY, -f32::INFINITY, 0.0, -5.0, 1e9];
+            probes.extend((0..=20_000).map(|k| 250.0 + 700.0 * k as f32 / 20_000.0));
+            if let Model::Table(rows) = &m.model {
+                checked_tables += 1;
+                for r in rows {
+                    let l = r.0 as f32;
+                    probes.extend([l, l.next_down(), l.next_up(), l.next_down().next_down()]);
+                }
+            }
+            let lookup = Nk4::new(m);
+            for chunk in probes.chunks(4) {
+                let mut lambda = [550.0; 4];
+                lambda[..chunk.len()].copy_from_slice(chunk);
+                let (n, k) = lookup.at(lambda);
+                for i in 0..4 {
+                    let want = m.nk(lambda[i] as f64);
+                    let same = |a: f32, b: f64| a.to_bits() == (b as f32).to_bits();
+                    assert!(
+                        same(n[i], want.re) && same(k[i], want.im),
+                        "{} at {}: {} {} vs {want}",
+                        m.name,
+                        lambda[i],
+                        n[i],
+                        k[i]
+                    );
+                }
+            }
+        }
+        assert!(checked_tables >= 7);
     }
 
     #[test]

@@ -13,6 +13,7 @@ use super::microfacet::{
 };
 use super::roughness::Roughness;
 use super::{fresnel::fresnel_conductor4, BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
+use crate::optics::dispersion::Nk4;
 use crate::optics::Ior;
 use crate::render::geometry::{Frame, SurfaceInteraction};
 use crate::render::polarization::{specular_reflection_conductor, Mueller};
@@ -23,6 +24,8 @@ use num_complex::Complex32;
 #[derive(Debug, Clone)]
 pub struct Conductor {
     pub eta: Ior,
+    /// `eta` at four wavelengths for a named material (a metal's table found in a grid).
+    eta4: Option<Nk4>,
     /// Constant None = smooth (a delta lobe).
     pub roughness: Roughness,
     /// Mitsuba's `specular_reflectance`.
@@ -54,12 +57,36 @@ impl Conductor {
         check_alpha(alpha_u, "conductor alpha_u")?;
         check_alpha(alpha_v, "conductor alpha_v")?;
         Ok(Conductor {
+            eta4: nk4_of(&eta),
             eta,
             roughness: Roughness::Constant(
                 (alpha_u > 0.0 || alpha_v > 0.0).then(|| Microfacet::of(kind, alpha_u, alpha_v)),
             ),
             specular: LobeFactor::default(),
         })
+    }
+}
+
+/// The four-wavelength lookup of a named material's index.
+fn nk4_of(eta: &Ior) -> Option<Nk4> {
+    match eta {
+        Ior::Material(m) => Some(Nk4::new(m)),
+        Ior::Constant(_) => None,
+    }
+}
+
+impl Conductor {
+    /// (n, k) at the sample's four wavelengths, in f32 (inlined: the lanes go to the Fresnel
+    /// term in registers, not through four stores and one wide load).
+    #[inline(always)]
+    fn nk(&self, ctx: &ShadingCtx) -> ([f32; 4], [f32; 4]) {
+        match &self.eta4 {
+            Some(lookup) => lookup.at(ctx.wl.lambda),
+            None => {
+                let n = ctx.wl.lambda.map(|l| self.eta.at(l as f64));
+                (n.map(|n| n.re as f32), n.map(|n| n.im as f32))
+            }
+        }
     }
 }
 
@@ -70,16 +97,16 @@ impl OpaqueReflector for Conductor {
 
     #[inline]
     fn reflectance(&self, ctx: &ShadingCtx, cos_i: f32) -> Spec {
-        let n = ctx.wl.lambda.map(|l| self.eta.at(l as f64));
-        let r = fresnel_conductor4(cos_i, n.map(|n| n.re as f32), n.map(|n| n.im as f32));
+        let (n, k) = self.nk(ctx);
+        let r = fresnel_conductor4(cos_i, n, k);
         Spec::from_array(r) * self.specular.eval(ctx)
     }
 
     #[inline]
     fn reflectance_mueller(&self, ctx: &ShadingCtx, cos_i: f32) -> [Mueller; 4] {
-        let m = ctx.wl.lambda.map(|l| {
-            let n = self.eta.at(l as f64);
-            specular_reflection_conductor(cos_i, Complex32::new(n.re as f32, n.im as f32))
+        let (n, k) = self.nk(ctx);
+        let m = std::array::from_fn(|i| {
+            specular_reflection_conductor(cos_i, Complex32::new(n[i], k[i]))
         });
         self.specular.scale_mueller(ctx, m)
     }
@@ -118,6 +145,7 @@ impl BsdfPlugin for Conductor {
             }
         };
         Ok(Conductor {
+            eta4: nk4_of(&ior),
             eta: ior,
             roughness,
             specular,

@@ -228,6 +228,18 @@ fn malformed_sets_are_clear_errors() {
     assert!(e.contains("nowl.hdr") && e.contains("wavelength"), "{e}");
 }
 
+/// Loads a capture.json in `dir` with `angles` (JSON objects) on `substrate`.
+fn load_angles(dir: &Path, substrate: f64, angles: &[String]) -> thinfilm::capture::CaptureSet {
+    json(
+        dir,
+        &format!(
+            r#"{{"format": "thinfilm-capture/1", "polarization": "s", "substrate": {substrate}, "angles": [{}]}}"#,
+            angles.join(", ")
+        ),
+    );
+    load_capture_set(dir).unwrap()
+}
+
 /// Float32 cubes in this machine's byte order are read in place, whatever their
 /// interleave (their samples are the file's mapping: no decoding pass, no copy); masking a
 /// sample writes NaN into the loaded set, never into the file; the same data big-endian
@@ -265,14 +277,7 @@ fn float_cubes_are_read_in_place_and_equal_their_decoded_twins() {
             )
         })
         .collect();
-    json(
-        d.path(),
-        &format!(
-            r#"{{"format": "thinfilm-capture/1", "polarization": "s", "substrate": 1.64, "angles": [{}]}}"#,
-            angles.join(", ")
-        ),
-    );
-    let set = load_capture_set(d.path()).unwrap();
+    let set = load_angles(d.path(), 1.64, &angles);
     let mapped: Vec<bool> = set
         .angles
         .iter()
@@ -338,14 +343,7 @@ fn planar_cubes_read_in_place_match_their_decoded_twins_in_any_order() {
             5 * k + 1
         ));
     }
-    json(
-        d.path(),
-        &format!(
-            r#"{{"format": "thinfilm-capture/1", "polarization": "s", "substrate": 1.5, "angles": [{}]}}"#,
-            angles.join(", ")
-        ),
-    );
-    let set = load_capture_set(d.path()).unwrap();
+    let set = load_angles(d.path(), 1.5, &angles);
     let pairs: Vec<_> = set.angles.chunks(2).map(|c| (&c[0], &c[1])).collect();
     for (planar, decoded) in &pairs {
         assert!(planar.reflectance.as_bip().is_none() && decoded.reflectance.as_bip().is_some());

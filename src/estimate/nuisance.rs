@@ -234,12 +234,17 @@ impl Whitening {
                 &self.offset[a * s..(a + 1) * s],
                 &self.weight[a * s..(a + 1) * s],
             );
-            let mut acc = 0f32;
-            for ((v, &o), &w) in row.iter_mut().zip(o).zip(w) {
-                *v = (*v - o) * w;
-                acc += *v * *v;
+            // Eight partial sums (rows are padded to a multiple of 8): one running f32 sum
+            // was a chain of dependent adds, ~1 CPU-ns per sample over a megapixel's fit.
+            let mut acc = [0f32; 8];
+            let lanes = row.chunks_exact_mut(8).zip(o.chunks_exact(8));
+            for ((v, o), w) in lanes.zip(w.chunks_exact(8)) {
+                for k in 0..8 {
+                    v[k] = (v[k] - o[k]) * w[k];
+                    acc[k] += v[k] * v[k];
+                }
             }
-            *e = acc;
+            *e = ((acc[0] + acc[4]) + (acc[2] + acc[6])) + ((acc[1] + acc[5]) + (acc[3] + acc[7]));
         }
     }
 }

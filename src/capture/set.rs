@@ -342,7 +342,10 @@ fn raw_sample_cause(raw: f32, ignore: Option<f32>, sat: Option<f32>) -> Option<C
 
 /// Masking of an uncalibrated planar (BSQ/BIL float32) cube read in place from its mapping:
 /// the same masks, counts and NaN samples as decoding it would give, from one pass over
-/// each line's band runs (a pixel is checked sample by sample only when a run flags it).
+/// the band runs of each block of lines (a pixel is checked sample by sample only when a
+/// run flags it). Band-major within a block: a BSQ band's lines follow each other in the
+/// file, so each band is one long run the prefetcher follows (a line at a time it
+/// restarted every 4 KB).
 fn mask_planar(
     mut samples: Samples,
     (w, lines, nb): (usize, usize, usize),
@@ -350,25 +353,32 @@ fn mask_planar(
     sat: Option<f32>,
 ) -> (Samples, Vec<bool>, InvalidCounts) {
     use rayon::prelude::*;
+    const BLOCK_LINES: usize = 8;
     let ignore_v = ignore.unwrap_or(f32::NAN); // NaN never compares equal
     let sat_v = sat.unwrap_or(f32::INFINITY); // inf is caught as non-finite anyway
     let s = &samples;
-    let rows: Vec<(Vec<bool>, InvalidCounts, Vec<(usize, usize)>)> = (0..lines)
+    let run = |y, b| s.planar_run(y, b).expect("a planar cube");
+    let blocks: Vec<(Vec<bool>, InvalidCounts, Vec<(usize, usize, usize)>)> = (0..lines)
+        .step_by(BLOCK_LINES)
+        .collect::<Vec<_>>()
         .into_par_iter()
-        .map(|y| {
-            let run = |b| s.planar_run(y, b).expect("a planar cube");
-            let mut bad = vec![false; w];
+        .map(|y0| {
+            let ys = y0..(y0 + BLOCK_LINES).min(lines);
+            let mut bad = vec![false; w * ys.len()];
             for b in 0..nb {
-                for (k, &v) in bad.iter_mut().zip(run(b)) {
-                    *k |= !v.is_finite() | (v == ignore_v) | (v >= sat_v);
+                for (y, bad) in ys.clone().zip(bad.chunks_exact_mut(w)) {
+                    for (k, &v) in bad.iter_mut().zip(run(y, b)) {
+                        *k |= !v.is_finite() | (v == ignore_v) | (v >= sat_v);
+                    }
                 }
             }
             let (mut c, mut masked) = (InvalidCounts::default(), Vec::new());
-            for x in (0..w).filter(|&x| bad[x]) {
+            for i in (0..bad.len()).filter(|&i| bad[i]) {
+                let (y, x) = (y0 + i / w, i % w);
                 for b in 0..nb {
-                    if let Some(cause) = raw_sample_cause(run(b)[x], ignore, sat) {
+                    if let Some(cause) = raw_sample_cause(run(y, b)[x], ignore, sat) {
                         *c.of(cause) += 1;
-                        masked.push((x, b));
+                        masked.push((y, x, b));
                     }
                 }
             }
@@ -377,10 +387,10 @@ fn mask_planar(
         .collect();
     let mut valid = Vec::with_capacity(w * lines);
     let mut counts = InvalidCounts::default();
-    for (y, (valid_row, c, masked)) in rows.into_iter().enumerate() {
-        valid.extend_from_slice(&valid_row);
+    for (valid_block, c, masked) in blocks {
+        valid.extend_from_slice(&valid_block);
         counts.add(&c);
-        for (x, b) in masked {
+        for (y, x, b) in masked {
             samples.set_planar(y, x, b, f32::NAN);
         }
     }

@@ -185,22 +185,25 @@ fn resolve_orders(
     win: (usize, usize),
 ) {
     let (w, h) = (obs.width, obs.height);
-    let first = win.0 * w;
     for _ in 0..2 {
         let d: Vec<f32> = out.iter().map(|f| f.0).collect();
-        // med[i] is the median at pixel first + i.
-        let med = median_filter_rows(&d, w, h, 2, win);
         let tau = solver.scan_step * 2.0;
-        let changes: Vec<(usize, PixelFit)> = (win.0 * w..win.1 * w)
+        // The 5 × 5 median is only needed where it is farther than tau from the pixel
+        // (rare): elsewhere counting the window's values on either side decides.
+        let flagged: Vec<(usize, f32)> = (win.0 * w..win.1 * w)
             .into_par_iter()
-            .filter(|&p| {
-                let m = med[p - first];
-                d[p].is_finite() && m.is_finite() && (d[p] - m).abs() as f64 > tau
+            .map_init(Vec::new, |buf, p| {
+                window_values(&d, w, h, 2, p, buf);
+                let far = d[p].is_finite() && median_is_farther(buf, d[p], tau);
+                far.then(|| (p, window_median(buf)))
             })
+            .flatten()
+            .collect();
+        let changes: Vec<(usize, PixelFit)> = flagged
+            .into_par_iter()
             .map_init(
                 || PixelData::new(obs),
-                |px, p| {
-                    let m = med[p - first];
+                |px, (p, m)| {
                     px.load(obs, white, film, p);
                     let (d2, s2, h2) = solver.refine(px, m as f64, 8);
                     let tol = 1.25 * out[p].1 as f64 + 1e-9;
@@ -256,25 +259,75 @@ fn interpolate_seed(
 
 /// Median over the (2r+1)² neighbourhood (inside the image), ignoring NaN, for the pixels
 /// of rows `[rows.0, rows.1)`.
-fn median_filter_rows(d: &[f32], w: usize, h: usize, r: usize, rows: (usize, usize)) -> Vec<f32> {
-    (rows.0 * w..rows.1 * w)
-        .into_par_iter()
-        .map_init(Vec::new, |buf: &mut Vec<f32>, p| {
-            let (x, y) = (p % w, p / w);
-            buf.clear();
-            for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-                for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
-                    let v = d[yy * w + xx];
-                    if v.is_finite() {
-                        buf.push(v);
-                    }
-                }
-            }
-            if buf.is_empty() {
-                return f32::NAN;
-            }
-            let mid = buf.len() / 2;
-            *buf.select_nth_unstable_by(mid, f32::total_cmp).1
-        })
-        .collect()
+/// The finite values of the (2r + 1)² window around pixel `p` of the `w × h` map `d`.
+fn window_values(d: &[f32], w: usize, h: usize, r: usize, p: usize, buf: &mut Vec<f32>) {
+    let (x, y) = (p % w, p / w);
+    buf.clear();
+    for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+        let row = &d[yy * w..(yy + 1) * w];
+        let span = &row[x.saturating_sub(r)..(x + r + 1).min(w)];
+        buf.extend(span.iter().filter(|v| v.is_finite()));
+    }
+}
+
+/// Element `len / 2` of the sorted `values` (NaN when empty).
+fn window_median(values: &mut [f32]) -> f32 {
+    if values.is_empty() {
+        return f32::NAN;
+    }
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f32::total_cmp).1
+}
+
+/// Whether `|v − median(values)| > tau` (the difference in f32 as it is computed for the
+/// median itself), without finding the median: `v − x` falls as x grows, so the median m
+/// (element `mid` of the sorted values) has `v − m > tau` exactly when at least `mid + 1`
+/// values x do, and `v − m < −tau` exactly when at least `len − mid` do.
+fn median_is_farther(values: &[f32], v: f32, tau: f64) -> bool {
+    if values.is_empty() {
+        return false;
+    }
+    let mid = values.len() / 2;
+    let above = values.iter().filter(|&&x| (v - x) as f64 > tau).count();
+    let below = values.iter().filter(|&&x| ((v - x) as f64) < -tau).count();
+    above > mid || below >= values.len() - mid
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The counting test decides exactly as finding the median and comparing does,
+        /// including ties, values on the tau boundary and f32 rounding of the difference.
+        #[test]
+        fn median_is_farther_matches_the_median(
+            values in proptest::collection::vec(
+                prop_oneof![-3i32..3, -2000i32..2000].prop_map(|k| k as f32 * 0.25), 0..26),
+            v_steps in -2000i32..2000,
+            tau_steps in 0i32..40,
+        ) {
+            let v = v_steps as f32 * 0.25;
+            let tau = tau_steps as f64 * 0.125;
+            let mut sorted = values.clone();
+            let m = window_median(&mut sorted);
+            let want = m.is_finite() && (v - m).abs() as f64 > tau;
+            prop_assert_eq!(median_is_farther(&values, v, tau), want);
+        }
+    }
+
+    /// The window holds the finite values around the pixel, clipped at the image edges.
+    #[test]
+    fn window_values_clip_and_skip_non_finite() {
+        let (w, h) = (4, 3);
+        let mut d: Vec<f32> = (0..w * h).map(|i| i as f32).collect();
+        d[5] = f32::NAN;
+        let mut buf = Vec::new();
+        window_values(&d, w, h, 1, 0, &mut buf);
+        assert_eq!(buf, vec![0.0, 1.0, 4.0]);
+        window_values(&d, w, h, 2, 6, &mut buf);
+        assert_eq!(buf.len(), 11); // 3 rows × 4 columns, less the NaN
+        assert!(!buf.contains(&5.0));
+    }
 }

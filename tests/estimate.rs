@@ -215,3 +215,28 @@ fn unpolarised_metal_substrate_and_thick_film() {
     );
     assert!(mae < 5.0, "metal mae {mae}");
 }
+
+/// A fit is the same to the last bit on any number of threads and in every run: its
+/// parallel sums are added in a fixed order, not in the order work was split.
+#[test]
+fn fits_are_bit_identical_on_any_thread_count() {
+    let mut spec = SynthSpec::seed_conditions(1.37, 450.0);
+    (spec.width, spec.height) = (48, 32);
+    spec.noise_sigma = 0.01;
+    let (mut set, _) = synth::capture(&spec);
+    // Relative amplitudes: the nuisance terms' joint refinement sums over pixels too.
+    set.radiometry = thinfilm::capture::Radiometry::Relative;
+    let fit_on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let fit = pool.install(|| estimate(&set, &Options::default()).unwrap());
+        let bits: Vec<u32> = fit.thickness_nm.iter().map(|v| v.to_bits()).collect();
+        (fit.film_ior.to_bits(), bits)
+    };
+    let one = fit_on(1);
+    for threads in [2, 3, 4, 3] {
+        assert!(fit_on(threads) == one, "{threads} threads differ from one");
+    }
+}

@@ -60,10 +60,12 @@ impl IndexStage for GridIndex {
         for i in 0..n_steps {
             let n = lo + i as f64 * o.grid_ior_step;
             let m = obs.geom.model(n);
-            let total: f64 = data
+            // Added in pixel order: the same total in every run and on any thread count.
+            let per_pixel: Vec<f64> = data
                 .par_iter()
                 .map(|px| best_d(cx, &m, &px.y, &px.mask).1)
-                .sum();
+                .collect();
+            let total: f64 = per_pixel.iter().sum();
             if total < best.1 {
                 best = (n, total);
             }

@@ -260,7 +260,9 @@ fn index_scan(cx: &Context, pixels: &[usize]) -> Option<f64> {
                 cx.opts.max_thickness_nm,
                 true,
             );
-            let total: f64 = sample
+            // Collected, then added in pixel order: the same total in every run (a parallel
+            // sum adds in the order work happened to be split).
+            let per_pixel: Vec<f64> = sample
                 .par_iter()
                 .map_init(
                     || PixelData::new(obs),
@@ -269,7 +271,8 @@ fn index_scan(cx: &Context, pixels: &[usize]) -> Option<f64> {
                         solver.search(px).1
                     },
                 )
-                .sum();
+                .collect();
+            let total: f64 = per_pixel.iter().sum();
             (film.n550(), total)
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))

@@ -13,6 +13,7 @@
 //! Writer: any interleave, float32/float64/uint16/int16/uint8, header + binary written
 //! through temporary files and renamed into place (see [`write_cube`]).
 
+use super::samples::{transpose_runs, TILE_PX};
 use super::Samples;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
@@ -797,23 +798,21 @@ impl EnviFile {
         let (w, l, nb, il) = (h.samples, h.lines, h.bands, h.interleave);
         let bytes = self.data();
         let mut out = vec![0f32; h.len()];
-        // Pixels per transposition tile (BSQ/BIL → BIP): 256 px × all bands of f32
-        // (~80 KB for 81 bands) stays in L2 while each band plane is read in 1 KB runs, long
-        // enough for the hardware prefetcher across ~80 interleaved streams.
-        const TILE: usize = 256;
         let results = out
             .par_chunks_mut(w * nb)
             .enumerate()
             .map(|(y, row)| {
                 match il {
                     Interleave::Bip => dec.run(bytes, y * w * nb, w * nb, row, 1),
+                    // BSQ/BIL → BIP by tiles of pixels, as a planar cube read in place.
                     _ => {
-                        for x0 in (0..w).step_by(TILE) {
-                            let x1 = (x0 + TILE).min(w);
-                            for b in 0..nb {
+                        for (x0, tile) in (0..w).step_by(TILE_PX).zip(row.chunks_mut(TILE_PX * nb))
+                        {
+                            let n = tile.len() / nb;
+                            transpose_runs(nb, n, tile, |b, run| {
                                 let base = il.index(l, w, nb, y, 0, b);
-                                dec.run(bytes, base + x0, x1 - x0, &mut row[x0 * nb + b..], nb);
-                            }
+                                dec.run(bytes, base + x0, n, run, 1);
+                            });
                         }
                     }
                 }

@@ -43,9 +43,9 @@ struct Planar {
     id: u64,
 }
 
-/// Pixels per transposed tile: 256 px × 81 bands of f32 is ~80 KB (a 5-angle pixel's
+/// Pixels per transposed tile (also the decoding of BSQ/BIL cubes): 256 px × 81 bands of f32 is ~80 KB (a 5-angle pixel's
 /// tiles stay in L2), and each band's run is 1 KB, long enough for the prefetcher.
-const TILE_PX: usize = 256;
+pub(super) const TILE_PX: usize = 256;
 /// Tiles a thread keeps: every angle of a pixel (captures rarely have more than 8).
 const TILE_SLOTS: usize = 8;
 
@@ -81,34 +81,11 @@ impl Planar {
     }
 
     /// Pixels `[x0, x0 + n)` of line `y` (n ≤ [`TILE_PX`]) as BIP into `out` (`n * bands`
-    /// long), eight band runs at a time: each run is read front to back once (the band
-    /// planes of a power-of-two image map to the same cache sets, so gathering a pixel's
-    /// bands one by one thrashes), copied into a stack buffer that stays in L1, and each
-    /// pixel's eight values are written side by side — a line of `out` touched once per
-    /// eight bands instead of once per band.
+    /// long), read band run by band run ([`transpose_runs`]).
     fn transpose(&self, y: usize, x0: usize, n: usize, out: &mut [f32]) {
-        const BLOCK: usize = 8;
-        let nb = self.bands;
-        let mut buf = [[0f32; TILE_PX]; BLOCK];
-        for b0 in (0..nb).step_by(BLOCK) {
-            let k = (nb - b0).min(BLOCK);
-            for (j, row) in buf.iter_mut().enumerate().take(k) {
-                row[..n].copy_from_slice(&self.run(y, b0 + j)[x0..x0 + n]);
-            }
-            let pixels = out.chunks_exact_mut(nb).enumerate();
-            if k == BLOCK {
-                for (x, px) in pixels {
-                    let o: &mut [f32; BLOCK] = (&mut px[b0..b0 + BLOCK]).try_into().unwrap();
-                    *o = std::array::from_fn(|j| buf[j][x]);
-                }
-            } else {
-                for (x, px) in pixels {
-                    for (j, o) in px[b0..b0 + k].iter_mut().enumerate() {
-                        *o = buf[j][x];
-                    }
-                }
-            }
-        }
+        transpose_runs(self.bands, n, out, |b, run| {
+            run.copy_from_slice(&self.run(y, b)[x0..x0 + n]);
+        });
     }
 
     /// Pixel `p`'s bands into `out`: through this thread's tile cache when the thread reads
@@ -154,6 +131,42 @@ impl Planar {
             let k = (x - x0) * nb;
             out.copy_from_slice(&cache.slots[slot].2[k..k + nb]);
         });
+    }
+}
+
+/// Transposes `n ≤ TILE_PX` pixels of `bands` bands into BIP `out` (`n * bands` long), from
+/// band runs that `fill(b, run)` writes (`run.len() == n`: band `b` of those pixels, as
+/// stored in a BSQ or BIL file), eight bands at a time: each run is read front to back once
+/// (the band planes of a power-of-two image map to the same cache sets, so gathering a
+/// pixel's bands one by one thrashes), into a stack buffer that stays in L1, and each
+/// pixel's eight values are written side by side — a line of `out` touched once per eight
+/// bands instead of once per band.
+pub(super) fn transpose_runs(
+    bands: usize,
+    n: usize,
+    out: &mut [f32],
+    mut fill: impl FnMut(usize, &mut [f32]),
+) {
+    const BLOCK: usize = 8;
+    let mut buf = [[0f32; TILE_PX]; BLOCK];
+    for b0 in (0..bands).step_by(BLOCK) {
+        let k = (bands - b0).min(BLOCK);
+        for (j, run) in buf.iter_mut().enumerate().take(k) {
+            fill(b0 + j, &mut run[..n]);
+        }
+        let pixels = out.chunks_exact_mut(bands).enumerate();
+        if k == BLOCK {
+            for (x, px) in pixels {
+                let o: &mut [f32; BLOCK] = (&mut px[b0..b0 + BLOCK]).try_into().unwrap();
+                *o = std::array::from_fn(|j| buf[j][x]);
+            }
+        } else {
+            for (x, px) in pixels {
+                for (j, o) in px[b0..b0 + k].iter_mut().enumerate() {
+                    *o = buf[j][x];
+                }
+            }
+        }
     }
 }
 

@@ -358,11 +358,11 @@ fn mask_planar(
     let sat_v = sat.unwrap_or(f32::INFINITY); // inf is caught as non-finite anyway
     let s = &samples;
     let run = |y, b| s.planar_run(y, b).expect("a planar cube");
-    let blocks: Vec<(Vec<bool>, InvalidCounts, Vec<(usize, usize, usize)>)> = (0..lines)
-        .step_by(BLOCK_LINES)
-        .collect::<Vec<_>>()
+    let blocks: Vec<(Vec<bool>, InvalidCounts, Vec<(usize, usize, usize)>)> = (0..lines
+        .div_ceil(BLOCK_LINES))
         .into_par_iter()
-        .map(|y0| {
+        .map(|block| {
+            let y0 = block * BLOCK_LINES;
             let ys = y0..(y0 + BLOCK_LINES).min(lines);
             let mut bad = vec![false; w * ys.len()];
             for b in 0..nb {

@@ -95,6 +95,24 @@ fn check_coeff(path: &Path) -> Result<(), String> {
             bytes.len()
         ));
     }
+    // The renderer reads the embedded values in place without checking them again.
+    let floats: Vec<f32> = bytes[8..need]
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let (z_nodes, data) = floats.split_at(res);
+    if z_nodes.windows(2).any(|w| !(w[1] > w[0])) {
+        return Err(format!(
+            "{}: z-nodes are not strictly increasing",
+            path.display()
+        ));
+    }
+    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+        return Err(format!(
+            "{}: non-finite coefficient at index {i}",
+            path.display()
+        ));
+    }
     Ok(())
 }
 

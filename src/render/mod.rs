@@ -405,18 +405,20 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     let camera = camera::Camera::new(&scene.camera, width, height)?;
     let samples = width as u64 * height as u64 * (sample_range.1 - sample_range.0) as u64;
     // The emitters (an environment map's rgb2spec texels and sampling tables: ~25 ms for a
-    // 512 × 256 map) need no BVH: build them beside it on a second thread.
+    // 512 × 256 map) need no BVH: build them beside it on a second thread. The screen bins
+    // need only the triangles: binned beside the BVH build, then given its ids. Screen bins
+    // need camera rays from one pinhole (`lights` hook: not for lens cameras).
+    let pinhole = camera.pinhole();
     let (built, emitters) = std::thread::scope(|s| {
         let emitters = s.spawn(|| lights::LightSet::emitter_lights(scene));
-        let built = accel::Accel::build(scene, samples);
+        let built = accel::Accel::build_beside(scene, samples, |tris| {
+            pinhole.and_then(|c| primary::PrimaryBins::build(tris, c, width, height, samples))
+        });
         let emitters = (emitters.join()).unwrap_or_else(|p| std::panic::resume_unwind(p));
         (built, emitters)
     });
-    let (accel, degenerate_triangles) = built?;
-    // Screen bins need camera rays from one pinhole (`lights` hook: not for lens cameras).
-    let primary_bins = camera
-        .pinhole()
-        .and_then(|c| primary::PrimaryBins::build(&accel, c, width, height, samples));
+    let (accel, degenerate_triangles, bins) = built?;
+    let primary_bins = bins.map(|b| b.into_bvh_order(accel.bvh_order()));
     effects.decisions.push(effects::Decision {
         effect: effects::Effect::CameraRays,
         on: primary_bins.is_some(),

@@ -16,7 +16,7 @@
 //! crossing the camera plane, a total footprint beyond [`MAX_ENTRIES_PER_PIXEL`] per pixel, or
 //! images beyond [`MAX_PIXELS`].
 
-use super::accel::{Accel, Hit, Prim, RayLanes, PACKET};
+use super::accel::{Accel, Hit, Prim, RayLanes, SceneTriangles, PACKET};
 use super::camera::{PerspectiveCamera, Ray};
 use glam::Vec3;
 
@@ -71,17 +71,18 @@ pub struct BinStats {
 }
 
 impl PrimaryBins {
-    /// Bins the scene's triangles for a `width`×`height` image seen by `camera` that will
+    /// Bins the scene's triangles (scene order: the lists are put in the BVH's order by
+    /// [`Self::into_bvh_order`]) for a `width`×`height` image seen by `camera` that will
     /// trace `camera_rays` camera rays (pixels × samples per pixel); None when
     /// the bins would not pay (see the module doc) and every camera ray should use the BVH.
     pub fn build(
-        accel: &Accel,
+        tris: &SceneTriangles,
         camera: &PerspectiveCamera,
         width: u32,
         height: u32,
         camera_rays: u64,
     ) -> Option<Self> {
-        let n_tris = accel.triangle_count();
+        let n_tris = tris.len();
         let (w, h) = (width as usize, height as usize);
         if n_tris == 0
             || w == 0
@@ -102,7 +103,7 @@ impl PrimaryBins {
         let mut counts = vec![0u32; w * h];
         let mut bbox_pixels = 0usize;
         for id in 0..n_tris as u32 {
-            let f = match project(accel, camera, id, margin, width, height) {
+            let f = match project(tris, camera, id, margin, width, height) {
                 Projection::Hidden => continue,
                 Projection::Crossing => {
                     crossing.push(id);
@@ -122,7 +123,7 @@ impl PrimaryBins {
         }
         let footprints =
             visible.iter().map(
-                |&id| match project(accel, camera, id, margin, width, height) {
+                |&id| match project(tris, camera, id, margin, width, height) {
                     Projection::Footprint(f) => f,
                     _ => unreachable!("the same projection as in the first pass"),
                 },
@@ -152,10 +153,6 @@ impl PrimaryBins {
                 }
             });
         }
-        for p in 0..w * h {
-            candidates[offsets[p] as usize..offsets[p + 1] as usize]
-                .sort_unstable_by(|a, b| a.depth.total_cmp(&b.depth).then(a.tri.cmp(&b.tri)));
-        }
         Some(PrimaryBins {
             width,
             height,
@@ -165,6 +162,44 @@ impl PrimaryBins {
             crossing,
             camera: camera.clone(),
         })
+    }
+
+    /// The bins with the BVH's triangle ids (`bvh_order[j]`: the scene-order index of BVH
+    /// triangle `j`, [`Accel::bvh_order`]), each pixel's list nearest first (exact depth
+    /// ties: smaller id first) and the crossing triangles in id order.
+    pub fn into_bvh_order(mut self, bvh_order: &[u32]) -> Self {
+        use rayon::prelude::*;
+        let mut bvh_id = vec![0u32; bvh_order.len()];
+        for (j, &i) in bvh_order.iter().enumerate() {
+            bvh_id[i as usize] = j as u32;
+        }
+        for t in &mut self.crossing {
+            *t = bvh_id[*t as usize];
+        }
+        self.crossing.sort_unstable();
+        // Rows of pixels as independent tasks: disjoint runs of the candidate array.
+        let w = self.width as usize;
+        let mut rows = Vec::with_capacity(self.height as usize);
+        let mut rest = self.candidates.as_mut_slice();
+        for y in 0..self.height as usize {
+            let (start, end) = (self.offsets[y * w], self.offsets[(y + 1) * w]);
+            let (row, tail) = std::mem::take(&mut rest).split_at_mut((end - start) as usize);
+            rows.push((y, row));
+            rest = tail;
+        }
+        let offsets = &self.offsets;
+        rows.into_par_iter().for_each(|(y, row)| {
+            let row_start = offsets[y * w];
+            for t in row.iter_mut() {
+                t.tri = bvh_id[t.tri as usize];
+            }
+            for p in y * w..(y + 1) * w {
+                let (a, b) = (offsets[p] - row_start, offsets[p + 1] - row_start);
+                row[a as usize..b as usize]
+                    .sort_unstable_by(|a, b| a.depth.total_cmp(&b.depth).then(a.tri.cmp(&b.tri)));
+            }
+        });
+        self
     }
 
     pub fn stats(&self) -> BinStats {
@@ -322,14 +357,14 @@ enum Projection {
 }
 
 fn project(
-    accel: &Accel,
+    tris: &SceneTriangles,
     camera: &PerspectiveCamera,
     id: u32,
     margin: f64,
     width: u32,
     height: u32,
 ) -> Projection {
-    let q = accel.triangle(id).map(|v| camera.camera_local(v));
+    let q = tris.vertices(id).map(|v| camera.camera_local(v));
     let zmin = q[0].z.min(q[1].z).min(q[2].z);
     let zmax = q[0].z.max(q[1].z).max(q[2].z);
     if zmax.is_nan() || zmax < 0.0 {

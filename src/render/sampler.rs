@@ -41,16 +41,29 @@ fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The key of pixel (`x`, `y`)'s independent streams under `seed`.
+#[inline]
+fn pixel_key(x: u32, y: u32, seed: u64) -> u64 {
+    let pixel = ((y as u64) << 32) | x as u64;
+    mix64(pixel ^ mix64(seed.wrapping_add(0x9e37_79b9_7f4a_7c15)))
+}
+
 impl Pcg32 {
+    /// PCG32's seeding (`pcg32_srandom_r`: step from 0, add the initial state, step) with
+    /// the initial state and stream drawn from the pixel key and the sample number. Plain
+    /// 64-bit arithmetic without branches: the camera stage runs it for 16 samples as
+    /// SIMD lanes.
+    #[inline]
     fn new(key: u64, sample_index: u32) -> Self {
         let state0 = mix64(key ^ (sample_index as u64).wrapping_mul(0xd1b5_4a32_d192_ed03));
         // The increment selects one of 2^63 streams; it must be odd.
         let inc = (mix64(key.rotate_left(17) ^ sample_index as u64) << 1) | 1;
-        let mut s = Pcg32 { state: 0, inc };
-        s.next_u32();
-        s.state = s.state.wrapping_add(state0);
-        s.next_u32();
-        s
+        // `next_u32` from state 0 leaves `inc`; after adding state0, one more step.
+        let state = inc
+            .wrapping_add(state0)
+            .wrapping_mul(PCG_MULT)
+            .wrapping_add(inc);
+        Pcg32 { state, inc }
     }
 
     #[inline]
@@ -88,8 +101,12 @@ impl Sampler {
 
     /// The numbers of sample `sample_index` of pixel (`x`, `y`) under `seed`.
     pub fn new(kind: SamplerKind, x: u32, y: u32, sample_index: u32, seed: u64) -> Self {
-        let pixel = ((y as u64) << 32) | x as u64;
-        let key = mix64(pixel ^ mix64(seed.wrapping_add(0x9e37_79b9_7f4a_7c15)));
+        Self::with_key(kind, pixel_key(x, y, seed), sample_index)
+    }
+
+    /// [`Self::new`] from the pixel's key ([`pixel_key`]).
+    #[inline]
+    fn with_key(kind: SamplerKind, key: u64, sample_index: u32) -> Self {
         let pcg = match kind {
             SamplerKind::Independent => Pcg32::new(key, sample_index),
             // Unused by Sobol'; not worth two hashes per sample.
@@ -216,9 +233,8 @@ impl Sampler {
 #[derive(Debug, Clone, Copy)]
 pub struct PixelSampler {
     kind: SamplerKind,
-    x: u32,
-    y: u32,
-    seed: u64,
+    /// The key of the pixel's independent streams ([`pixel_key`]).
+    key: u64,
     pixel_seed: u32,
     /// Sobol' camera sample: digital shifts of film x and y, scramble seed of the
     /// Owen-scrambled wavelength number, and the digital shift of the wavelength grid.
@@ -227,14 +243,13 @@ pub struct PixelSampler {
 
 impl PixelSampler {
     pub fn new(kind: SamplerKind, x: u32, y: u32, seed: u64) -> Self {
-        let base = Sampler::new(SamplerKind::Sobol, x, y, 0, seed);
+        let key = pixel_key(x, y, seed);
+        let base = Sampler::with_key(SamplerKind::Sobol, key, 0);
         // Dimension 0's seed (`Sampler::next_dim` at dim 0).
         let dim0 = hash_u32(base.pixel_seed);
         PixelSampler {
             kind,
-            x,
-            y,
-            seed,
+            key,
             pixel_seed: base.pixel_seed,
             camera_seeds: [
                 hash_u32(dim0 ^ 0x68bc_21eb),
@@ -249,7 +264,7 @@ impl PixelSampler {
     #[inline]
     pub fn sampler(&self, index: u32) -> Sampler {
         match self.kind {
-            SamplerKind::Independent => Sampler::new(self.kind, self.x, self.y, index, self.seed),
+            SamplerKind::Independent => Sampler::with_key(self.kind, self.key, index),
             SamplerKind::Sobol => Sampler {
                 kind: SamplerKind::Sobol,
                 pcg: Pcg32 { state: 0, inc: 1 },
@@ -274,12 +289,37 @@ impl PixelSampler {
         samplers: &mut [Sampler; N],
     ) {
         if self.kind == SamplerKind::Independent {
-            for i in 0..N {
-                samplers[i] = self.sampler(first.wrapping_add(i as u32));
-                let (b, j) = samplers[i].camera_sample(wavelength_grid);
-                bits[i] = b;
-                jitter[0][i] = j.x;
-                jitter[1][i] = j.y;
+            // Each lane's seeding and three draws ([`Sampler::camera_sample`]) as loops over
+            // lanes of 64-bit integer arithmetic (SIMD where the CPU multiplies 64-bit lanes).
+            let pcg: [Pcg32; N] =
+                std::array::from_fn(|i| Pcg32::new(self.key, first.wrapping_add(i as u32)));
+            let mut state = pcg.map(|p| p.state);
+            let inc = pcg.map(|p| p.inc);
+            let mut draw = || -> [u32; N] {
+                std::array::from_fn(|i| {
+                    let mut p = Pcg32 {
+                        state: state[i],
+                        inc: inc[i],
+                    };
+                    let v = p.next_u32();
+                    state[i] = p.state;
+                    v
+                })
+            };
+            *bits = draw();
+            jitter[0] = draw().map(to_unit);
+            jitter[1] = draw().map(to_unit);
+            for (i, s) in samplers.iter_mut().enumerate() {
+                *s = Sampler {
+                    kind: SamplerKind::Independent,
+                    pcg: Pcg32 {
+                        state: state[i],
+                        inc: inc[i],
+                    },
+                    index: first.wrapping_add(i as u32),
+                    pixel_seed: self.pixel_seed,
+                    dim: 0,
+                };
             }
             return;
         }

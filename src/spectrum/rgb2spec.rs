@@ -31,17 +31,24 @@
 //! (white emitter → white pixel) rather than its digits; the two agree within 0.11 %.
 
 use super::Spec;
+use std::borrow::Cow;
 use std::sync::OnceLock;
 
 /// Σ ȳ·D65 / Σ ȳ over the 1 nm tables: D65 divided by this has luminance 1 under the film's
 /// 1/[`super::CIE_Y_INTEGRAL`] normalisation (see the module docs).
 pub const RGB_ILLUMINANT_D65_NORM: f64 = super::tables::D65_Y_SUM_1NM / super::CIE_Y_INTEGRAL;
 
-/// The embedded sRGB table (validated by build.rs).
-static SRGB_COEFF_BYTES: &[u8] = include_bytes!(concat!(
+/// Bytes at an address that is a multiple of 4, so that the embedded table's f32 data can be
+/// read where it lies.
+#[repr(C, align(4))]
+struct Aligned4<B: ?Sized>(B);
+
+/// The embedded sRGB table (validated by build.rs: header, size, finite coefficients,
+/// increasing z-nodes).
+static SRGB_COEFF: &Aligned4<[u8]> = &Aligned4(*include_bytes!(concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/spectra/srgb_rgb2spec_64.coeff"
-));
+)));
 
 /// f(λ) = S(c0 λ² + c1 λ + c2), S(x) = ½ + x / (2 √(1 + x²)), λ in nm.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,30 +96,18 @@ impl RgbSigmoidPolynomial {
 pub struct Rgb2SpecTable {
     res: usize,
     /// z-node positions (smoothstep(smoothstep(k/(res−1)))).
-    scale: Vec<f32>,
-    /// `[3][res][res][res][3]`.
-    data: Vec<f32>,
+    scale: Cow<'static, [f32]>,
+    /// `[3][res][res][res][3]`: the embedded table's read where it lies in the binary
+    /// (9.4 MB: copying and checking it took ~13 ms of every render's set-up, and only the
+    /// pages a scene's colours touch are ever read), a parsed file's owned.
+    data: Cow<'static, [f32]>,
 }
 
 impl Rgb2SpecTable {
     /// Parse the "SPEC" format (trailing bytes, e.g. newer Mitsuba's forward-model block,
     /// are ignored).
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
-        if bytes.len() < 8 || &bytes[..4] != b"SPEC" {
-            return Err("not an rgb2spec table (missing \"SPEC\" header)".into());
-        }
-        let res = u32::from_le_bytes(bytes[4..8].try_into().unwrap()) as usize;
-        if !(2..=1024).contains(&res) {
-            return Err(format!("implausible resolution {res}"));
-        }
-        let n_data = 9 * res * res * res;
-        let need = 8 + 4 * (res + n_data);
-        if bytes.len() < need {
-            return Err(format!(
-                "truncated: {} bytes, resolution {res} needs {need}",
-                bytes.len()
-            ));
-        }
+        let res = Self::resolution_of(bytes)?;
         let floats = |from: usize, n: usize| -> Vec<f32> {
             bytes[from..from + 4 * n]
                 .chunks_exact(4)
@@ -120,7 +115,7 @@ impl Rgb2SpecTable {
                 .collect()
         };
         let scale = floats(8, res);
-        let data = floats(8 + 4 * res, n_data);
+        let data = floats(8 + 4 * res, 9 * res * res * res);
         if scale
             .windows(2)
             .any(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater))
@@ -130,7 +125,46 @@ impl Rgb2SpecTable {
         if let Some(i) = data.iter().position(|v| !v.is_finite()) {
             return Err(format!("non-finite coefficient at index {i}"));
         }
-        Ok(Rgb2SpecTable { res, scale, data })
+        Ok(Rgb2SpecTable {
+            res,
+            scale: Cow::Owned(scale),
+            data: Cow::Owned(data),
+        })
+    }
+
+    /// The resolution in a "SPEC" header, checked against the number of bytes.
+    fn resolution_of(bytes: &[u8]) -> Result<usize, String> {
+        if bytes.len() < 8 || &bytes[..4] != b"SPEC" {
+            return Err("not an rgb2spec table (missing \"SPEC\" header)".into());
+        }
+        let res = u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]) as usize;
+        if !(2..=1024).contains(&res) {
+            return Err(format!("implausible resolution {res}"));
+        }
+        let need = 8 + 4 * (res + 9 * res * res * res);
+        if bytes.len() < need {
+            return Err(format!(
+                "truncated: {} bytes, resolution {res} needs {need}",
+                bytes.len()
+            ));
+        }
+        Ok(res)
+    }
+
+    /// A table whose values build.rs has checked, read in place where the target's byte
+    /// order is the file's (little-endian) and parsed into a copy elsewhere.
+    fn from_checked_static(bytes: &'static [u8]) -> Result<Self, String> {
+        let res = Self::resolution_of(bytes)?;
+        let n_data = 9 * res * res * res;
+        let floats = &bytes[8..8 + 4 * (res + n_data)];
+        match bytemuck::try_cast_slice::<u8, f32>(floats) {
+            Ok(f) if cfg!(target_endian = "little") => Ok(Rgb2SpecTable {
+                res,
+                scale: Cow::Borrowed(&f[..res]),
+                data: Cow::Borrowed(&f[res..]),
+            }),
+            _ => Self::from_bytes(bytes),
+        }
     }
 
     pub fn resolution(&self) -> usize {
@@ -185,8 +219,8 @@ impl Rgb2SpecTable {
 pub fn srgb_table() -> &'static Rgb2SpecTable {
     static TABLE: OnceLock<Rgb2SpecTable> = OnceLock::new();
     TABLE.get_or_init(|| {
-        // build.rs validated header and size, so failure here means a corrupted build.
-        Rgb2SpecTable::from_bytes(SRGB_COEFF_BYTES)
+        // build.rs validated the table, so failure here means a corrupted build.
+        Rgb2SpecTable::from_checked_static(&SRGB_COEFF.0)
             .unwrap_or_else(|e| panic!("embedded spectra/srgb_rgb2spec_64.coeff: {e}"))
     })
 }
@@ -287,6 +321,19 @@ impl<const ILLUMINANT: bool> RgbScaledSpectrum<ILLUMINANT> {
 #[cfg(test)]
 mod simd_tests {
     use super::*;
+
+    /// The embedded table read in place is the table `from_bytes` parses and checks, value
+    /// for value (build.rs's checks stand in for the runtime ones only if they agree).
+    #[test]
+    fn embedded_table_in_place_equals_the_parsed_copy() {
+        let parsed = Rgb2SpecTable::from_bytes(&SRGB_COEFF.0).unwrap();
+        let table = srgb_table();
+        assert_eq!(table.res, parsed.res);
+        assert!(matches!(table.data, Cow::Borrowed(_)) || cfg!(target_endian = "big"));
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&table.scale), bits(&parsed.scale));
+        assert_eq!(bits(&table.data), bits(&parsed.data));
+    }
 
     /// Polynomials covering black, white, greys, saturated and large-argument sigmoids.
     fn polys() -> Vec<RgbSigmoidPolynomial> {

@@ -101,7 +101,7 @@ fn check_coeff(path: &Path) -> Result<(), String> {
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
     let (z_nodes, data) = floats.split_at(res);
-    if z_nodes.windows(2).any(|w| !(w[1] > w[0])) {
+    if (z_nodes.windows(2)).any(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater)) {
         return Err(format!(
             "{}: z-nodes are not strictly increasing",
             path.display()

@@ -686,7 +686,8 @@ pub struct SceneTriangles<'a> {
 }
 
 impl SceneTriangles<'_> {
-    pub fn len(&self) -> usize {
+    /// How many triangles there are.
+    pub fn count(&self) -> usize {
         self.tri_ref.len()
     }
 

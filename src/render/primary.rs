@@ -82,7 +82,7 @@ impl PrimaryBins {
         height: u32,
         camera_rays: u64,
     ) -> Option<Self> {
-        let n_tris = tris.len();
+        let n_tris = tris.count();
         let (w, h) = (width as usize, height as usize);
         if n_tris == 0
             || w == 0

@@ -6,8 +6,8 @@
 //! λ in nm) is made by `tools/rgb2spec` — `rgb2spec_opt`'s algorithm at Mitsuba 3's resolution
 //! (64), fitted against this module's own 1 nm CIE/D65 quadrature and sRGB matrix with
 //! Levenberg–Marquardt (see tools/rgb2spec/README.md for timings and the comparison with
-//! Mitsuba's table). It is embedded with `include_bytes!`; `build.rs` validates its header and
-//! size; it is parsed once, on first use.
+//! Mitsuba's table). It is embedded with `include_bytes!` (4-byte aligned); `build.rs`
+//! validates its header, size and values, and on little-endian targets it is read in place.
 //!
 //! Lookup follows `rgb2spec_fetch` (Mitsuba 3, `ext/rgb2spec/rgb2spec.c`): clamp to [0,1],
 //! pick the largest component (ties go to the later channel), z = that component on the

@@ -406,8 +406,8 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     let samples = width as u64 * height as u64 * (sample_range.1 - sample_range.0) as u64;
     // The emitters (an environment map's rgb2spec texels and sampling tables: ~25 ms for a
     // 512 × 256 map) need no BVH: build them beside it on a second thread. The screen bins
-    // need only the triangles: binned beside the BVH build, then given its ids. Screen bins
-    // need camera rays from one pinhole (`lights` hook: not for lens cameras).
+    // (for camera rays from one pinhole: `lights` hook, not for lens cameras) need only the
+    // triangles: binned beside the BVH build, then given its ids.
     let pinhole = camera.pinhole();
     let (built, emitters) = std::thread::scope(|s| {
         let emitters = s.spawn(|| lights::LightSet::emitter_lights(scene));

@@ -71,17 +71,18 @@ pub struct BinStats {
 }
 
 impl PrimaryBins {
-    /// Bins the scene's triangles (scene order: the lists are put in the BVH's order by
-    /// [`Self::into_bvh_order`]) for a `width`×`height` image seen by `camera` that will
+    /// Bins the scene's triangles for a `width`×`height` image seen by `camera` that will
     /// trace `camera_rays` camera rays (pixels × samples per pixel); None when
     /// the bins would not pay (see the module doc) and every camera ray should use the BVH.
+    /// The lists hold scene-order ids until [`SceneOrderBins::into_bvh_order`] (the BVH is
+    /// built meanwhile).
     pub fn build(
         tris: &SceneTriangles,
         camera: &PerspectiveCamera,
         width: u32,
         height: u32,
         camera_rays: u64,
-    ) -> Option<Self> {
+    ) -> Option<SceneOrderBins> {
         let n_tris = tris.count();
         let (w, h) = (width as usize, height as usize);
         if n_tris == 0
@@ -153,7 +154,7 @@ impl PrimaryBins {
                 }
             });
         }
-        Some(PrimaryBins {
+        Some(SceneOrderBins(PrimaryBins {
             width,
             height,
             offsets,
@@ -161,33 +162,48 @@ impl PrimaryBins {
             bvh_pixel,
             crossing,
             camera: camera.clone(),
-        })
+        }))
     }
 
+    pub fn stats(&self) -> BinStats {
+        BinStats {
+            candidates: self.candidates.len(),
+            bvh_pixels: self.bvh_pixel.iter().filter(|&&b| b).count(),
+            crossing: self.crossing.len(),
+        }
+    }
+}
+
+/// Screen bins whose lists hold scene-order triangle ids ([`PrimaryBins::build`]), before
+/// the BVH exists.
+pub struct SceneOrderBins(PrimaryBins);
+
+impl SceneOrderBins {
     /// The bins with the BVH's triangle ids (`bvh_order[j]`: the scene-order index of BVH
     /// triangle `j`, [`Accel::bvh_order`]), each pixel's list nearest first (exact depth
     /// ties: smaller id first) and the crossing triangles in id order.
-    pub fn into_bvh_order(mut self, bvh_order: &[u32]) -> Self {
+    pub fn into_bvh_order(self, bvh_order: &[u32]) -> PrimaryBins {
         use rayon::prelude::*;
+        let mut bins = self.0;
         let mut bvh_id = vec![0u32; bvh_order.len()];
         for (j, &i) in bvh_order.iter().enumerate() {
             bvh_id[i as usize] = j as u32;
         }
-        for t in &mut self.crossing {
+        for t in &mut bins.crossing {
             *t = bvh_id[*t as usize];
         }
-        self.crossing.sort_unstable();
+        bins.crossing.sort_unstable();
         // Rows of pixels as independent tasks: disjoint runs of the candidate array.
-        let w = self.width as usize;
-        let mut rows = Vec::with_capacity(self.height as usize);
-        let mut rest = self.candidates.as_mut_slice();
-        for y in 0..self.height as usize {
-            let (start, end) = (self.offsets[y * w], self.offsets[(y + 1) * w]);
+        let w = bins.width as usize;
+        let mut rows = Vec::with_capacity(bins.height as usize);
+        let mut rest = bins.candidates.as_mut_slice();
+        for y in 0..bins.height as usize {
+            let (start, end) = (bins.offsets[y * w], bins.offsets[(y + 1) * w]);
             let (row, tail) = std::mem::take(&mut rest).split_at_mut((end - start) as usize);
             rows.push((y, row));
             rest = tail;
         }
-        let offsets = &self.offsets;
+        let offsets = &bins.offsets;
         rows.into_par_iter().for_each(|(y, row)| {
             let row_start = offsets[y * w];
             for t in row.iter_mut() {
@@ -199,17 +215,11 @@ impl PrimaryBins {
                     .sort_unstable_by(|a, b| a.depth.total_cmp(&b.depth).then(a.tri.cmp(&b.tri)));
             }
         });
-        self
+        bins
     }
+}
 
-    pub fn stats(&self) -> BinStats {
-        BinStats {
-            candidates: self.candidates.len(),
-            bvh_pixels: self.bvh_pixel.iter().filter(|&&b| b).count(),
-            crossing: self.crossing.len(),
-        }
-    }
-
+impl PrimaryBins {
     /// Closest hit of camera ray `ray` generated inside pixel (`x`, `y`): the same hit as
     /// [`Accel::intersect`] (spheres included).
     #[inline]

@@ -4,10 +4,11 @@
 
 use std::process::Command;
 
-fn bench(seed: &str) -> std::process::Output {
+/// The run's output and whether it left its scratch directory behind.
+fn bench(seed: &str) -> (std::process::Output, bool) {
     let root = env!("CARGO_MANIFEST_DIR");
     let plot = std::env::temp_dir().join(format!("bench_seed_{}.png", std::process::id()));
-    Command::new(env!("CARGO_BIN_EXE_thinfilm"))
+    let child = Command::new(env!("CARGO_BIN_EXE_thinfilm"))
         .args(["bench", "render", "--mitsuba", "--only", "teapot_gold"])
         .args([
             "--spp",
@@ -23,13 +24,18 @@ fn bench(seed: &str) -> std::process::Output {
         .args(["--python", "/nonexistent/python3"])
         .arg("--plot")
         .arg(&plot)
-        .output()
-        .unwrap()
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let scratch = std::env::temp_dir().join(format!("thinfilm-bench-render-{}", child.id()));
+    let out = child.wait_with_output().unwrap();
+    (out, scratch.exists())
 }
 
 #[test]
 fn the_references_own_seed_is_refused() {
-    let out = bench("0");
+    let (out, _) = bench("0");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(stderr.contains("--seed 0"), "{stderr}");
@@ -39,10 +45,12 @@ fn the_references_own_seed_is_refused() {
 
 #[test]
 fn another_seed_passes_the_check() {
-    let out = bench("1");
+    let (out, left_scratch) = bench("1");
     let stderr = String::from_utf8_lossy(&out.stderr);
     // It gets as far as starting Mitsuba (which fails here), not stopped by the seed check.
     assert!(!out.status.success());
     assert!(!stderr.contains("--seed 1 is the seed"), "{stderr}");
     assert!(stderr.contains("/nonexistent/python3"), "{stderr}");
+    // The failed run removed its scratch directory.
+    assert!(!left_scratch);
 }

@@ -320,7 +320,7 @@ pub fn run(args: Args) -> Result<()> {
         let ours = render_ours(&args, &scene, r, &reference)?;
         let mut theirs: Vec<Row> = Vec::new();
         if args.mitsuba {
-            let dir = tmp.join(&r.name);
+            let dir = tmp.0.join(&r.name);
             let (variant, sampler, mut rows) = run_mitsuba(
                 &args,
                 &r.scene,
@@ -407,7 +407,6 @@ pub fn run(args: Args) -> Result<()> {
         thinfilm::image_io::write_atomically(p, |tmp| Ok(std::fs::write(tmp, &table)?))?;
     }
     write_plot(&series, &args.plot)?;
-    let _ = std::fs::remove_dir_all(&tmp);
     Ok(())
 }
 
@@ -426,8 +425,18 @@ fn check_seed_apart(refs: &[thinfilm::compare::references::Reference], seed: u64
     Ok(())
 }
 
-fn tempfile_dir() -> Result<PathBuf> {
+/// The bench's scratch directory (Mitsuba's EXRs), removed when dropped: also when a run
+/// fails half-way (a missing Python, a Mitsuba error), so no run leaves it behind.
+struct ScratchDir(PathBuf);
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn tempfile_dir() -> Result<ScratchDir> {
     let dir = std::env::temp_dir().join(format!("thinfilm-bench-render-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    Ok(dir)
+    Ok(ScratchDir(dir))
 }

@@ -337,6 +337,7 @@ fn load(bytes: &[u8], what: &str) -> Result<Option<TriangleMesh>> {
 mod tests {
     use super::super::meshio::{load_ply, load_ply_general, write_ply_binary};
     use super::*;
+    use std::path::Path;
 
     fn same(a: &TriangleMesh, b: &TriangleMesh) {
         assert_eq!(format!("{a:?}"), format!("{b:?}"));
@@ -346,10 +347,32 @@ mod tests {
         assert_eq!(a.indices, b.indices);
     }
 
-    fn tmp(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("thinfilm-ply-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
+    /// A scratch file in the temp directory, removed when dropped (tests run in parallel
+    /// threads of one process: one file each, no shared directory to remove).
+    struct TmpFile(std::path::PathBuf);
+
+    impl Drop for TmpFile {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+
+    impl std::ops::Deref for TmpFile {
+        type Target = Path;
+        fn deref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl AsRef<Path> for TmpFile {
+        fn as_ref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    fn tmp(name: &str) -> TmpFile {
+        let file = format!("thinfilm-ply-{}-{name}", std::process::id());
+        TmpFile(std::env::temp_dir().join(file))
     }
 
     /// Header + body of a little- or big-endian file: uchar/ushort/double vertex properties

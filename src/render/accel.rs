@@ -32,6 +32,9 @@ const SMALL_SCENE: usize = 64;
 /// Hits nearer than this are left to the BVH in a small scene (twice the node test's
 /// epsilon, see [`Accel::intersect_small`]).
 const NEAR_HIT: f32 = 2e-4;
+/// Batches of fewer rays than this test each ray against triangles in lanes
+/// ([`Accel::intersect_small`]).
+const FEW_RAYS: usize = 8;
 
 /// What a closest-hit query found.
 #[derive(Debug, Clone, Copy)]
@@ -56,6 +59,9 @@ pub struct Accel {
     /// (obvhs `RtTriangle`: the same Möller–Trumbore arithmetic as `Triangle::intersect`, so
     /// hits are bit-identical, minus two subtractions and a cross product per test).
     rt_tris: Vec<RtTriangle>,
+    /// A small scene's triangles, [`PACKET`] per group in lanes ([`Self::intersect_small`]);
+    /// empty otherwise.
+    small_groups: Vec<TriLanes>,
     /// (shape, triangle index within the shape's mesh), BVH order.
     tri_ref: Vec<(u32, u32)>,
     spheres: Vec<SphereGeom>,
@@ -131,10 +137,16 @@ impl Accel {
                 Geometry::Sphere { .. } => None,
             })
             .collect();
+        let small_groups = if rt_tris.len() <= SMALL_SCENE {
+            rt_tris.chunks(PACKET).map(TriLanes::of).collect()
+        } else {
+            Vec::new()
+        };
         Ok((
             Accel {
                 bvh,
                 rt_tris,
+                small_groups,
                 tri_ref,
                 spheres,
                 avx2: cpu_has_avx2(),
@@ -285,14 +297,28 @@ impl Accel {
     /// within 1e-4 of a wall can pass through the wall there), so a hit nearer than
     /// [`NEAR_HIT`] is traced again by the BVH. Each lane's answer depends on its own ray
     /// only: a ray gets the same hit in any batch, and alone.
+    ///
+    /// Which data go in the SIMD lanes depends on the batch: below [`FEW_RAYS`] rays (deeper
+    /// bounces, where fewer paths live: 8.9 rays per call on average in the Cornell box) each
+    /// ray is tested against [`PACKET`] triangles at a time instead. The closest hit is the
+    /// lexicographic minimum of (t, id) over the triangles hit before the ray's tmax, whatever
+    /// the order of the tests, and each (ray, triangle) distance is the same IEEE operations
+    /// either way, so both give the same hits bit for bit.
     fn intersect_small(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        let mut lanes = RayLanes::of_rays(rays);
-        let mut best = [u32::MAX; PACKET];
-        for (id, tri) in self.rt_tris.iter().enumerate() {
-            lanes.test_triangle(&TriScalars::of(tri), id as u32, &mut best);
+        let (mut tmax, mut best) = ([0.0f32; PACKET], [u32::MAX; PACKET]);
+        if rays.len() < FEW_RAYS {
+            for (i, r) in rays.iter().enumerate() {
+                (tmax[i], best[i]) = self.closest_small_triangle(r);
+            }
+        } else {
+            let mut lanes = RayLanes::of_rays(rays);
+            for (id, tri) in self.rt_tris.iter().enumerate() {
+                lanes.test_triangle(&TriScalars::of(tri), id as u32, &mut best);
+            }
+            tmax = lanes.tmax;
         }
         for (i, (r, h)) in rays.iter().zip(hits.iter_mut()).enumerate() {
-            let t = lanes.tmax[i];
+            let t = tmax[i];
             *h = if best[i] == u32::MAX {
                 self.closest_sphere(r, t, None)
             } else if t < NEAR_HIT {
@@ -305,6 +331,29 @@ impl Accel {
                 self.closest_sphere(r, t, Some(hit))
             };
         }
+    }
+
+    /// One ray of a small scene against its triangles, [`PACKET`] at a time in lanes: the
+    /// nearest distance (the ray's tmax if none) and triangle id (`u32::MAX` if none), as
+    /// [`RayLanes::test_triangle`] over every triangle in id order finds them.
+    fn closest_small_triangle(&self, r: &Ray) -> (f32, u32) {
+        let (o, d) = (r.origin.to_array(), r.dir.to_array());
+        let (mut best_t, mut best) = (r.tmax, u32::MAX);
+        for (g, group) in self.small_groups.iter().enumerate() {
+            let t = group.distances(o, d, r.tmin, best_t);
+            // Nearest lane, the first (smallest id) on ties; later groups win only when
+            // strictly nearer, as `closer` lets a later id win.
+            let (mut m, mut lane) = (f32::INFINITY, usize::MAX);
+            for (i, &ti) in t[..group.count].iter().enumerate() {
+                if ti < m {
+                    (m, lane) = (ti, i);
+                }
+            }
+            if lane != usize::MAX && m < best_t {
+                (best_t, best) = (m, (g * PACKET + lane) as u32);
+            }
+        }
+        (best_t, best)
     }
 
     /// [`Self::occluded`] of every ray (`out[i]` for `rays[i]`), [`PACKET`] rays at a time
@@ -944,6 +993,56 @@ impl TriScalars {
             e2: a(t.e2),
             ng: a(t.ng),
         }
+    }
+}
+
+/// Up to [`PACKET`] triangles in struct-of-arrays form (lane i: triangle i of the group;
+/// lanes from `count` on are zero and never read).
+#[derive(Debug, Clone)]
+struct TriLanes {
+    v0: [[f32; PACKET]; 3],
+    e1: [[f32; PACKET]; 3],
+    e2: [[f32; PACKET]; 3],
+    ng: [[f32; PACKET]; 3],
+    count: usize,
+}
+
+impl TriLanes {
+    fn of(tris: &[RtTriangle]) -> Self {
+        let mut lanes = TriLanes {
+            v0: [[0.0; PACKET]; 3],
+            e1: [[0.0; PACKET]; 3],
+            e2: [[0.0; PACKET]; 3],
+            ng: [[0.0; PACKET]; 3],
+            count: tris.len().min(PACKET),
+        };
+        for (i, t) in tris.iter().take(PACKET).enumerate() {
+            let s = TriScalars::of(t);
+            for k in 0..3 {
+                lanes.v0[k][i] = s.v0[k];
+                lanes.e1[k][i] = s.e1[k];
+                lanes.e2[k][i] = s.e2[k];
+                lanes.ng[k][i] = s.ng[k];
+            }
+        }
+        lanes
+    }
+
+    /// [`triangle_distance`] of one ray to every lane's triangle.
+    #[inline]
+    fn distances(&self, o: [f32; 3], d: [f32; 3], tmin: f32, tmax: f32) -> [f32; PACKET] {
+        let mut t = [0.0f32; PACKET];
+        for (i, ti) in t.iter_mut().enumerate() {
+            let lane = |v: &[[f32; PACKET]; 3]| [v[0][i], v[1][i], v[2][i]];
+            let tri = TriScalars {
+                v0: lane(&self.v0),
+                e1: lane(&self.e1),
+                e2: lane(&self.e2),
+                ng: lane(&self.ng),
+            };
+            *ti = triangle_distance(&tri, o, d, tmin, tmax);
+        }
+        t
     }
 }
 
@@ -1596,11 +1695,25 @@ mod tests {
         let (mut batch, mut blocked) = (Vec::new(), Vec::new());
         accel.intersect_batch(&rays, &mut batch);
         accel.occluded_batch(&rays, &mut blocked);
+        // Batches of every size below a full packet (the few-ray path and the lane path).
+        let mut sized = Vec::new();
+        let mut start = 0;
+        for n in (1..=PACKET).cycle() {
+            if start >= rays.len() {
+                break;
+            }
+            let end = (start + n).min(rays.len());
+            let mut out = Vec::new();
+            accel.intersect_batch(&rays[start..end], &mut out);
+            sized.extend(out);
+            start = end;
+        }
         let (mut hits, mut occluded) = (0, 0);
         for (i, r) in rays.iter().enumerate() {
             let bvh = accel.intersect_bvh(r);
             assert_eq!(key(accel.intersect(r)), key(bvh), "ray {i}");
             assert_eq!(key(batch[i]), key(bvh), "ray {i} in a batch");
+            assert_eq!(key(sized[i]), key(bvh), "ray {i} in a smaller batch");
             let occ = accel.occluded_bvh(r);
             assert_eq!(accel.occluded(r), occ, "ray {i}");
             assert_eq!(blocked[i], occ, "ray {i} in a batch");

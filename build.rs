@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 #[path = "src/spectrum/table_csv.rs"]
 mod table_csv;
 
+#[path = "src/spectrum/rgb2spec_format.rs"]
+mod rgb2spec_format;
+
 use table_csv::TABLE_ROWS as N_ROWS;
 
 /// Read and parse one table; errors name the file and line.
@@ -80,38 +83,11 @@ fn check_coeff(path: &Path) -> Result<(), String> {
             path.display()
         )
     })?;
-    if bytes.len() < 8 || &bytes[..4] != b"SPEC" {
-        return Err(format!("{}: missing \"SPEC\" header", path.display()));
-    }
-    let res = u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]) as usize;
+    // The renderer reads the embedded values in place without checking them again.
+    let res =
+        rgb2spec_format::check_spec(&bytes).map_err(|e| format!("{}: {e}", path.display()))?;
     if res != 64 {
         return Err(format!("{}: resolution {res}, expected 64", path.display()));
-    }
-    let need = 8 + 4 * (res + 9 * res * res * res);
-    if bytes.len() < need {
-        return Err(format!(
-            "{}: {} bytes, a resolution-{res} table needs {need}",
-            path.display(),
-            bytes.len()
-        ));
-    }
-    // The renderer reads the embedded values in place without checking them again.
-    let floats: Vec<f32> = bytes[8..need]
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    let (z_nodes, data) = floats.split_at(res);
-    if (z_nodes.windows(2)).any(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater)) {
-        return Err(format!(
-            "{}: z-nodes are not strictly increasing",
-            path.display()
-        ));
-    }
-    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-        return Err(format!(
-            "{}: non-finite coefficient at index {i}",
-            path.display()
-        ));
     }
     Ok(())
 }
@@ -121,6 +97,7 @@ fn main() {
     println!("cargo:rerun-if-changed=spectra/cie_d65_1nm.csv");
     println!("cargo:rerun-if-changed=spectra/srgb_rgb2spec_64.coeff");
     println!("cargo:rerun-if-changed=src/spectrum/table_csv.rs");
+    println!("cargo:rerun-if-changed=src/spectrum/rgb2spec_format.rs");
     println!("cargo:rerun-if-changed=build.rs");
     let manifest = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"));
     let out_dir = PathBuf::from(std::env::var("OUT_DIR").expect("OUT_DIR"));

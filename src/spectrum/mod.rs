@@ -11,6 +11,7 @@
 
 pub mod color;
 pub mod rgb2spec;
+mod rgb2spec_format;
 pub mod sampled;
 pub mod table_csv;
 

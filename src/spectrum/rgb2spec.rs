@@ -107,54 +107,24 @@ impl Rgb2SpecTable {
     /// Parse the "SPEC" format (trailing bytes, e.g. newer Mitsuba's forward-model block,
     /// are ignored).
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
-        let res = Self::resolution_of(bytes)?;
+        let res = super::rgb2spec_format::check_spec(bytes)?;
         let floats = |from: usize, n: usize| -> Vec<f32> {
             bytes[from..from + 4 * n]
                 .chunks_exact(4)
                 .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
                 .collect()
         };
-        let scale = floats(8, res);
-        let data = floats(8 + 4 * res, 9 * res * res * res);
-        if scale
-            .windows(2)
-            .any(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater))
-        {
-            return Err("z-nodes are not strictly increasing".into());
-        }
-        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-            return Err(format!("non-finite coefficient at index {i}"));
-        }
         Ok(Rgb2SpecTable {
             res,
-            scale: Cow::Owned(scale),
-            data: Cow::Owned(data),
+            scale: Cow::Owned(floats(8, res)),
+            data: Cow::Owned(floats(8 + 4 * res, 9 * res * res * res)),
         })
-    }
-
-    /// The resolution in a "SPEC" header, checked against the number of bytes.
-    fn resolution_of(bytes: &[u8]) -> Result<usize, String> {
-        if bytes.len() < 8 || &bytes[..4] != b"SPEC" {
-            return Err("not an rgb2spec table (missing \"SPEC\" header)".into());
-        }
-        let res = u32::from_le_bytes([bytes[4], bytes[5], bytes[6], bytes[7]]) as usize;
-        if !(2..=1024).contains(&res) {
-            return Err(format!("implausible resolution {res}"));
-        }
-        let need = 8 + 4 * (res + 9 * res * res * res);
-        if bytes.len() < need {
-            return Err(format!(
-                "truncated: {} bytes, resolution {res} needs {need}",
-                bytes.len()
-            ));
-        }
-        Ok(res)
     }
 
     /// A table whose values build.rs has checked, read in place where the target's byte
     /// order is the file's (little-endian) and parsed into a copy elsewhere.
     fn from_checked_static(bytes: &'static [u8]) -> Result<Self, String> {
-        let res = Self::resolution_of(bytes)?;
+        let res = super::rgb2spec_format::spec_resolution(bytes)?;
         let n_data = 9 * res * res * res;
         let floats = &bytes[8..8 + 4 * (res + n_data)];
         match bytemuck::try_cast_slice::<u8, f32>(floats) {

@@ -1,13 +1,15 @@
-//! A pixel's camera samples in struct-of-arrays form: the first stage of the renderer's
-//! per-pixel batch ([`super::trace_batch`]).
+//! Camera samples in struct-of-arrays form: the first stage of the renderer's batches
+//! ([`super::trace_batches`]).
 //!
-//! [`BATCH`] samples of one pixel share their pixel, camera origin and scramble seeds, and
-//! their camera steps are the same arithmetic on different numbers: sample numbers
+//! [`BATCH`] samples — of one pixel, or at low sample counts of several neighbouring pixels
+//! ([`BatchSpan`]) — share their row and camera origin, and their camera steps are the same
+//! arithmetic on different numbers: sample numbers
 //! ([`PixelSampler::camera_samples`]), hero wavelengths, film positions, ray directions
 //! ([`super::camera::PerspectiveCamera::generate_rays`]) and the colour-matching rows of their wavelengths.
 //! Written as loops over lanes, each step compiles to SIMD (16 lanes are one AVX-512 or two
-//! AVX2 registers). Every lane's values are bit-identical to those of the one-sample functions
-//! ([`super::camera_sample`]; test `render::tests::batched_samples_equal_single_samples`).
+//! AVX2 registers). A lane's values do not depend on the other lanes (test
+//! `render::tests::samples_do_not_depend_on_their_batch`: bit for bit against each sample
+//! traced alone).
 //!
 //! The rows (r̄, ḡ, b̄, D65) at a sample's wavelengths are looked up once here and used twice:
 //! by the environment lookups of every ray of the path (the D65 factor of RGB illuminants)
@@ -15,7 +17,7 @@
 
 use super::camera::{Camera, Ray};
 use super::primary::PixelRays;
-use super::sampler::{PixelSampler, Sampler};
+use super::sampler::{PixelSampler, Sampler, SamplerKind};
 use super::texture::Spec;
 use crate::spectrum::{SampledWavelengths, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 
@@ -59,7 +61,38 @@ fn lens_rays(
     (rays, Some(origins))
 }
 
-/// Camera samples `first .. first + n` of one pixel.
+/// The samples a camera batch holds: samples `first .. first + len` of each of `pixels`
+/// neighbouring pixels (`x0 + j`, `y`). Lane i is sample `first + i % len` of pixel
+/// `x0 + i / len`: one pixel's samples at ≥ [`BATCH`] samples per pixel, several pixels'
+/// at lower counts, so that a 1-spp preview fills the lanes with 16 pixels instead of
+/// computing 16 lanes for one sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatchSpan {
+    pub x0: u32,
+    pub y: u32,
+    pub pixels: u32,
+    pub first: u32,
+    pub len: u32,
+}
+
+impl BatchSpan {
+    /// Samples in the batch (≤ [`BATCH`]).
+    #[inline]
+    pub fn lanes(&self) -> usize {
+        (self.pixels * self.len) as usize
+    }
+
+    /// Lane `i`'s pixel offset j (pixel `x0 + j`) and sample offset k (sample `first + k`);
+    /// lanes past [`Self::lanes`] continue the last pixel's samples.
+    #[inline]
+    pub fn lane(&self, i: usize) -> (u32, u32) {
+        let i = i as u32;
+        let j = (i / self.len).min(self.pixels - 1);
+        (j, i - j * self.len)
+    }
+}
+
+/// The camera samples of a [`BatchSpan`].
 pub struct CameraBatch {
     pub n: usize,
     /// Film position in pixels.
@@ -81,23 +114,44 @@ pub struct CameraBatch {
 }
 
 impl CameraBatch {
-    /// The camera samples `first .. first + n` (n ≤ [`BATCH`]) of pixel (`x`, `y`). Lanes
-    /// from `n` on hold further samples of the pixel and are ignored.
+    /// The camera samples of `span`. Lanes from `span.lanes()` on hold further samples of
+    /// its last pixel and are ignored.
     pub fn generate(
         camera: &Camera,
-        pixel: &PixelSampler,
-        [x, y]: [u32; 2],
+        sampler: SamplerKind,
+        seed: u64,
+        span: &BatchSpan,
         [width, height]: [u32; 2],
-        first: u32,
-        n: usize,
         wavelength_grid: bool,
     ) -> Self {
-        debug_assert!(n <= BATCH);
+        let n = span.lanes();
+        debug_assert!(n <= BATCH && span.pixels >= 1);
+        let pixel = |j: u32| PixelSampler::new(sampler, span.x0 + j, span.y, seed);
+        let first_pixel = pixel(0);
+        let mut per_pixel = [first_pixel; BATCH];
+        for (j, p) in per_pixel
+            .iter_mut()
+            .enumerate()
+            .take(span.pixels as usize)
+            .skip(1)
+        {
+            *p = pixel(j as u32);
+        }
+        let mut lane_pixels = [first_pixel; BATCH];
+        let mut x = [0u32; BATCH];
+        let mut index = [0u32; BATCH];
+        for i in 0..BATCH {
+            let (j, k) = span.lane(i);
+            lane_pixels[i] = per_pixel[j as usize];
+            x[i] = span.x0 + j;
+            index[i] = span.first.wrapping_add(k);
+        }
         let mut bits = [0u32; BATCH];
         let mut jitter = [[0.0f32; BATCH]; 2];
-        let mut samplers = [pixel.sampler(first); BATCH];
-        pixel.camera_samples(
-            first,
+        let mut samplers = [first_pixel.sampler(span.first); BATCH];
+        PixelSampler::camera_samples(
+            &lane_pixels,
+            &index,
             wavelength_grid,
             &mut bits,
             &mut jitter,
@@ -116,8 +170,8 @@ impl CameraBatch {
         let mut film_uv = [[0.0f32; BATCH]; 2];
         let size = [width as f32, height as f32];
         for i in 0..BATCH {
-            pos[0][i] = x as f32 + jitter[0][i];
-            pos[1][i] = y as f32 + jitter[1][i];
+            pos[0][i] = x[i] as f32 + jitter[0][i];
+            pos[1][i] = span.y as f32 + jitter[1][i];
             film_uv[0][i] = pos[0][i] / size[0];
             film_uv[1][i] = pos[1][i] / size[1];
         }

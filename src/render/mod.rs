@@ -253,27 +253,6 @@ impl PreparedScene {
         }
     }
 
-    /// Closest hits of the first `hits.len()` camera rays of a batch generated in pixel
-    /// (`x`, `y`), through the screen bins when there are some (all rays of the pixel tested
-    /// at once).
-    #[inline]
-    pub fn intersect_camera_lanes(
-        &self,
-        rays: &primary::PixelRays,
-        x: u32,
-        y: u32,
-        hits: &mut [Option<accel::Hit>],
-    ) {
-        match &self.primary_bins {
-            Some(bins) => bins.intersect_lanes(&self.accel, x, y, rays, hits),
-            None => {
-                for (i, h) in hits.iter_mut().enumerate() {
-                    *h = self.accel.intersect(&rays.ray(i));
-                }
-            }
-        }
-    }
-
     pub fn lights(&self) -> &lights::LightSet {
         &self.lights
     }
@@ -513,7 +492,7 @@ fn check_render_memory(
     )
 }
 
-use batch::{Lanes, BATCH};
+use batch::{BatchSpan, Lanes, BATCH};
 
 /// Camera samples traced as one wavefront ([`trace_batches`]) at most: four full batches of
 /// [`BATCH`] (one pixel at 64 spp, four at 16 spp), or up to [`WAVEFRONT_JOBS`] partial ones
@@ -523,17 +502,6 @@ use batch::{Lanes, BATCH};
 const WAVEFRONT_SAMPLES: usize = 4 * BATCH;
 /// Camera batches per wavefront at most (at 4 spp: 16 pixels, −5 to −10 % against 4).
 const WAVEFRONT_JOBS: usize = 16;
-
-/// One camera batch of a wavefront: samples `first .. first + len` (len ≤ [`BATCH`]) of
-/// pixel (`x`, `y`).
-#[derive(Clone, Copy)]
-struct BatchJob {
-    pixel: sampler::PixelSampler,
-    x: u32,
-    y: u32,
-    first: u32,
-    len: usize,
-}
 
 /// A camera batch whose paths are in the wavefront: its camera samples, the radiance of its
 /// rays that escaped, and which lanes of the wavefront carry its other samples.
@@ -549,6 +517,9 @@ struct StartedBatch {
 struct WaveScratch<C> {
     paths: integrator::PathScratch<C>,
     started: Vec<StartedBatch>,
+    /// A batch's camera rays and hits when they go through the BVH.
+    rays: Vec<camera::Ray>,
+    hits: Vec<Option<accel::Hit>>,
 }
 
 impl<C> Default for WaveScratch<C> {
@@ -556,6 +527,8 @@ impl<C> Default for WaveScratch<C> {
         WaveScratch {
             paths: Default::default(),
             started: Vec::with_capacity(WAVEFRONT_JOBS),
+            rays: Vec::with_capacity(BATCH),
+            hits: Vec::with_capacity(BATCH),
         }
     }
 }
@@ -571,58 +544,100 @@ impl<C> Default for WaveScratch<C> {
 fn trace_batches<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
-    jobs: &[BatchJob],
+    jobs: &[BatchSpan],
     out: &mut [(Vec2, [f32; 3])],
     scratch: &mut WaveScratch<C>,
 ) {
     debug_assert!(jobs.len() <= WAVEFRONT_JOBS);
-    debug_assert_eq!(out.len(), jobs.iter().map(|j| j.len).sum::<usize>());
-    let WaveScratch { paths, started } = scratch;
+    debug_assert_eq!(out.len(), jobs.iter().map(|j| j.lanes()).sum::<usize>());
+    let WaveScratch {
+        paths,
+        started,
+        rays,
+        hits,
+    } = scratch;
     paths.lanes.clear();
     paths.first_hits.clear();
     started.clear();
-    started.extend(jobs.iter().map(|job| start_batch(scene, setup, job, paths)));
+    started.extend(
+        jobs.iter()
+            .map(|job| start_batch(scene, setup, job, paths, rays, hits)),
+    );
     if !paths.lanes.is_empty() {
         integrator::trace_lanes(scene, setup, paths);
     }
     let mut out = out;
     for (s, job) in started.iter().zip(jobs) {
-        let (this, rest) = out.split_at_mut(job.len);
+        let (this, rest) = out.split_at_mut(job.lanes());
         finish_batch(s, &paths.lanes, this);
         out = rest;
     }
 }
 
-/// The first stages of [`trace_batches`] for one camera batch: camera samples, first hits,
-/// the environment of escaped rays; the samples that hit become lanes of `paths`.
+/// Closest hits of the camera rays of `span` (`cam`): through the screen bins, pixel by
+/// pixel, when there are some and the camera is a pinhole; else together through the BVH (one
+/// packet traversal where they are coherent, [`accel::Accel::intersect_batch`]).
+#[inline]
+fn camera_hits(
+    scene: &PreparedScene,
+    span: &BatchSpan,
+    cam: &batch::CameraBatch,
+    rays: &mut Vec<camera::Ray>,
+    hits: &mut Vec<Option<accel::Hit>>,
+) -> [Option<accel::Hit>; BATCH] {
+    let m = span.lanes();
+    let mut first_hits = [None; BATCH];
+    match (&scene.primary_bins, cam.origins.is_some()) {
+        (Some(bins), false) if span.pixels == 1 => {
+            bins.intersect_lanes(
+                &scene.accel,
+                span.x0,
+                span.y,
+                &cam.rays,
+                &mut first_hits[..m],
+            );
+        }
+        (Some(bins), false) => {
+            let len = span.len as usize;
+            for j in 0..span.pixels as usize {
+                let rays = cam.rays.from_lane(j * len);
+                let x = span.x0 + j as u32;
+                let hits = &mut first_hits[j * len..(j + 1) * len];
+                bins.intersect_lanes(&scene.accel, x, span.y, &rays, hits);
+            }
+        }
+        _ => {
+            rays.clear();
+            rays.extend((0..m).map(|i| cam.ray(i)));
+            scene.accel.intersect_batch(rays, hits);
+            first_hits[..m].copy_from_slice(hits);
+        }
+    }
+    count(Counter::Rays, m as u64);
+    first_hits
+}
+
+/// The first stages of [`trace_batches`] for one camera batch: camera samples, first hits
+/// ([`camera_hits`]), the environment of escaped rays; the samples that hit become lanes of
+/// `paths`.
 fn start_batch<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
-    job: &BatchJob,
+    span: &BatchSpan,
     paths: &mut integrator::PathScratch<C>,
+    rays: &mut Vec<camera::Ray>,
+    hits: &mut Vec<Option<accel::Hit>>,
 ) -> StartedBatch {
-    let m = job.len;
-    debug_assert!(m <= BATCH);
+    let m = span.lanes();
     let cam = batch::CameraBatch::generate(
         &scene.camera,
-        &job.pixel,
-        [job.x, job.y],
+        scene.sampler,
+        scene.seed,
+        span,
         [scene.width, scene.height],
-        job.first,
-        m,
         !scene.effects.dispersion,
     );
-    let mut hits = [None; BATCH];
-    if cam.origins.is_some() {
-        // Rays from many points (thin lens, orthographic): one by one through the BVH.
-        for (i, h) in hits[..m].iter_mut().enumerate() {
-            *h = scene.intersect(&cam.ray(i), None);
-        }
-    } else {
-        scene.intersect_camera_lanes(&cam.rays, job.x, job.y, &mut hits[..m]);
-    }
-    count(Counter::Rays, m as u64);
-
+    let hits = camera_hits(scene, span, &cam, rays, hits);
     // Rays that escape see the infinite lights (one batch of lookups, straight on the camera
     // batch's lanes); the others start paths.
     let mut radiance = [[0.0f32; BATCH]; 4];
@@ -823,6 +838,31 @@ impl Accumulation {
     }
 }
 
+/// The camera batches of row `y`, samples `[p0, p1)` of every pixel, in pixel order: each
+/// pixel's samples [`BATCH`] at a time, or — below [`BATCH`] samples per pixel — all samples of
+/// as many neighbouring pixels as fill a batch.
+fn row_batches(width: u32, y: u32, (p0, p1): (u32, u32)) -> impl Iterator<Item = BatchSpan> {
+    let n = p1 - p0;
+    let per_batch = (BATCH as u32 / n.max(1)).max(1);
+    let (step, len) = if n >= BATCH as u32 {
+        (1, BATCH as u32)
+    } else {
+        (per_batch, n)
+    };
+    (0..width).step_by(step as usize).flat_map(move |x0| {
+        let pixels = step.min(width - x0);
+        (p0..p1)
+            .step_by(len.max(1) as usize)
+            .map(move |first| BatchSpan {
+                x0,
+                y,
+                pixels,
+                first,
+                len: len.min(p1 - first),
+            })
+    })
+}
+
 /// Row `y`: samples `[p0, p1)` of every pixel, [`BATCH`] at a time, several batches per
 /// wavefront ([`trace_batches`]), carrying `C`. Returns the row's buffer
 /// ([`Accumulation`]) and this thread's work counters for it.
@@ -842,41 +882,32 @@ fn render_row<C: Carrier>(
     let mut buf = vec![[0.0f32; 4]; if reach == 0 { w } else { rows * w }];
     let mut out = [(Vec2::ZERO, [0.0f32; 3]); WAVEFRONT_SAMPLES];
     let mut scratch = WaveScratch::<C>::default();
-    let jobs = (0..w as u32).flat_map(|x| {
-        let pixel = sampler::PixelSampler::new(scene.sampler, x, y as u32, scene.seed);
-        (0..n).step_by(BATCH).map(move |i| BatchJob {
-            pixel,
-            x,
-            y: y as u32,
-            first: p0 + i as u32,
-            len: BATCH.min(n - i),
-        })
-    });
+    let jobs = row_batches(w as u32, y as u32, (p0, p1));
     let mut wave = Vec::with_capacity(WAVEFRONT_JOBS);
     let mut jobs = jobs.peekable();
     while jobs.peek().is_some() {
         wave.clear();
         let mut lanes = 0;
         while let Some(job) =
-            jobs.next_if(|j| wave.len() < WAVEFRONT_JOBS && lanes + j.len <= WAVEFRONT_SAMPLES)
+            jobs.next_if(|j| wave.len() < WAVEFRONT_JOBS && lanes + j.lanes() <= WAVEFRONT_SAMPLES)
         {
-            lanes += job.len;
+            lanes += job.lanes();
             wave.push(job);
         }
-        let m = wave.iter().map(|j| j.len).sum();
-        trace_batches(scene, setup, &wave, &mut out[..m], &mut scratch);
-        let mut done = out[..m].iter();
+        trace_batches(scene, setup, &wave, &mut out[..lanes], &mut scratch);
+        let mut done = out[..lanes].iter();
         for job in &wave {
-            for (k, &(pos, rgb)) in done.by_ref().take(job.len).enumerate() {
-                let i = (job.first - p0) as usize + k;
+            for (lane, &(pos, rgb)) in done.by_ref().take(job.lanes()).enumerate() {
                 if reach != 0 {
                     acc.splat(&mut buf, y, pos, rgb);
                     continue;
                 }
+                let (j, k) = job.lane(lane);
+                let i = (job.first - p0 + k) as usize;
                 samples[i] = rgb;
                 if i + 1 == n {
                     let sum = tree_sum_in_place(&mut samples);
-                    buf[job.x as usize] = [sum[0], sum[1], sum[2], n as f32];
+                    buf[(job.x0 + j) as usize] = [sum[0], sum[1], sum[2], n as f32];
                 }
             }
         }
@@ -1098,12 +1129,21 @@ mod tests {
 
     /// A sample's film position and RGB do not depend on the batch or wavefront it is traced
     /// in (bit for bit): full and partial batches, alone and in wavefronts of batches from
-    /// several pixels (up to [`WAVEFRONT_JOBS`]) (pixels that see the teapot, its reflections and the bare environment),
-    /// against each sample traced alone; nor do the work counters.
+    /// several pixels (up to [`WAVEFRONT_JOBS`]), batches of several pixels' samples, against
+    /// each sample traced alone; nor do the work counters. On the teapot (camera rays through
+    /// the BVH; pixels that see the teapot, its reflections and the bare environment) and the
+    /// Cornell box (camera rays through the screen bins).
     #[test]
     fn samples_do_not_depend_on_their_batch() {
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/teapot_mgf2_400.xml");
+        for (name, binned) in [("teapot_mgf2_400", false), ("cornell_box", true)] {
+            samples_do_not_depend_on_their_batch_in(name, binned);
+        }
+    }
+
+    fn samples_do_not_depend_on_their_batch_in(name: &str, binned: bool) {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("scenes")
+            .join(format!("{name}.xml"));
         let scene = crate::scene::load(&path, &[]).unwrap();
         let options = RenderOptions {
             resolution: Some((32, 32)),
@@ -1112,66 +1152,80 @@ mod tests {
         };
         let p = prepare(&scene, &options).unwrap();
         assert!(p.polarized.is_none());
-        let job = |(x, y): (u32, u32), first: u32, len: usize| BatchJob {
-            pixel: sampler::PixelSampler::new(p.sampler, x, y, p.seed),
-            x,
+        assert_eq!(p.primary_bins().is_some(), binned, "{name}");
+        let job = |(x, y): (u32, u32), first: u32, len: u32| BatchSpan {
+            x0: x,
             y,
+            pixels: 1,
             first,
             len,
         };
         let pixels = [(16, 16), (3, 2), (20, 12), (10, 22), (31, 31)];
-        let mut waves: Vec<Vec<BatchJob>> = Vec::new();
+        let mut waves: Vec<Vec<BatchSpan>> = Vec::new();
         for &px in &pixels {
-            for len in [BATCH, 3, 1] {
+            for len in [BATCH as u32, 3, 1] {
                 waves.push(vec![job(px, 5, len)]);
             }
         }
         // Wavefronts of up to four batches: several pixels, partial batches among full ones.
-        waves.push(pixels[..4].iter().map(|&px| job(px, 5, BATCH)).collect());
+        waves.push(
+            pixels[..4]
+                .iter()
+                .map(|&px| job(px, 5, BATCH as u32))
+                .collect(),
+        );
         waves.push(vec![
             job(pixels[0], 5, 3),
-            job(pixels[4], 40, BATCH),
+            job(pixels[4], 40, BATCH as u32),
             job(pixels[1], 0, 1),
-            job(pixels[0], 21, BATCH),
+            job(pixels[0], 21, BATCH as u32),
         ]);
         // As many partial batches as a wavefront takes (low spp).
-        let partial = (0..WAVEFRONT_JOBS).map(|k| job(pixels[k % 5], k as u32, 1 + k % 4));
+        let partial = (0..WAVEFRONT_JOBS).map(|k| job(pixels[k % 5], k as u32, 1 + k as u32 % 4));
         waves.push(partial.collect());
+        // Batches of several pixels (low spp): 16 × 1, 5 × 3 (a lane left over), 2 × 8, at a
+        // row's end, with the rest of the row.
+        let row = |x0, pixels, len| BatchSpan {
+            x0,
+            y: 16,
+            pixels,
+            first: 2,
+            len,
+        };
+        waves.push(vec![
+            row(0, 16, 1),
+            row(16, 5, 3),
+            row(21, 2, 8),
+            row(29, 3, 1),
+        ]);
         let mut seen_hit = false;
         let mut scratch = WaveScratch::<Spec>::default();
         for wave in &waves {
-            let n = wave.iter().map(|j| j.len).sum();
+            let n = wave.iter().map(|j| j.lanes()).sum();
             let mut out = vec![(Vec2::ZERO, [0.0f32; 3]); n];
             counters::take();
             trace_batches(&p, &(), wave, &mut out, &mut scratch);
             let c_wave = counters::take();
             let singles = wave
                 .iter()
-                .flat_map(|j| (0..j.len as u32).map(move |k| (j, k)));
-            for (&(pos, rgb), (j, k)) in out.iter().zip(singles) {
+                .flat_map(|b| (0..b.lanes()).map(move |i| (b, b.lane(i))));
+            for (&(pos, rgb), (b, (j, k))) in out.iter().zip(singles) {
+                let (x, s) = (b.x0 + j, b.first + k);
                 let mut one = [(Vec2::ZERO, [0.0f32; 3])];
-                trace_batches(
-                    &p,
-                    &(),
-                    &[job((j.x, j.y), j.first + k, 1)],
-                    &mut one,
-                    &mut scratch,
-                );
+                trace_batches(&p, &(), &[job((x, b.y), s, 1)], &mut one, &mut scratch);
                 assert_eq!(pos, one[0].0);
                 assert_eq!(
                     rgb.map(f32::to_bits),
                     one[0].1.map(f32::to_bits),
-                    "pixel ({}, {}), sample {}",
-                    j.x,
-                    j.y,
-                    j.first + k
+                    "pixel ({x}, {}), sample {s}",
+                    b.y
                 );
             }
             let c_single = counters::take();
             assert_eq!(c_wave, c_single);
-            seen_hit |= c_single.film_evals > 0;
+            seen_hit |= c_single.film_evals > 0 || c_single.shadow_rays > 0;
         }
-        assert!(seen_hit, "no pixel saw the teapot");
+        assert!(seen_hit, "{name}: no pixel saw the scene");
     }
 
     #[test]

@@ -341,6 +341,19 @@ pub struct PixelRays {
 }
 
 impl PixelRays {
+    /// The rays from lane `first` on, moved to lanes 0, 1, …; the lanes past the end repeat
+    /// the last ray (a batch of several pixels' samples, one pixel at a time through its bins).
+    #[inline]
+    pub fn from_lane(&self, first: usize) -> PixelRays {
+        let lane = |i: usize| (first + i).min(PACKET - 1);
+        PixelRays {
+            origin: self.origin,
+            dir: self.dir.map(|d| std::array::from_fn(|i| d[lane(i)])),
+            tmin: std::array::from_fn(|i| self.tmin[lane(i)]),
+            tmax: std::array::from_fn(|i| self.tmax[lane(i)]),
+        }
+    }
+
     #[inline]
     pub fn direction(&self, i: usize) -> Vec3 {
         Vec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i])

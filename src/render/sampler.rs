@@ -275,24 +275,27 @@ impl PixelSampler {
         }
     }
 
-    /// The camera samples of samples `first + i`, i < `N` ([`Sampler::camera_sample`] of
-    /// each): wavelength numbers and film jitter, and every sample's stream positioned after
-    /// them. With Sobol' the lanes are independent integer arithmetic (hashes, table lookups,
-    /// bit reversals) that compiles to SIMD.
+    /// The camera samples of lane i: sample `index[i]` of pixel `pixels[i]` ([`Sampler::camera_sample`]
+    /// of each; the pixels are of one sampler kind): wavelength numbers and film jitter, and
+    /// every sample's stream positioned after them. The lanes are independent integer
+    /// arithmetic (64-bit multiplies, or hashes, table lookups and bit reversals) that
+    /// compiles to SIMD.
     #[inline]
     pub fn camera_samples<const N: usize>(
-        &self,
-        first: u32,
+        pixels: &[PixelSampler; N],
+        index: &[u32; N],
         wavelength_grid: bool,
         bits: &mut [u32; N],
         jitter: &mut [[f32; N]; 2],
         samplers: &mut [Sampler; N],
     ) {
-        if self.kind == SamplerKind::Independent {
+        let pixel_seed: [u32; N] = std::array::from_fn(|i| pixels[i].pixel_seed);
+        if pixels[0].kind == SamplerKind::Independent {
+            debug_assert!(pixels.iter().all(|p| p.kind == SamplerKind::Independent));
             // Each lane's seeding and three draws ([`Sampler::camera_sample`]) as loops over
             // lanes of 64-bit integer arithmetic (SIMD where the CPU multiplies 64-bit lanes).
-            let pcg: [Pcg32; N] =
-                std::array::from_fn(|i| Pcg32::new(self.key, first.wrapping_add(i as u32)));
+            let key: [u64; N] = std::array::from_fn(|i| pixels[i].key);
+            let pcg: [Pcg32; N] = std::array::from_fn(|i| Pcg32::new(key[i], index[i]));
             let mut state = pcg.map(|p| p.state);
             let inc = pcg.map(|p| p.inc);
             let mut draw = || -> [u32; N] {
@@ -316,18 +319,18 @@ impl PixelSampler {
                         state: state[i],
                         inc: inc[i],
                     },
-                    index: first.wrapping_add(i as u32),
-                    pixel_seed: self.pixel_seed,
+                    index: index[i],
+                    pixel_seed: pixel_seed[i],
                     dim: 0,
                 };
             }
             return;
         }
-        let [sx, sy, so, shift] = self.camera_seeds;
+        let seeds: [[u32; 4]; N] = std::array::from_fn(|i| pixels[i].camera_seeds);
         for i in 0..N {
-            let index = first.wrapping_add(i as u32);
-            let (x, y) = camera_xy(index, sx, sy);
-            let s2 = sobol_dim_reversed(2, index);
+            let [sx, sy, so, shift] = seeds[i];
+            let (x, y) = camera_xy(index[i], sx, sy);
+            let s2 = sobol_dim_reversed(2, index[i]);
             let owen = lk_hash(s2, so).reverse_bits();
             bits[i] = if wavelength_grid {
                 ((s2.reverse_bits() ^ shift) & !3) | (owen >> 30)
@@ -338,7 +341,7 @@ impl PixelSampler {
             jitter[1][i] = to_unit(y);
         }
         for (i, s) in samplers.iter_mut().enumerate() {
-            *s = self.sampler(first.wrapping_add(i as u32));
+            *s = pixels[i].sampler(index[i]);
             s.dim = 1;
         }
     }
@@ -500,22 +503,35 @@ fn sobol_dim_reversed(dim: usize, i: u32) -> u32 {
 mod tests {
     use super::*;
 
+    /// Lanes of one pixel, and lanes of several pixels (with different seeds) side by side,
+    /// against [`Sampler::new`] and [`Sampler::camera_sample`] of each sample.
     #[test]
     fn pixel_sampler_matches_sampler() {
+        let pixels = [(0, 0, 0), (17, 3, 5), (255, 1000, u64::MAX)];
         for kind in [SamplerKind::Independent, SamplerKind::Sobol] {
-            for (x, y, seed) in [(0, 0, 0), (17, 3, 5), (255, 1000, u64::MAX)] {
-                let pixel = PixelSampler::new(kind, x, y, seed);
+            let layouts: [&dyn Fn(usize) -> usize; 4] = [&|_| 0, &|_| 1, &|_| 2, &|i| (i / 3) % 3];
+            for lane_pixel in layouts {
                 for grid in [false, true] {
                     for first in [0u32, 8, 1000, u32::MAX - 20] {
+                        let at: [(u32, u32, u64); 16] =
+                            std::array::from_fn(|i| pixels[lane_pixel(i)]);
+                        let lanes = at.map(|(x, y, seed)| PixelSampler::new(kind, x, y, seed));
+                        let index = std::array::from_fn(|i| first.wrapping_add(i as u32));
                         let mut bits = [0u32; 16];
                         let mut jitter = [[0.0f32; 16]; 2];
-                        let mut samplers = [pixel.sampler(0); 16];
-                        pixel.camera_samples(first, grid, &mut bits, &mut jitter, &mut samplers);
-                        for i in 0..16u32 {
-                            let s = first.wrapping_add(i);
-                            let mut want = Sampler::new(kind, x, y, s, seed);
+                        let mut samplers = [lanes[0].sampler(0); 16];
+                        PixelSampler::camera_samples(
+                            &lanes,
+                            &index,
+                            grid,
+                            &mut bits,
+                            &mut jitter,
+                            &mut samplers,
+                        );
+                        for i in 0..16 {
+                            let (x, y, seed) = at[i];
+                            let mut want = Sampler::new(kind, x, y, index[i], seed);
                             let (b, j) = want.camera_sample(grid);
-                            let i = i as usize;
                             assert_eq!((bits[i], jitter[0][i], jitter[1][i]), (b, j.x, j.y));
                             let mut got = samplers[i];
                             for _ in 0..5 {
@@ -627,7 +643,15 @@ mod tests {
             let mut bits = [0u32; 16];
             let mut jitter = [[0.0f32; 16]; 2];
             let mut samplers = [pixel.sampler(0); 16];
-            pixel.camera_samples(first, true, &mut bits, &mut jitter, &mut samplers);
+            let index = std::array::from_fn(|i| first + i as u32);
+            PixelSampler::camera_samples(
+                &[pixel; 16],
+                &index,
+                true,
+                &mut bits,
+                &mut jitter,
+                &mut samplers,
+            );
             for i in 0..16 {
                 out.push(jitter.map(|j| (j[i] * 16_777_216.0) as u32));
             }

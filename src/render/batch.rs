@@ -82,13 +82,12 @@ impl BatchSpan {
         (self.pixels * self.len) as usize
     }
 
-    /// Lane `i`'s pixel offset j (pixel `x0 + j`) and sample offset k (sample `first + k`);
-    /// lanes past [`Self::lanes`] continue the last pixel's samples.
+    /// Each lane's pixel offset j (pixel `x0 + j`) and sample offset k (sample `first + k`),
+    /// lane by lane (nested loops: no division per lane).
     #[inline]
-    pub fn lane(&self, i: usize) -> (u32, u32) {
-        let i = i as u32;
-        let j = (i / self.len).min(self.pixels - 1);
-        (j, i - j * self.len)
+    pub fn lane_samples(&self) -> impl Iterator<Item = (u32, u32)> {
+        let len = self.len;
+        (0..self.pixels).flat_map(move |j| (0..len).map(move |k| (j, k)))
     }
 }
 
@@ -128,35 +127,44 @@ impl CameraBatch {
         debug_assert!(n <= BATCH && span.pixels >= 1);
         let pixel = |j: u32| PixelSampler::new(sampler, span.x0 + j, span.y, seed);
         let first_pixel = pixel(0);
-        let mut per_pixel = [first_pixel; BATCH];
-        for (j, p) in per_pixel
-            .iter_mut()
-            .enumerate()
-            .take(span.pixels as usize)
-            .skip(1)
-        {
-            *p = pixel(j as u32);
-        }
-        let mut lane_pixels = [first_pixel; BATCH];
-        let mut x = [0u32; BATCH];
-        let mut index = [0u32; BATCH];
-        for i in 0..BATCH {
-            let (j, k) = span.lane(i);
-            lane_pixels[i] = per_pixel[j as usize];
-            x[i] = span.x0 + j;
-            index[i] = span.first.wrapping_add(k);
-        }
         let mut bits = [0u32; BATCH];
         let mut jitter = [[0.0f32; BATCH]; 2];
         let mut samplers = [first_pixel.sampler(span.first); BATCH];
-        PixelSampler::camera_samples(
-            &lane_pixels,
-            &index,
-            wavelength_grid,
-            &mut bits,
-            &mut jitter,
-            &mut samplers,
-        );
+        let mut x = [span.x0; BATCH];
+        if span.pixels == 1 {
+            // One pixel (the common case): the same seeds in every lane.
+            let index = std::array::from_fn(|i| span.first.wrapping_add(i as u32));
+            PixelSampler::camera_samples(
+                |_| &first_pixel,
+                &index,
+                wavelength_grid,
+                &mut bits,
+                &mut jitter,
+                &mut samplers,
+            );
+        } else {
+            let mut per_pixel = [first_pixel; BATCH];
+            for (j, p) in per_pixel.iter_mut().enumerate().take(span.pixels as usize) {
+                *p = pixel(j as u32);
+            }
+            // Lanes past the span's continue its last pixel's samples.
+            let tail = (span.len..).map(|k| (span.pixels - 1, k));
+            let mut lane_pixel = [0u32; BATCH];
+            let mut index = [0u32; BATCH];
+            for (i, (j, k)) in span.lane_samples().chain(tail).take(BATCH).enumerate() {
+                lane_pixel[i] = j;
+                x[i] = span.x0 + j;
+                index[i] = span.first.wrapping_add(k);
+            }
+            PixelSampler::camera_samples(
+                |i| &per_pixel[lane_pixel[i] as usize],
+                &index,
+                wavelength_grid,
+                &mut bits,
+                &mut jitter,
+                &mut samplers,
+            );
+        }
         let mut u = [0.0f32; BATCH];
         for (u, &b) in u.iter_mut().zip(&bits) {
             *u = super::hero_wavelength_u(b);

@@ -897,12 +897,11 @@ fn render_row<C: Carrier>(
         trace_batches(scene, setup, &wave, &mut out[..lanes], &mut scratch);
         let mut done = out[..lanes].iter();
         for job in &wave {
-            for (lane, &(pos, rgb)) in done.by_ref().take(job.lanes()).enumerate() {
+            for ((j, k), &(pos, rgb)) in job.lane_samples().zip(done.by_ref()) {
                 if reach != 0 {
                     acc.splat(&mut buf, y, pos, rgb);
                     continue;
                 }
-                let (j, k) = job.lane(lane);
                 let i = (job.first - p0 + k) as usize;
                 samples[i] = rgb;
                 if i + 1 == n {
@@ -1208,7 +1207,7 @@ mod tests {
             let c_wave = counters::take();
             let singles = wave
                 .iter()
-                .flat_map(|b| (0..b.lanes()).map(move |i| (b, b.lane(i))));
+                .flat_map(|b| b.lane_samples().map(move |jk| (b, jk)));
             for (&(pos, rgb), (b, (j, k))) in out.iter().zip(singles) {
                 let (x, s) = (b.x0 + j, b.first + k);
                 let mut one = [(Vec2::ZERO, [0.0f32; 3])];

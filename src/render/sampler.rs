@@ -275,26 +275,26 @@ impl PixelSampler {
         }
     }
 
-    /// The camera samples of lane i: sample `index[i]` of pixel `pixels[i]` ([`Sampler::camera_sample`]
-    /// of each; the pixels are of one sampler kind): wavelength numbers and film jitter, and
+    /// The camera samples of lane i: sample `index[i]` of pixel `pixel_of(i)`
+    /// ([`Sampler::camera_sample`] of each; the pixels are of one sampler kind): wavelength numbers and film jitter, and
     /// every sample's stream positioned after them. The lanes are independent integer
     /// arithmetic (64-bit multiplies, or hashes, table lookups and bit reversals) that
     /// compiles to SIMD.
     #[inline]
-    pub fn camera_samples<const N: usize>(
-        pixels: &[PixelSampler; N],
+    pub fn camera_samples<'a, const N: usize>(
+        pixel_of: impl Fn(usize) -> &'a PixelSampler,
         index: &[u32; N],
         wavelength_grid: bool,
         bits: &mut [u32; N],
         jitter: &mut [[f32; N]; 2],
         samplers: &mut [Sampler; N],
     ) {
-        let pixel_seed: [u32; N] = std::array::from_fn(|i| pixels[i].pixel_seed);
-        if pixels[0].kind == SamplerKind::Independent {
-            debug_assert!(pixels.iter().all(|p| p.kind == SamplerKind::Independent));
+        let pixel_seed: [u32; N] = std::array::from_fn(|i| pixel_of(i).pixel_seed);
+        if pixel_of(0).kind == SamplerKind::Independent {
+            debug_assert!((0..N).all(|i| pixel_of(i).kind == SamplerKind::Independent));
             // Each lane's seeding and three draws ([`Sampler::camera_sample`]) as loops over
             // lanes of 64-bit integer arithmetic (SIMD where the CPU multiplies 64-bit lanes).
-            let key: [u64; N] = std::array::from_fn(|i| pixels[i].key);
+            let key: [u64; N] = std::array::from_fn(|i| pixel_of(i).key);
             let pcg: [Pcg32; N] = std::array::from_fn(|i| Pcg32::new(key[i], index[i]));
             let mut state = pcg.map(|p| p.state);
             let inc = pcg.map(|p| p.inc);
@@ -326,7 +326,7 @@ impl PixelSampler {
             }
             return;
         }
-        let seeds: [[u32; 4]; N] = std::array::from_fn(|i| pixels[i].camera_seeds);
+        let seeds: [[u32; 4]; N] = std::array::from_fn(|i| pixel_of(i).camera_seeds);
         for i in 0..N {
             let [sx, sy, so, shift] = seeds[i];
             let (x, y) = camera_xy(index[i], sx, sy);
@@ -341,7 +341,7 @@ impl PixelSampler {
             jitter[1][i] = to_unit(y);
         }
         for (i, s) in samplers.iter_mut().enumerate() {
-            *s = pixels[i].sampler(index[i]);
+            *s = pixel_of(i).sampler(index[i]);
             s.dim = 1;
         }
     }
@@ -521,7 +521,7 @@ mod tests {
                         let mut jitter = [[0.0f32; 16]; 2];
                         let mut samplers = [lanes[0].sampler(0); 16];
                         PixelSampler::camera_samples(
-                            &lanes,
+                            |i| &lanes[i],
                             &index,
                             grid,
                             &mut bits,
@@ -645,7 +645,7 @@ mod tests {
             let mut samplers = [pixel.sampler(0); 16];
             let index = std::array::from_fn(|i| first + i as u32);
             PixelSampler::camera_samples(
-                &[pixel; 16],
+                |_| &pixel,
                 &index,
                 true,
                 &mut bits,

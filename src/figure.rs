@@ -72,7 +72,7 @@ pub fn teapot_scene(settings: &RenderSettings) -> Scene {
         seed: settings.seed,
         sampler: crate::scene::SamplerKind::Sobol,
         shapes: vec![Shape {
-            geometry: Geometry::Mesh(teapot::teapot_mesh(teapot::DEFAULT_SUBDIVISIONS)),
+            geometry: Geometry::Mesh(teapot::teapot_mesh(teapot::DEFAULT_SUBDIVISIONS).into()),
             bsdf: 0,
             emission: None,
             name: Some("teapot".into()),

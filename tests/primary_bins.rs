@@ -99,14 +99,14 @@ fn teapot_camera_rays_find_the_bvh_hit() {
 
 fn quad(corners: [Vec3; 4], bsdf: usize, name: &str) -> Shape {
     Shape {
-        geometry: Geometry::Mesh(TriangleMesh {
+        geometry: Geometry::Mesh(std::sync::Arc::new(TriangleMesh {
             colors: Vec::new(),
             tangents: Vec::new(),
             positions: corners.to_vec(),
             normals: vec![],
             uvs: vec![],
             indices: vec![[0, 1, 2], [0, 2, 3]],
-        }),
+        })),
         bsdf,
         emission: None,
         name: Some(name.into()),
@@ -150,7 +150,7 @@ fn room(extra: Vec<Shape>) -> Scene {
         ),
         // Edge-on from the pinhole (its plane y = 0 contains the camera): projects to a line.
         Shape {
-            geometry: Geometry::Mesh(TriangleMesh {
+            geometry: Geometry::Mesh(std::sync::Arc::new(TriangleMesh {
                 colors: Vec::new(),
                 tangents: Vec::new(),
                 positions: vec![
@@ -161,7 +161,7 @@ fn room(extra: Vec<Shape>) -> Scene {
                 normals: vec![],
                 uvs: vec![],
                 indices: vec![[0, 1, 2]],
-            }),
+            })),
             bsdf: 0,
             emission: None,
             name: Some("edge-on".into()),
@@ -239,14 +239,14 @@ fn bins_step_aside_when_many_triangles_cross_the_camera_plane() {
         indices.push([base, base + 1, base + 2]);
     }
     let fan = Shape {
-        geometry: Geometry::Mesh(TriangleMesh {
+        geometry: Geometry::Mesh(std::sync::Arc::new(TriangleMesh {
             colors: Vec::new(),
             tangents: Vec::new(),
             positions,
             normals: vec![],
             uvs: vec![],
             indices,
-        }),
+        })),
         bsdf: 0,
         emission: None,
         name: Some("fan".into()),

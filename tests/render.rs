@@ -88,7 +88,7 @@ fn floor(y: f32, half: f32, bsdf: usize) -> Shape {
         indices: vec![[0, 2, 1], [0, 3, 2]],
     };
     Shape {
-        geometry: Geometry::Mesh(mesh),
+        geometry: Geometry::Mesh(mesh.into()),
         bsdf,
         emission: None,
         name: Some("floor".into()),
@@ -542,14 +542,14 @@ fn bad_inputs_are_errors() {
     assert!(render(&bad, &RenderOptions::default()).is_err());
     let mut bad = film_scene(8, 4);
     bad.shapes.push(Shape {
-        geometry: Geometry::Mesh(TriangleMesh {
+        geometry: Geometry::Mesh(std::sync::Arc::new(TriangleMesh {
             colors: Vec::new(),
             tangents: Vec::new(),
             positions: vec![Vec3::ZERO; 3],
             normals: vec![],
             uvs: vec![],
             indices: vec![[0, 1, 7]],
-        }),
+        })),
         bsdf: 0,
         emission: None,
         name: Some("broken".into()),
@@ -593,14 +593,14 @@ fn emissive_box(h: f32, bsdf: usize) -> Shape {
         }
     }
     Shape {
-        geometry: Geometry::Mesh(TriangleMesh {
+        geometry: Geometry::Mesh(std::sync::Arc::new(TriangleMesh {
             colors: Vec::new(),
             tangents: Vec::new(),
             positions,
             normals: vec![],
             uvs: vec![],
             indices,
-        }),
+        })),
         bsdf,
         emission: Some(SpectrumDesc::Constant(1.0)),
         name: Some("light box".into()),

@@ -67,8 +67,8 @@ pub struct Accel {
     spheres: Vec<SphereGeom>,
     /// The CPU has AVX2 (checked once at build): traversal uses the 8-wide node test.
     avx2: bool,
-    /// Meshes by shape index (None for non-mesh shapes).
-    meshes: Vec<Option<TriangleMesh>>,
+    /// Meshes by shape index (None for non-mesh shapes), shared with the scene.
+    meshes: Vec<Option<std::sync::Arc<TriangleMesh>>>,
 }
 
 impl Accel {
@@ -88,8 +88,8 @@ impl Accel {
     /// table per BVH2 node, ~110 bytes per triangle, beside the BVH2's own 64). Nothing else of
     /// size is held then: triangles are (shape, index) references into the scene's meshes until
     /// the intersection array is made after the build, the build boxes are freed once the BVH2
-    /// exists, and the meshes are copied only after the build (what `beside` holds aside:
-    /// screen bins are built only with ≥ 4 camera rays per triangle).
+    /// exists, and the meshes are the scene's own arrays, shared, not copied (what `beside`
+    /// holds aside: screen bins are built only with ≥ 4 camera rays per triangle).
     ///
     /// `beside` runs on another thread while the BVH is built: set-up work that needs only
     /// the triangles' vertices (the camera's screen bins: ~11 ms for the 36k-triangle teapot
@@ -133,7 +133,7 @@ impl Accel {
         };
         let meshes = (scene.shapes.iter())
             .map(|s| match &s.geometry {
-                Geometry::Mesh(m) => Some(m.clone()),
+                Geometry::Mesh(m) => Some(std::sync::Arc::clone(m)),
                 Geometry::Sphere { .. } => None,
             })
             .collect();
@@ -555,7 +555,7 @@ impl Accel {
 
     /// A shape's mesh, if it is one.
     pub fn mesh(&self, shape: u32) -> Option<&TriangleMesh> {
-        self.meshes.get(shape as usize).and_then(|m| m.as_ref())
+        self.meshes.get(shape as usize).and_then(|m| m.as_deref())
     }
 }
 
@@ -1844,7 +1844,7 @@ mod tests {
             mesh(vec![[1, 0, 2], [1, 3, 2]]),
         ] {
             scene.shapes.push(crate::scene::Shape {
-                geometry: Geometry::Mesh(m),
+                geometry: Geometry::Mesh(m.into()),
                 ..template.clone()
             });
         }

@@ -297,7 +297,7 @@ impl Loader<'_> {
             }
         }
         Ok(Some(Shape {
-            geometry: Geometry::Mesh(m),
+            geometry: Geometry::Mesh(m.into()),
             bsdf,
             emission,
             name: mesh.name().map(str::to_string),

@@ -1927,7 +1927,10 @@ impl<'a, 'i> Ctx<'a, 'i> {
         let geometry = match p.plugin.as_str() {
             "sphere" => self.sphere(p, &to_world, flip_normals)?,
             "obj" | "ply" | "serialized" | "rectangle" | "cube" | "disk" | "cylinder" => {
-                Geometry::Mesh(self.mesh(p, &to_world, flip_normals, attribute.as_deref())?)
+                Geometry::Mesh(
+                    self.mesh(p, &to_world, flip_normals, attribute.as_deref())?
+                        .into(),
+                )
             }
             _ => {
                 return Err(self.unknown_plugin(
@@ -2737,9 +2740,9 @@ fn sphere_geometry(m: &Mat4, flip_normals: bool) -> std::result::Result<Geometry
 fn transformed_shape(shape: &Shape, m: &Mat4) -> std::result::Result<Shape, String> {
     let geometry = match &shape.geometry {
         Geometry::Mesh(mesh) => {
-            let mut mesh = mesh.clone();
+            let mut mesh = TriangleMesh::clone(mesh);
             mesh.transform(m);
-            Geometry::Mesh(mesh)
+            Geometry::Mesh(mesh.into())
         }
         Geometry::Sphere {
             center,

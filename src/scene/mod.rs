@@ -180,7 +180,8 @@ pub struct Shape {
 
 #[derive(Debug, Clone)]
 pub enum Geometry {
-    Mesh(TriangleMesh),
+    /// Shared with the prepared scene (a render reads the scene's arrays, not a copy).
+    Mesh(std::sync::Arc<TriangleMesh>),
     /// Analytic sphere (world space), normals pointing out (in if `flip_normals`).
     /// `rotation` takes the sphere's local frame to world space (orthonormal; a reflection if
     /// its `to_world` mirrors): Mitsuba measures a sphere's (u, v) in the local frame, so a
@@ -562,7 +563,7 @@ fn scene_for_mesh(mut mesh: TriangleMesh, path: &Path) -> Result<Scene> {
         seed: 0,
         sampler: SamplerKind::Sobol,
         shapes: vec![Shape {
-            geometry: Geometry::Mesh(mesh),
+            geometry: Geometry::Mesh(mesh.into()),
             bsdf: 0,
             emission: None,
             name,

@@ -495,12 +495,12 @@ fn check_render_memory(
 use batch::{BatchSpan, Lanes, BATCH};
 
 /// Camera samples traced as one wavefront ([`trace_batches`]) at most: four full batches of
-/// [`BATCH`] (one pixel at 64 spp, four at 16 spp), or up to [`WAVEFRONT_JOBS`] partial ones
-/// of neighbouring pixels at lower spp. Measured (one thread, diffuse teapot and Cornell box,
-/// alternating runs): one batch per wavefront → four: −4 to −6 % render time at 64 spp;
-/// eight or sixteen full batches: no further gain.
+/// [`BATCH`] (one pixel at 64 spp, four pixels at 16 spp, 16 pixels at 4 spp). Measured (one
+/// thread, diffuse teapot and Cornell box, alternating runs): one batch per wavefront → four:
+/// −4 to −6 % render time at 64 spp; eight or sixteen full batches: no further gain.
 const WAVEFRONT_SAMPLES: usize = 4 * BATCH;
-/// Camera batches per wavefront at most (at 4 spp: 16 pixels, −5 to −10 % against 4).
+/// Camera batches per wavefront at most: batches that are not full (a pixel's last, or 9–15
+/// spp, where a batch holds one pixel) still fill a wavefront up to [`WAVEFRONT_SAMPLES`].
 const WAVEFRONT_JOBS: usize = 16;
 
 /// A camera batch whose paths are in the wavefront: its camera samples, the radiance of its
@@ -535,12 +535,13 @@ impl<C> Default for WaveScratch<C> {
 
 /// The camera batches `jobs` (at most [`WAVEFRONT_JOBS`], [`WAVEFRONT_SAMPLES`] samples)
 /// traced together, stage by stage: each batch's camera samples ([`batch::CameraBatch`]),
-/// first hits (all rays of its pixel against the pixel's screen bin at once) and the
+/// first hits ([`camera_hits`]) and the
 /// environment seen by its rays that escape (one batch of lookups); then the paths of every
 /// batch's rays that hit, as one wavefront ([`integrator::trace_lanes`], carrying `C`): more
 /// rays per traversal call, environment lookup and shadow query than one batch has, and more
-/// independent memory accesses in flight; then film values. A sample's values do not depend on the batch or wavefront it is traced
-/// in. Writes (film position, finite linear sRGB) per sample, the jobs' samples in order.
+/// independent memory accesses in flight; then film values. A sample's values do not depend
+/// on the batch or wavefront it is traced in. Writes (film position, finite linear sRGB) per
+/// sample, the jobs' samples in order.
 fn trace_batches<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,

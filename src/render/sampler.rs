@@ -276,8 +276,8 @@ impl PixelSampler {
     }
 
     /// The camera samples of lane i: sample `index[i]` of pixel `pixel_of(i)`
-    /// ([`Sampler::camera_sample`] of each; the pixels are of one sampler kind): wavelength numbers and film jitter, and
-    /// every sample's stream positioned after them. The lanes are independent integer
+    /// ([`Sampler::camera_sample`] of each; the pixels are of one sampler kind): wavelength
+    /// numbers and film jitter, and every sample's stream positioned after them. The lanes are independent integer
     /// arithmetic (64-bit multiplies, or hashes, table lookups and bit reversals) that
     /// compiles to SIMD.
     #[inline]

@@ -589,22 +589,20 @@ fn camera_hits(
     let m = span.lanes();
     let mut first_hits = [None; BATCH];
     match (&scene.primary_bins, cam.origins.is_some()) {
-        (Some(bins), false) if span.pixels == 1 => {
-            bins.intersect_lanes(
-                &scene.accel,
-                span.x0,
-                span.y,
-                &cam.rays,
-                &mut first_hits[..m],
-            );
-        }
         (Some(bins), false) => {
             let len = span.len as usize;
             for j in 0..span.pixels as usize {
-                let rays = cam.rays.from_lane(j * len);
+                // Pixel j's rays moved to lanes 0.. (the first pixel's are there already).
+                let moved;
+                let rays = if j == 0 {
+                    &cam.rays
+                } else {
+                    moved = cam.rays.from_lane(j * len);
+                    &moved
+                };
                 let x = span.x0 + j as u32;
                 let hits = &mut first_hits[j * len..(j + 1) * len];
-                bins.intersect_lanes(&scene.accel, x, span.y, &rays, hits);
+                bins.intersect_lanes(&scene.accel, x, span.y, rays, hits);
             }
         }
         _ => {
@@ -843,12 +841,12 @@ impl Accumulation {
 /// pixel's samples [`BATCH`] at a time, or — below [`BATCH`] samples per pixel — all samples of
 /// as many neighbouring pixels as fill a batch.
 fn row_batches(width: u32, y: u32, (p0, p1): (u32, u32)) -> impl Iterator<Item = BatchSpan> {
+    // `step` pixels per batch, `len` samples of each.
     let n = p1 - p0;
-    let per_batch = (BATCH as u32 / n.max(1)).max(1);
     let (step, len) = if n >= BATCH as u32 {
         (1, BATCH as u32)
     } else {
-        (per_batch, n)
+        (BATCH as u32 / n.max(1), n)
     };
     (0..width).step_by(step as usize).flat_map(move |x0| {
         let pixels = step.min(width - x0);

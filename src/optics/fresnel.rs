@@ -12,7 +12,8 @@ use num_complex::Complex64;
 pub fn n_cos_theta(n: Complex64, kx: f64) -> Complex64 {
     let nc = (n * n - kx * kx).sqrt();
     // sqrt() returns the principal root (Re ≥ 0); flip to the forward branch when needed.
-    let forward = if nc.im.abs() > 100.0 * f64::EPSILON * nc.norm().max(1e-300) {
+    // (A real root skips the norm: 0 > x is false for every x the norm can give.)
+    let forward = if nc.im != 0.0 && nc.im.abs() > 100.0 * f64::EPSILON * nc.norm().max(1e-300) {
         nc.im > 0.0
     } else {
         nc.re > 0.0

@@ -5,14 +5,17 @@
 //! `n + ik` with `k ≥ 0` for absorption (time dependence `e^{-iωt}`), and the forward
 //! wave in every layer is chosen with `Im(n cosθ) ≥ 0` (decaying, or propagating forward).
 
+pub mod coating;
 pub mod dispersion;
 pub mod film;
 pub mod film_f32;
 pub mod fresnel;
 pub mod gltf_iridescence;
 pub mod ior;
+mod lanes;
 pub mod stack;
 
+pub use coating::Coating;
 pub use film::{FilmResponse, ThinFilm};
 pub use ior::Ior;
 pub use num_complex::Complex64;

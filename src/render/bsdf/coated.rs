@@ -16,7 +16,7 @@ use super::bubble::BubbleBsdf;
 use super::fresnel::{fresnel_dielectric, reflect_local};
 use super::stack::describe_layers;
 use super::{BsdfFlags, BsdfModel, BsdfPlugin, BsdfSample, Lobes, PolarizedBsdf, ShadingCtx};
-use crate::optics::{Ior, Layer, Stack};
+use crate::optics::{Coating, Ior, Stack};
 use crate::render::counters::{count, Counter};
 use crate::render::texture::Spec;
 use crate::scene::mitsuba::PluginParams;
@@ -30,13 +30,19 @@ pub struct CoatedDielectric {
     pub ext_ior: Ior,
     /// Either bulk index depends on wavelength.
     pub dispersive: bool,
+    /// The coating seen from outside (ext | layers | int) and from inside.
+    outside: Coating,
+    inside: Coating,
 }
 
 impl CoatedDielectric {
     /// A coating of `layers` (outside first) on the interface `ext_ior` | `int_ior` (real
     /// indices); the stack is validated from both sides.
     pub fn new(layers: Vec<(Ior, f64)>, int_ior: Ior, ext_ior: Ior) -> anyhow::Result<Self> {
+        let outside = Coating::new(ext_ior.clone(), &layers, int_ior.clone());
         let b = CoatedDielectric {
+            inside: outside.reversed(),
+            outside,
             layers,
             dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
             int_ior,
@@ -57,21 +63,14 @@ impl CoatedDielectric {
 
     /// The stack seen from outside (`inside` = false) or from inside the object.
     pub fn stack_at(&self, lambda_nm: f64, inside: bool) -> Stack {
-        let ext = self.ext_ior.at(lambda_nm);
-        let int = self.int_ior.at(lambda_nm);
-        let layer = |(n, d): &(Ior, f64)| Layer::coherent(n.at(lambda_nm), *d);
+        self.coating(inside).stack_at(lambda_nm)
+    }
+
+    fn coating(&self, inside: bool) -> &Coating {
         if inside {
-            Stack {
-                ambient_ior: int.re,
-                layers: self.layers.iter().rev().map(layer).collect(),
-                substrate_ior: ext,
-            }
+            &self.inside
         } else {
-            Stack {
-                ambient_ior: ext.re,
-                layers: self.layers.iter().map(layer).collect(),
-                substrate_ior: int,
-            }
+            &self.outside
         }
     }
 
@@ -87,15 +86,11 @@ impl CoatedDielectric {
                 0.0
             }
         };
-        let mut r = [0.0f32; 4];
-        let mut t = [0.0f32; 4];
-        for k in 0..4 {
-            let l = ctx.wl.lambda[k] as f64;
-            let resp = self.stack_at(l, inside).response(l, cos);
-            r[k] = clean(resp.r());
-            t[k] = clean(resp.t());
-        }
-        (Spec::from_array(r), Spec::from_array(t))
+        let resp = (self.coating(inside)).response(ctx.wl.lambda.map(f64::from), cos);
+        (
+            Spec::from_array(resp.map(|r| clean(r.r()))),
+            Spec::from_array(resp.map(|r| clean(r.t()))),
+        )
     }
 
     /// The refracted lobe with `weight`·η_ti² and selection probability `pdf` (Snell's

@@ -3,7 +3,8 @@
 //! unpolarised reflectance R = (R_s + R_p)/2 of the layer stack from the transfer-matrix
 //! method of [`crate::optics::Stack`] (Born & Wolf §1.6; validated against `tmm.coh_tmm` in
 //! `tests/optics_tmm.rs`), evaluated in f64 at each of the path's four wavelengths with each
-//! layer's index at that wavelength (named dispersive materials). Ambient n = 1, like
+//! layer's index at that wavelength (named dispersive materials; each distinct material
+//! evaluated once per wavelength, [`crate::optics::Coating`]). Ambient n = 1, like
 //! `thinfilm`. Smooth: a mirror lobe weighted by R; rough (α > 0): a GGX lobe with R at the
 //! microfacet angle, exactly as [`super::thinfilm::ThinFilmBsdf`]. What the stack transmits
 //! into the substrate is absorbed. One-sided. Polarised: the Mueller matrix of the stack's
@@ -11,7 +12,7 @@
 
 use super::microfacet::{opaque_reflector_methods, reflection_lobe, Ggx, OpaqueReflector};
 use super::{BsdfFlags, BsdfModel, BsdfPlugin, ShadingCtx};
-use crate::optics::{Ior, Layer, Stack};
+use crate::optics::{Coating, Ior, Stack};
 use crate::render::counters::{count, Counter};
 use crate::render::polarization::{film_reflection, Mueller};
 use crate::render::texture::Spec;
@@ -25,6 +26,8 @@ pub struct StackBsdf {
     pub substrate_ior: Ior,
     /// None = smooth.
     pub ggx: Option<Ggx>,
+    /// The layers under air, evaluated per wavelength.
+    coating: Coating,
 }
 
 /// "MgF2:100, TiO2:50" (the first six layers, then a count).
@@ -44,6 +47,7 @@ impl StackBsdf {
     pub fn new(layers: Vec<(Ior, f64)>, substrate_ior: Ior, alpha: f32) -> anyhow::Result<Self> {
         super::conductor::check_alpha(alpha, "thinfilm alpha")?;
         let b = StackBsdf {
+            coating: Coating::new(Ior::real(1.0), &layers, substrate_ior.clone()),
             layers,
             substrate_ior,
             ggx: (alpha > 0.0).then(|| Ggx::new(alpha, alpha)),
@@ -56,15 +60,7 @@ impl StackBsdf {
 
     /// The stack at one wavelength (all layers coherent).
     pub fn stack_at(&self, lambda_nm: f64) -> Stack {
-        Stack {
-            ambient_ior: 1.0,
-            layers: self
-                .layers
-                .iter()
-                .map(|(n, d)| Layer::coherent(n.at(lambda_nm), *d))
-                .collect(),
-            substrate_ior: self.substrate_ior.at(lambda_nm),
-        }
+        self.coating.stack_at(lambda_nm)
     }
 }
 
@@ -78,16 +74,15 @@ impl OpaqueReflector for StackBsdf {
     fn reflectance(&self, ctx: &ShadingCtx, cos_theta: f32) -> Spec {
         count(Counter::FilmEvals, 1);
         let cos = (cos_theta as f64).clamp(0.0, 1.0);
-        let r = ctx.wl.lambda.map(|l| {
-            let v = self.stack_at(l as f64).response(l as f64, cos).r() as f32;
+        let r = self.coating.reflectance(ctx.wl.lambda.map(f64::from), cos);
+        Spec::from_array(r.map(|v| {
+            let v = v as f32;
             if v.is_finite() {
                 v.clamp(0.0, 1.0)
             } else {
                 0.0
             }
-
-        });
-        Spec::from_array(r)
+        }))
     }
 
     /// The stack's reflection Mueller matrices at the four path wavelengths.
@@ -95,8 +90,8 @@ impl OpaqueReflector for StackBsdf {
         count(Counter::FilmEvals, 1);
         let cos = (cos_theta as f64).clamp(0.0, 1.0);
         let c32 = |z: crate::optics::Complex64| Complex32::new(z.re as f32, z.im as f32);
-        ctx.wl.lambda.map(|l| {
-            let a = self.stack_at(l as f64).amplitudes(l as f64, cos);
+        let amplitudes = self.coating.amplitudes(ctx.wl.lambda.map(f64::from), cos);
+        amplitudes.map(|a| {
             let m = film_reflection(c32(a.r_s), c32(a.r_p));
             if m.is_finite() {
                 m

@@ -1,0 +1,236 @@
+//! A coating: coherent layers of (possibly dispersive) materials between a lossless ambient
+//! and a substrate, evaluated at any wavelength without building a [`Stack`].
+//!
+//! A renderer asks for the stack's response at four wavelengths per shading point, and a
+//! dielectric mirror such as `(TiO2:51.9, SiO2:94.2)x6, TiO2:51.9` repeats two materials
+//! thirteen times. So the distinct materials are found once, here, and at each wavelength
+//! every one of them is evaluated once — its index and its `n cosθ` (a complex square root)
+//! — and shared by all the layers made of it. The recursion itself is
+//! [`Stack`]'s (the same function), so the values equal [`Coating::stack_at`]`(λ)` evaluated
+//! as a [`Stack`] bit for bit, without the allocations of the general (incoherent-capable)
+//! path.
+
+use super::film::{FilmAmplitudes, FilmResponse};
+use super::ior::Ior;
+use super::stack::{rouard, t_power, AmplitudeLanes, Layer, Medium, MediumLanes, Stack};
+
+/// Distinct materials whose media are kept on the stack per evaluation; layers of further
+/// materials (rare) are evaluated where they are used.
+const CACHED_MATERIALS: usize = 8;
+
+/// Coherent layers of named or constant indices on a substrate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coating {
+    /// Ambient (incidence) medium; its real part is used (lossless).
+    ambient_ior: Ior,
+    /// The distinct layer materials.
+    materials: Vec<Ior>,
+    /// Each layer's material (an index into `materials`) and thickness in nm, top first.
+    layers: Vec<(usize, f64)>,
+    substrate_ior: Ior,
+}
+
+impl Coating {
+    /// `layers` (index, thickness nm) from the ambient side down to the substrate.
+    pub fn new(ambient_ior: Ior, layers: &[(Ior, f64)], substrate_ior: Ior) -> Self {
+        let mut materials: Vec<Ior> = Vec::new();
+        let layers = layers
+            .iter()
+            .map(|(n, d)| {
+                let id = match materials.iter().position(|m| m == n) {
+                    Some(id) => id,
+                    None => {
+                        materials.push(n.clone());
+                        materials.len() - 1
+                    }
+                };
+                (id, *d)
+            })
+            .collect();
+        Coating {
+            ambient_ior,
+            materials,
+            layers,
+            substrate_ior,
+        }
+    }
+
+    /// The same layers seen from the substrate: substrate and ambient swapped, layers in
+    /// reverse order (the substrate's index must then be real).
+    pub fn reversed(&self) -> Coating {
+        Coating {
+            ambient_ior: self.substrate_ior.clone(),
+            materials: self.materials.clone(),
+            layers: self.layers.iter().rev().copied().collect(),
+            substrate_ior: self.ambient_ior.clone(),
+        }
+    }
+
+    /// The stack at one wavelength (every layer coherent): for validation, and the
+    /// reference the fast path equals.
+    pub fn stack_at(&self, lambda_nm: f64) -> Stack {
+        Stack {
+            ambient_ior: self.ambient_ior.at(lambda_nm).re,
+            layers: (self.layers.iter())
+                .map(|&(id, d)| Layer::coherent(self.materials[id].at(lambda_nm), d))
+                .collect(),
+            substrate_ior: self.substrate_ior.at(lambda_nm),
+        }
+    }
+
+    /// The Rouard recursion at `N` wavelengths (in lanes), `cos θ1` in the ambient (clamped
+    /// to [0, 1]); also each wavelength's ambient and substrate media (for transmitted
+    /// powers).
+    #[inline]
+    fn solve<const N: usize, const WITH_T: bool>(
+        &self,
+        lambda_nm: [f64; N],
+        cos_theta1: f64,
+    ) -> (AmplitudeLanes<N>, [Medium; N], [Medium; N]) {
+        let ambient_kx: [(Medium, f64); N] = std::array::from_fn(|k| {
+            Medium::ambient(self.ambient_ior.at(lambda_nm[k]).re, cos_theta1)
+        });
+        let ambient = ambient_kx.map(|(m, _)| m);
+        let kx = ambient_kx.map(|(_, kx)| kx);
+        let media_of = |m: &Ior| {
+            let lanes: [Medium; N] =
+                std::array::from_fn(|k| Medium::new(m.at(lambda_nm[k]), kx[k]));
+            lanes
+        };
+        let substrate = media_of(&self.substrate_ior);
+        let mut cached = [MediumLanes::from_lanes(&ambient); CACHED_MATERIALS];
+        for (c, m) in cached.iter_mut().zip(&self.materials) {
+            *c = MediumLanes::from_lanes(&media_of(m));
+        }
+        let layer_medium = |id: usize| match cached.get(id) {
+            Some(c) => *c,
+            None => MediumLanes::from_lanes(&media_of(&self.materials[id])),
+        };
+        let len = self.layers.len() + 2;
+        let medium = |j: usize| match j {
+            0 => MediumLanes::from_lanes(&ambient),
+            j if j == len - 1 => MediumLanes::from_lanes(&substrate),
+            j => layer_medium(self.layers[j - 1].0),
+        };
+        let a = rouard::<N, WITH_T>(len, medium, |j| self.layers[j].1, lambda_nm);
+        (a, ambient, substrate)
+    }
+
+    /// Complex amplitudes (r_s, r_p, t_s, t_p) at each wavelength, `cos θ1` in the ambient.
+    pub fn amplitudes<const N: usize>(
+        &self,
+        lambda_nm: [f64; N],
+        cos_theta1: f64,
+    ) -> [FilmAmplitudes; N] {
+        let a = self.solve::<N, true>(lambda_nm, cos_theta1).0;
+        std::array::from_fn(|k| a.lane(k))
+    }
+
+    /// Unpolarised reflectance (R_s + R_p)/2 at each wavelength (no transmission amplitudes
+    /// computed).
+    pub fn reflectance<const N: usize>(&self, lambda_nm: [f64; N], cos_theta1: f64) -> [f64; N] {
+        let a = self.solve::<N, false>(lambda_nm, cos_theta1).0;
+        std::array::from_fn(|k| {
+            let a = a.lane(k);
+            0.5 * (a.r_s.norm_sqr() + a.r_p.norm_sqr())
+        })
+    }
+
+    /// Power R and T (s, p) at each wavelength, as [`Stack::response`] of
+    /// [`Coating::stack_at`].
+    pub fn response<const N: usize>(
+        &self,
+        lambda_nm: [f64; N],
+        cos_theta1: f64,
+    ) -> [FilmResponse; N] {
+        let (a, ambient, substrate) = self.solve::<N, true>(lambda_nm, cos_theta1);
+        std::array::from_fn(|k| {
+            let a = a.lane(k);
+            let [t_s, t_p] = t_power(&a, &ambient[k], &substrate[k]);
+            FilmResponse {
+                r_s: a.r_s.norm_sqr(),
+                r_p: a.r_p.norm_sqr(),
+                t_s,
+                t_p,
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ior(s: &str) -> Ior {
+        s.parse().unwrap()
+    }
+
+    /// Every path equals the general `Stack` of the same layers at the same wavelength bit
+    /// for bit: mirrors of repeated materials, more distinct materials than are cached, an
+    /// absorbing layer and substrate, a bare interface, seen from both sides, from normal to
+    /// grazing incidence (where the substrate side has total internal reflection).
+    #[test]
+    fn equals_the_general_stack_bit_for_bit() {
+        let mut mirror = Vec::new();
+        for _ in 0..6 {
+            mirror.push((ior("TiO2"), 51.9));
+            mirror.push((ior("SiO2"), 94.2));
+        }
+        mirror.push((ior("TiO2"), 51.9));
+        let many: Vec<(Ior, f64)> = (0..11)
+            .map(|i| (Ior::real(1.3 + 0.1 * i as f64), 20.0 + 7.0 * i as f64))
+            .collect();
+        let cases = [
+            Coating::new(Ior::real(1.0), &mirror, ior("BK7")),
+            Coating::new(Ior::real(1.0), &many, ior("1.52")),
+            Coating::new(
+                Ior::real(1.0),
+                &[(ior("MgF2"), 99.6), (ior("1.5+0.2i"), 30.0)],
+                ior("Au"),
+            ),
+            Coating::new(Ior::real(1.0), &[], ior("BK7")),
+            Coating::new(ior("BK7"), &[(ior("MgF2"), 120.0)], Ior::real(1.0)),
+            Coating::new(Ior::real(1.0), &mirror, ior("BK7")).reversed(),
+        ];
+        let bundle = [380.0, 471.3, 550.0, 779.9];
+        for c in &cases {
+            for cos in [1.0, 0.8, 0.31, 0.02, 0.0, 1.2, -0.1] {
+                // Four wavelengths in lanes, and one alone.
+                let responses = c.response(bundle, cos);
+                let reflectances = c.reflectance(bundle, cos);
+                let amplitudes = c.amplitudes(bundle, cos);
+                for (k, &lambda) in bundle.iter().enumerate() {
+                    let s = c.stack_at(lambda);
+                    let want = s.response(lambda, cos);
+                    for got in [responses[k], c.response([lambda], cos)[0]] {
+                        for (x, y) in [
+                            (got.r_s, want.r_s),
+                            (got.r_p, want.r_p),
+                            (got.t_s, want.t_s),
+                            (got.t_p, want.t_p),
+                        ] {
+                            assert_eq!(x.to_bits(), y.to_bits(), "{c:?} λ {lambda} cos {cos}");
+                        }
+                    }
+                    assert_eq!(reflectances[k].to_bits(), want.r().to_bits());
+                    assert_eq!(amplitudes[k], s.amplitudes(lambda, cos));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn distinct_materials_are_shared() {
+        let layers = [
+            (ior("TiO2"), 50.0),
+            (ior("SiO2"), 90.0),
+            (ior("tio2"), 50.0),
+            (Ior::real(1.38), 10.0),
+            (Ior::real(1.38), 12.0),
+        ];
+        let c = Coating::new(Ior::real(1.0), &layers, ior("BK7"));
+        assert_eq!(c.materials.len(), 3);
+        let ids: Vec<usize> = c.layers.iter().map(|l| l.0).collect();
+        assert_eq!(ids, [0, 1, 0, 2, 2]);
+    }
+}

@@ -5,18 +5,23 @@
 //! dielectric mirror such as `(TiO2:51.9, SiO2:94.2)x6, TiO2:51.9` repeats two materials
 //! thirteen times. So the distinct materials are found once, here, and at each wavelength
 //! every one of them is evaluated once — its index and its `n cosθ` (a complex square root)
-//! — and shared by all the layers made of it. The recursion itself is
+//! — and shared by all the layers made of it; so is the phase factor `e^{iβ}` (a sine and a
+//! cosine per wavelength) of all the layers of one material and thickness. The four
+//! wavelengths go through the recursion together, in SIMD lanes. The recursion itself is
 //! [`Stack`]'s (the same function), so the values equal [`Coating::stack_at`]`(λ)` evaluated
 //! as a [`Stack`] bit for bit, without the allocations of the general (incoherent-capable)
 //! path.
 
 use super::film::{FilmAmplitudes, FilmResponse};
 use super::ior::Ior;
-use super::stack::{rouard, t_power, AmplitudeLanes, Layer, Medium, MediumLanes, Stack};
+use super::stack::{
+    layer_phase, rouard, t_power, AmplitudeLanes, Layer, LayerPhase, Medium, MediumLanes, Stack,
+};
 
-/// Distinct materials whose media are kept on the stack per evaluation; layers of further
-/// materials (rare) are evaluated where they are used.
-const CACHED_MATERIALS: usize = 8;
+/// Distinct materials (and distinct material–thickness pairs) whose media (phases) are kept
+/// on the stack per evaluation; layers of further ones (rare) are evaluated where they are
+/// used.
+const CACHED: usize = 8;
 
 /// Coherent layers of named or constant indices on a substrate.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,31 +30,40 @@ pub struct Coating {
     ambient_ior: Ior,
     /// The distinct layer materials.
     materials: Vec<Ior>,
-    /// Each layer's material (an index into `materials`) and thickness in nm, top first.
-    layers: Vec<(usize, f64)>,
+    /// The distinct layers: material (an index into `materials`) and thickness in nm.
+    kinds: Vec<(usize, f64)>,
+    /// Each layer's kind (an index into `kinds`), top first.
+    layers: Vec<usize>,
     substrate_ior: Ior,
 }
 
 impl Coating {
     /// `layers` (index, thickness nm) from the ambient side down to the substrate.
     pub fn new(ambient_ior: Ior, layers: &[(Ior, f64)], substrate_ior: Ior) -> Self {
-        let mut materials: Vec<Ior> = Vec::new();
-        let layers = layers
-            .iter()
+        fn id_of<T: PartialEq + Clone>(list: &mut Vec<T>, x: &T) -> usize {
+            list.iter().position(|y| y == x).unwrap_or_else(|| {
+                list.push(x.clone());
+                list.len() - 1
+            })
+        }
+        let mut materials = Vec::new();
+        let mut kinds = Vec::new();
+        let layers = (layers.iter())
             .map(|(n, d)| {
-                let id = match materials.iter().position(|m| m == n) {
-                    Some(id) => id,
-                    None => {
-                        materials.push(n.clone());
-                        materials.len() - 1
-                    }
-                };
-                (id, *d)
+                let material = id_of(&mut materials, n);
+                // (Thicknesses compare by bits: equal phases need equal values.)
+                let kind = (kinds.iter())
+                    .position(|&(m, t): &(usize, f64)| m == material && t.to_bits() == d.to_bits());
+                kind.unwrap_or_else(|| {
+                    kinds.push((material, *d));
+                    kinds.len() - 1
+                })
             })
             .collect();
         Coating {
             ambient_ior,
             materials,
+            kinds,
             layers,
             substrate_ior,
         }
@@ -61,6 +75,7 @@ impl Coating {
         Coating {
             ambient_ior: self.substrate_ior.clone(),
             materials: self.materials.clone(),
+            kinds: self.kinds.clone(),
             layers: self.layers.iter().rev().copied().collect(),
             substrate_ior: self.ambient_ior.clone(),
         }
@@ -72,7 +87,10 @@ impl Coating {
         Stack {
             ambient_ior: self.ambient_ior.at(lambda_nm).re,
             layers: (self.layers.iter())
-                .map(|&(id, d)| Layer::coherent(self.materials[id].at(lambda_nm), d))
+                .map(|&kind| {
+                    let (id, d) = self.kinds[kind];
+                    Layer::coherent(self.materials[id].at(lambda_nm), d)
+                })
                 .collect(),
             substrate_ior: self.substrate_ior.at(lambda_nm),
         }
@@ -87,32 +105,40 @@ impl Coating {
         lambda_nm: [f64; N],
         cos_theta1: f64,
     ) -> (AmplitudeLanes<N>, [Medium; N], [Medium; N]) {
-        let ambient_kx: [(Medium, f64); N] = std::array::from_fn(|k| {
-            Medium::ambient(self.ambient_ior.at(lambda_nm[k]).re, cos_theta1)
-        });
+        let ambient_n = self.ambient_ior.at_lanes(lambda_nm);
+        let ambient_kx = ambient_n.map(|n| Medium::ambient(n.re, cos_theta1));
         let ambient = ambient_kx.map(|(m, _)| m);
         let kx = ambient_kx.map(|(_, kx)| kx);
         let media_of = |m: &Ior| {
-            let lanes: [Medium; N] =
-                std::array::from_fn(|k| Medium::new(m.at(lambda_nm[k]), kx[k]));
+            let n = m.at_lanes(lambda_nm);
+            let lanes: [Medium; N] = std::array::from_fn(|k| Medium::new(n[k], kx[k]));
             lanes
         };
         let substrate = media_of(&self.substrate_ior);
-        let mut cached = [MediumLanes::from_lanes(&ambient); CACHED_MATERIALS];
-        for (c, m) in cached.iter_mut().zip(&self.materials) {
+        let mut media = [MediumLanes::from_lanes(&ambient); CACHED];
+        for (c, m) in media.iter_mut().zip(&self.materials) {
             *c = MediumLanes::from_lanes(&media_of(m));
         }
-        let layer_medium = |id: usize| match cached.get(id) {
+        let layer_medium = |id: usize| match media.get(id) {
             Some(c) => *c,
             None => MediumLanes::from_lanes(&media_of(&self.materials[id])),
         };
+        let kind_phase = |&(id, d): &(usize, f64)| layer_phase(&layer_medium(id), d, lambda_nm);
+        let mut phases = [LayerPhase::ZERO; CACHED];
+        for (p, kind) in phases.iter_mut().zip(&self.kinds) {
+            *p = kind_phase(kind);
+        }
         let len = self.layers.len() + 2;
         let medium = |j: usize| match j {
             0 => MediumLanes::from_lanes(&ambient),
             j if j == len - 1 => MediumLanes::from_lanes(&substrate),
-            j => layer_medium(self.layers[j - 1].0),
+            j => layer_medium(self.kinds[self.layers[j - 1]].0),
         };
-        let a = rouard::<N, WITH_T>(len, medium, |j| self.layers[j].1, lambda_nm);
+        let phase = |j: usize, m: &MediumLanes<N>| match phases.get(self.layers[j]) {
+            Some(p) => *p,
+            None => layer_phase(m, self.kinds[self.layers[j]].1, lambda_nm),
+        };
+        let a = rouard::<N, WITH_T>(len, medium, phase);
         (a, ambient, substrate)
     }
 
@@ -220,7 +246,7 @@ mod tests {
     }
 
     #[test]
-    fn distinct_materials_are_shared() {
+    fn distinct_materials_and_layers_are_shared() {
         let layers = [
             (ior("TiO2"), 50.0),
             (ior("SiO2"), 90.0),
@@ -230,7 +256,7 @@ mod tests {
         ];
         let c = Coating::new(Ior::real(1.0), &layers, ior("BK7"));
         assert_eq!(c.materials.len(), 3);
-        let ids: Vec<usize> = c.layers.iter().map(|l| l.0).collect();
-        assert_eq!(ids, [0, 1, 0, 2, 2]);
+        assert_eq!(c.kinds, [(0, 50.0), (1, 90.0), (2, 10.0), (2, 12.0)]);
+        assert_eq!(c.layers, [0, 1, 0, 2, 3]);
     }
 }

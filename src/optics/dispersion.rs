@@ -57,6 +57,38 @@ impl Material {
         }
     }
 
+    /// [`Material::nk`] at `N` wavelengths: the formulas' terms added lane by lane in the
+    /// same order (the same values bit for bit), so the divisions of the wavelengths run
+    /// side by side in SIMD lanes.
+    pub fn nk_lanes<const N: usize>(&self, lambda_nm: [f64; N]) -> [Complex64; N] {
+        let l2: [f64; N] = std::array::from_fn(|k| {
+            let l_um = lambda_nm[k] * 1e-3;
+            l_um * l_um
+        });
+        let real = |n: [f64; N]| n.map(|n| Complex64::new(n, 0.0));
+        match &self.model {
+            Model::Sellmeier { a, terms } => {
+                let mut n2 = [*a; N];
+                for &(b, c) in terms {
+                    for k in 0..N {
+                        n2[k] += b * l2[k] / (l2[k] - c);
+                    }
+                }
+                real(n2.map(|n2| n2.max(0.0).sqrt()))
+            }
+            Model::Poles { a, terms } => {
+                let mut n2 = [*a; N];
+                for &(b, c) in terms {
+                    for k in 0..N {
+                        n2[k] += b / (l2[k] - c);
+                    }
+                }
+                real(n2.map(|n2| n2.max(0.0).sqrt()))
+            }
+            Model::Cauchy { .. } | Model::Table(_) => lambda_nm.map(|l| self.nk(l)),
+        }
+    }
+
     /// Does `name` (case-insensitive) refer to this material?
     pub fn is_called(&self, name: &str) -> bool {
         self.name.eq_ignore_ascii_case(name)
@@ -458,6 +490,40 @@ mod tests {
                     m.name
                 );
             }
+        }
+    }
+
+    /// `nk_lanes` is `nk` bit for bit for every built-in material (formulas and tables), at
+    /// wavelengths inside and beyond the visible range, poles of the formulas included, and
+    /// NaN.
+    #[test]
+    fn nk_lanes_is_nk() {
+        let same = |a: Complex64, b: Complex64| {
+            let bits = |x: f64| if x.is_nan() { u64::MAX } else { x.to_bits() };
+            bits(a.re) == bits(b.re) && bits(a.im) == bits(b.im)
+        };
+        let mut probes: Vec<f64> = (0..=300).map(|k| 200.0 + 3.1 * k as f64).collect();
+        probes.extend([1e-3, 0.0, 5e4, f64::NAN, f64::INFINITY]);
+        for m in all() {
+            if let Model::Sellmeier { terms, .. } | Model::Poles { terms, .. } = &m.model {
+                // λ² = c exactly where a term's denominator vanishes.
+                probes.extend(terms.iter().map(|&(_, c)| c.max(0.0).sqrt() * 1e3));
+            }
+        }
+        for m in all() {
+            for lanes in probes.chunks(4).filter(|c| c.len() == 4) {
+                let got = m.nk_lanes([lanes[0], lanes[1], lanes[2], lanes[3]]);
+                for (k, &l) in lanes.iter().enumerate() {
+                    assert!(
+                        same(got[k], m.nk(l)),
+                        "{} at {l}: {} vs {}",
+                        m.name,
+                        got[k],
+                        m.nk(l)
+                    );
+                }
+            }
+            assert!(same(m.nk_lanes([550.0])[0], m.nk(550.0)));
         }
     }
 

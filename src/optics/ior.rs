@@ -28,6 +28,15 @@ impl Ior {
         }
     }
 
+    /// `n + ik` at `N` wavelengths ([`Material::nk_lanes`]).
+    #[inline]
+    pub fn at_lanes<const N: usize>(&self, lambda_nm: [f64; N]) -> [Complex64; N] {
+        match self {
+            Ior::Constant(c) => [*c; N],
+            Ior::Material(m) => m.nk_lanes(lambda_nm),
+        }
+    }
+
     /// True when the index depends on wavelength (so refraction splits hero wavelengths).
     pub fn is_dispersive(&self) -> bool {
         !matches!(self, Ior::Constant(_))

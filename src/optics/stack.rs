@@ -191,21 +191,21 @@ struct Powers {
 fn coherent_amplitudes(m: &[Medium], d_nm: &[f64], lambda_nm: f64) -> FilmAmplitudes {
     debug_assert_eq!(m.len(), d_nm.len() + 2);
     let medium = |j: usize| MediumLanes::from_lanes(&[m[j]]);
-    rouard::<1, true>(m.len(), medium, |j| d_nm[j], [lambda_nm]).lane(0)
+    let phase = |j: usize, m: &MediumLanes<1>| layer_phase(m, d_nm[j], [lambda_nm]);
+    rouard::<1, true>(m.len(), medium, phase).lane(0)
 }
 
 /// The Rouard recursion of the module doc over `len` media, from the substrate
-/// (`medium(len - 1)`) up to the ambient (`medium(0)`); layer `j` (medium `j + 1`) is
-/// `d_nm(j)` thick. Each medium is asked for once, so a caller can compute them on the fly
-/// without a buffer. `N` wavelengths go through in lanes (the same operations as one at a
-/// time, so the same values bit for bit); `WITH_T` = false skips the transmission
-/// amplitudes (left zero).
+/// (`medium(len - 1)`) up to the ambient (`medium(0)`); `phase(j, m)` is layer `j`'s
+/// ([`layer_phase`] of its medium `m = medium(j + 1)`). Each medium and phase is asked for
+/// once, so a caller can compute them on the fly or share them between equal layers. `N`
+/// wavelengths go through in lanes (the same operations as one at a time, so the same values
+/// bit for bit); `WITH_T` = false skips the transmission amplitudes (left zero).
 #[inline]
 pub(super) fn rouard<const N: usize, const WITH_T: bool>(
     len: usize,
     medium: impl Fn(usize) -> MediumLanes<N>,
-    d_nm: impl Fn(usize) -> f64,
-    lambda_nm: [f64; N],
+    phase: impl Fn(usize, &MediumLanes<N>) -> LayerPhase<N>,
 ) -> AmplitudeLanes<N> {
     let last = len - 1;
     let mut below = medium(last - 1);
@@ -213,13 +213,7 @@ pub(super) fn rouard<const N: usize, const WITH_T: bool>(
     for j in (1..last).rev() {
         let above = medium(j - 1);
         let step = interface::<N, WITH_T>(&above, &below);
-        // β_j = 2π d n_j cosθ_j / λ; forward branch ⇒ Im β ≥ 0 ⇒ |e^{iβ}| ≤ 1.
-        let d = d_nm(j - 1);
-        let beta = below
-            .nc
-            .scale(std::array::from_fn(|k| 2.0 * PI * d / lambda_nm[k]));
-        let e_half = phase_factor(beta);
-        let e_full = e_half * e_half;
+        let LayerPhase { e_half, e_full } = phase(j - 1, &below);
         let ds = (step.r_s * acc.r_s * e_full).plus(1.0);
         let dp = (step.r_p * acc.r_p * e_full).plus(1.0);
         let (t_s, t_p) = if WITH_T {
@@ -239,6 +233,38 @@ pub(super) fn rouard<const N: usize, const WITH_T: bool>(
         below = above;
     }
     acc
+}
+
+/// A layer's one-pass phase factor `e^{iβ}` and its square (the round trip), per lane.
+#[derive(Clone, Copy)]
+pub(super) struct LayerPhase<const N: usize> {
+    e_half: Cx<N>,
+    e_full: Cx<N>,
+}
+
+impl<const N: usize> LayerPhase<N> {
+    /// A placeholder for buffers (no layer has it: |e^{iβ}| = 0 only in the limit).
+    pub(super) const ZERO: Self = LayerPhase {
+        e_half: Cx::ZERO,
+        e_full: Cx::ZERO,
+    };
+}
+
+/// The phase of a layer of medium `m`, `d_nm` thick: β = 2π d n cosθ / λ; on the forward
+/// branch Im β ≥ 0, so |e^{iβ}| ≤ 1.
+#[inline(always)]
+pub(super) fn layer_phase<const N: usize>(
+    m: &MediumLanes<N>,
+    d_nm: f64,
+    lambda_nm: [f64; N],
+) -> LayerPhase<N> {
+    let beta =
+        m.nc.scale(std::array::from_fn(|k| 2.0 * PI * d_nm / lambda_nm[k]));
+    let e_half = phase_factor(beta);
+    LayerPhase {
+        e_half,
+        e_full: e_half * e_half,
+    }
 }
 
 /// `e^{iβ}` for `Im β ≥ 0` without overflow (the decay underflows gracefully to 0), in

@@ -30,9 +30,9 @@ pub struct CoatedDielectric {
     pub ext_ior: Ior,
     /// Either bulk index depends on wavelength.
     pub dispersive: bool,
-    /// The coating seen from outside (ext | layers | int) and from inside.
-    outside: Coating,
-    inside: Coating,
+    /// The coating seen from outside (ext | layers | int) and from inside (boxed: the pair
+    /// would make every `Bsdf` value larger).
+    coatings: Box<[Coating; 2]>,
 }
 
 impl CoatedDielectric {
@@ -40,9 +40,9 @@ impl CoatedDielectric {
     /// indices); the stack is validated from both sides.
     pub fn new(layers: Vec<(Ior, f64)>, int_ior: Ior, ext_ior: Ior) -> anyhow::Result<Self> {
         let outside = Coating::new(ext_ior.clone(), &layers, int_ior.clone());
+        let inside = outside.reversed();
         let b = CoatedDielectric {
-            inside: outside.reversed(),
-            outside,
+            coatings: Box::new([outside, inside]),
             layers,
             dispersive: int_ior.is_dispersive() || ext_ior.is_dispersive(),
             int_ior,
@@ -67,11 +67,7 @@ impl CoatedDielectric {
     }
 
     fn coating(&self, inside: bool) -> &Coating {
-        if inside {
-            &self.inside
-        } else {
-            &self.outside
-        }
+        &self.coatings[inside as usize]
     }
 
     /// Unpolarised (R, T) at the four path wavelengths for `cos θ` (signed: < 0 = inside).

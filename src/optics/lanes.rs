@@ -12,7 +12,7 @@ use std::ops::{Add, Div, Mul, Sub};
 /// `[f(0), …, f(N − 1)]` by a plain loop (which the compiler unrolls into SIMD operations;
 /// `std::array::from_fn` was seen left as a call per operation).
 #[inline(always)]
-fn lanes<const N: usize>(f: impl Fn(usize) -> f64) -> [f64; N] {
+pub(super) fn lanes<const N: usize>(f: impl Fn(usize) -> f64) -> [f64; N] {
     let mut out = [0.0; N];
     for (k, o) in out.iter_mut().enumerate() {
         *o = f(k);

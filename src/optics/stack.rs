@@ -26,7 +26,7 @@
 
 use super::film::{FilmAmplitudes, FilmResponse, ThinFilm};
 use super::fresnel::n_cos_theta;
-use super::lanes::Cx;
+use super::lanes::{lanes, Cx};
 use super::OpticsError;
 use num_complex::Complex64;
 use std::f64::consts::PI;
@@ -258,8 +258,7 @@ pub(super) fn layer_phase<const N: usize>(
     d_nm: f64,
     lambda_nm: [f64; N],
 ) -> LayerPhase<N> {
-    let beta =
-        m.nc.scale(std::array::from_fn(|k| 2.0 * PI * d_nm / lambda_nm[k]));
+    let beta = m.nc.scale(lanes(|k| 2.0 * PI * d_nm / lambda_nm[k]));
     let e_half = phase_factor(beta);
     LayerPhase {
         e_half,
@@ -269,7 +268,8 @@ pub(super) fn layer_phase<const N: usize>(
 
 /// `e^{iβ}` for `Im β ≥ 0` without overflow (the decay underflows gracefully to 0), in
 /// lanes. (A polynomial sine and cosine in SIMD lanes measured no faster than the library's
-/// `sin_cos` per lane here.)
+/// `sin_cos` per lane here, and once the phases of equal layers were shared, slower:
+/// docs/performance.md, seventh round.)
 #[inline(always)]
 fn phase_factor<const N: usize>(beta: Cx<N>) -> Cx<N> {
     let mut e = Cx::ZERO;

@@ -14,7 +14,7 @@ use std::process::Command;
 use thinfilm::compare::metrics::{compare_images, downsample_box};
 use thinfilm::compare::plot::{plot_error_vs_time, time_at_error, Series};
 use thinfilm::compare::references::load_manifest;
-use thinfilm::image_io::read_exr_rgb;
+use thinfilm::image_io::{read_exr_rgb, RgbImage};
 use thinfilm::render::sampler::SamplerKind;
 use thinfilm::render::{render, RenderOptions};
 
@@ -46,7 +46,7 @@ pub struct Args {
     /// Python interpreter for the Mitsuba side.
     #[arg(long, default_value = "python3")]
     pub python: String,
-    /// Sampler seed for both renderers.
+    /// Sampler seed for both renderers (of the first run; see `--repeats`).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Worker threads for our renderer (default: all cores).
@@ -66,10 +66,11 @@ pub struct Args {
     /// chosen by Fresnel, as Mitsuba does).
     #[arg(long)]
     pub fresnel_splits: Option<u32>,
-    /// Timed runs per spp, for both renderers; each row reports the fastest. Mitsuba's first
-    /// render at a new spp can include JIT compilation of its kernels (seen: 0.42 s instead
-    /// of 0.14 s for a 64-spp teapot on a cold kernel cache), and the shared machine's noise
-    /// only ever adds time. The images of the runs are identical.
+    /// Runs per spp, for both renderers, run j with seed `--seed` + j. Each row reports the
+    /// fastest run's time (Mitsuba's first render at a new spp can include JIT compilation of
+    /// its kernels — seen: 0.42 s instead of 0.14 s for a 64-spp teapot on a cold kernel
+    /// cache —, and the shared machine's noise only ever adds time) and the error over all
+    /// runs' images: RMSE over their pixels together, mean ΔE00.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..))]
     pub repeats: u32,
     #[command(flatten)]
@@ -90,7 +91,7 @@ fn run_mitsuba(
     variant: &str,
     size: usize,
     out_dir: &std::path::Path,
-) -> Result<(String, String, Vec<Row>)> {
+) -> Result<(String, String, Vec<(Row, Vec<PathBuf>)>)> {
     let script = args.root.join("tools/mitsuba/render_references.py");
     let spp: Vec<String> = args.spp.iter().map(|s| s.to_string()).collect();
     let mut cmd = Command::new(&args.python);
@@ -154,18 +155,56 @@ fn run_mitsuba(
         .context("Mitsuba bench JSON: no runs")?;
     let mut rows = Vec::new();
     for r in runs {
-        rows.push(Row {
-            spp: r["spp"].as_u64().context("run.spp")? as u32,
-            seconds: r["seconds"].as_f64().context("run.seconds")?,
-            rmse: f64::NAN,
-            delta_e00: f64::NAN,
-        });
+        let exrs = r["exrs"]
+            .as_array()
+            .context("run.exrs")?
+            .iter()
+            .map(|p| p.as_str().map(PathBuf::from).context("run.exrs[]"))
+            .collect::<Result<Vec<_>>>()?;
+        rows.push((
+            Row {
+                spp: r["spp"].as_u64().context("run.spp")? as u32,
+                seconds: r["seconds"].as_f64().context("run.seconds")?,
+                rmse: f64::NAN,
+                delta_e00: f64::NAN,
+            },
+            exrs,
+        ));
     }
     Ok((variant, sampler, rows))
 }
 
-/// Our renders of reference `r` at each `--spp` (the fastest of `--repeats` runs each), with
-/// their error against the reference image.
+/// The error of `repeats` renders (seeds S … S + repeats − 1) of one row against the
+/// reference: RMSE over all their pixels (the root of the mean of the images' squared
+/// errors) and the mean ΔE00. One seed's error is partly luck where a few pixels hold most of
+/// it (a Cornell box's light edge, a gold teapot's highlights, `veach_mis`' glints): Mitsuba's
+/// Cornell box at 256 spp had RMSE 0.0217 with seed 1 and 0.0235 over seeds 1–2 and 1–4.
+/// Pooling N seeds narrows that spread by ~√N, for both renderers alike.
+#[derive(Default)]
+struct PooledError {
+    squared: f64,
+    delta_e00: f64,
+    images: usize,
+}
+
+impl PooledError {
+    fn add(&mut self, image: &RgbImage, reference: &RgbImage) -> Result<()> {
+        let m = compare_images(image, reference)?;
+        self.squared += m.rmse * m.rmse;
+        self.delta_e00 += m.delta_e00_mean;
+        self.images += 1;
+        Ok(())
+    }
+
+    /// (RMSE, mean ΔE00) over the images added.
+    fn get(&self) -> (f64, f64) {
+        let n = self.images as f64;
+        ((self.squared / n).sqrt(), self.delta_e00 / n)
+    }
+}
+
+/// Our renders of reference `r` at each `--spp`: `--repeats` runs each with seeds S, S + 1,
+/// …, the fastest run's time and the error pooled over all runs ([`PooledError`]).
 fn render_ours(
     args: &Args,
     scene: &thinfilm::scene::Scene,
@@ -185,33 +224,33 @@ fn render_ours(
         },
     )?;
     for &spp in &args.spp {
-        let options = RenderOptions {
-            spp: Some(spp),
-            seed: Some(args.seed),
-            threads: args.threads,
-            resolution: Some((k as u32 * r.width as u32, k as u32 * r.height as u32)),
-            sampler: args.sampler,
-            fresnel_splits: args.fresnel_splits,
-            ..Default::default()
-        };
-        let mut out = render(scene, &options)?;
-        for _ in 1..args.repeats {
-            let again = render(scene, &options)?;
-            if again.stats.seconds < out.stats.seconds {
-                out = again;
-            }
+        let (mut seconds, mut error) = (f64::INFINITY, PooledError::default());
+        for j in 0..args.repeats as u64 {
+            let options = RenderOptions {
+                spp: Some(spp),
+                seed: Some(args.seed + j),
+                threads: args.threads,
+                resolution: Some((k as u32 * r.width as u32, k as u32 * r.height as u32)),
+                sampler: args.sampler,
+                fresnel_splits: args.fresnel_splits,
+                ..Default::default()
+            };
+            let out = render(scene, &options)?;
+            seconds = seconds.min(out.stats.seconds);
+            error
+                .add(&downsample_box(&out.image, k)?, reference)
+                .with_context(|| format!("{}: comparing with {}", r.name, r.exr.display()))?;
         }
-        let m = compare_images(&downsample_box(&out.image, k)?, reference)
-            .with_context(|| format!("{}: comparing with {}", r.name, r.exr.display()))?;
+        let (rmse, delta_e00) = error.get();
         eprintln!(
-            "{:24} ours    {spp:5} spp {:8.3} s RMSE {:.5}",
-            r.name, out.stats.seconds, m.rmse
+            "{:24} ours    {spp:5} spp {seconds:8.3} s RMSE {rmse:.5}",
+            r.name
         );
         ours.push(Row {
             spp,
-            seconds: out.stats.seconds,
-            rmse: m.rmse,
-            delta_e00: m.delta_e00_mean,
+            seconds,
+            rmse,
+            delta_e00,
         });
     }
     Ok(ours)
@@ -220,7 +259,7 @@ fn render_ours(
 /// Size of one scene's panel in the error-against-time plot.
 const PANEL_PX: (u32, u32) = (330, 250);
 const PLOT_TITLE: &str =
-    "RMSE against render time, per scene: ours and Mitsuba 3 (same spp, seed, sampler)";
+    "RMSE against render time, per scene: ours and Mitsuba 3 (same spp, seeds, sampler)";
 
 /// The (seconds, RMSE) curves of ours and Mitsuba per scene, from a table written by this
 /// command (columns: scene, spp, ours s, ours RMSE, ours ΔE00, Mitsuba s, Mitsuba RMSE, …).
@@ -303,8 +342,15 @@ pub fn run(args: Args) -> Result<()> {
         }
         refs.retain(|r| args.only.contains(&r.name));
     }
+    if args.seed.checked_add(args.repeats as u64).is_none() {
+        bail!(
+            "--seed {} with --repeats {}: the runs' seeds would overflow",
+            args.seed,
+            args.repeats
+        );
+    }
     if args.mitsuba {
-        check_seed_apart(&refs, args.seed)?;
+        check_seeds_apart(&refs, args.seed, args.repeats)?;
     }
     let tmp = tempfile_dir()?;
     let mut table = String::new();
@@ -321,22 +367,33 @@ pub fn run(args: Args) -> Result<()> {
         let mut theirs: Vec<Row> = Vec::new();
         if args.mitsuba {
             let dir = tmp.0.join(&r.name);
-            let (variant, sampler, mut rows) = run_mitsuba(
+            let (variant, sampler, runs) = run_mitsuba(
                 &args,
                 &r.scene,
                 r.variant.as_deref().unwrap_or("llvm_ad_spectral"),
                 k * r.width.max(r.height),
                 &dir,
             )?;
-            for row in &mut rows {
-                let img = read_exr_rgb(&dir.join(format!("mitsuba_{}spp.exr", row.spp)))?;
-                let m = compare_images(&at_reference_size(&img)?, &reference)?;
-                row.rmse = m.rmse;
-                row.delta_e00 = m.delta_e00_mean;
+            let mut rows = Vec::new();
+            for (mut row, exrs) in runs {
+                let mut error = PooledError::default();
+                for exr in &exrs {
+                    error.add(&at_reference_size(&read_exr_rgb(exr)?)?, &reference)?;
+                }
+                if error.images != args.repeats as usize {
+                    bail!(
+                        "Mitsuba bench: {} images at {} spp, expected {} (--repeats)",
+                        error.images,
+                        row.spp,
+                        args.repeats
+                    );
+                }
+                (row.rmse, row.delta_e00) = error.get();
                 eprintln!(
                     "{:24} mitsuba {:5} spp {:8.3} s RMSE {:.5}",
                     r.name, row.spp, row.seconds, row.rmse
                 );
+                rows.push(row);
             }
             mitsuba_variants.insert(format!("{variant} ({sampler})"));
             theirs = rows;
@@ -413,11 +470,28 @@ pub fn run(args: Args) -> Result<()> {
 /// Mitsuba's bench renders must not share samples with the reference they are scored
 /// against: `render_references.py` renders seed S as passes with seeds S·1000003 + i
 /// (i < 16), so a bench run with the reference's own seed would repeat the first
-/// reference pass's samples and understate Mitsuba's error.
-fn check_seed_apart(refs: &[thinfilm::compare::references::Reference], seed: u64) -> Result<()> {
-    if let Some(r) = refs.iter().find(|r| r.seed == Some(seed)) {
+/// reference pass's samples and understate Mitsuba's error. The bench's runs use seeds
+/// `seed` … `seed + repeats − 1`.
+fn check_seeds_apart(
+    refs: &[thinfilm::compare::references::Reference],
+    seed: u64,
+    repeats: u32,
+) -> Result<()> {
+    let seeds = seed..seed.saturating_add(repeats as u64);
+    if let Some((r, s)) = refs
+        .iter()
+        .find_map(|r| r.seed.filter(|s| seeds.contains(s)).map(|s| (r, s)))
+    {
+        let runs = if repeats > 1 {
+            format!(
+                " (--repeats {repeats} renders seeds {seed}…{})",
+                seeds.end - 1
+            )
+        } else {
+            String::new()
+        };
         bail!(
-            "--seed {seed} is the seed reference '{}' was rendered with (tests/references/manifest.json): \
+            "--seed {seed}{runs}: seed {s} is the seed reference '{}' was rendered with (tests/references/manifest.json): \
              Mitsuba's bench renders would share samples with it; pick another --seed",
             r.name
         );
@@ -439,4 +513,54 @@ fn tempfile_dir() -> Result<ScratchDir> {
     let dir = std::env::temp_dir().join(format!("thinfilm-bench-render-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     Ok(ScratchDir(dir))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use thinfilm::compare::references::Reference;
+
+    fn reference(seed: u64) -> Reference {
+        Reference {
+            name: "box".into(),
+            scene: "box.xml".into(),
+            exr: "box.exr".into(),
+            width: 1,
+            height: 1,
+            spp: 1,
+            variant: None,
+            seed: Some(seed),
+        }
+    }
+
+    /// Every run's seed is checked, not only the first: seeds 3, 4, 5 against a reference
+    /// rendered with seed 5.
+    #[test]
+    fn every_runs_seed_is_kept_apart_from_the_references() {
+        let refs = [reference(5)];
+        let err = check_seeds_apart(&refs, 3, 3).unwrap_err().to_string();
+        assert!(
+            err.contains("seeds 3…5") && err.contains("seed 5 is"),
+            "{err}"
+        );
+        assert!(check_seeds_apart(&refs, 3, 2).is_ok());
+        assert!(check_seeds_apart(&refs, 6, 4).is_ok());
+        assert!(check_seeds_apart(&refs, u64::MAX, 2).is_ok());
+    }
+
+    /// The pooled RMSE is the RMSE over all images' pixels together.
+    #[test]
+    fn pooled_error_is_the_rms_over_all_images() {
+        let image = |v: f32| RgbImage {
+            width: 2,
+            height: 1,
+            pixels: vec![[v; 3]; 2],
+        };
+        let reference = image(0.0);
+        let mut e = PooledError::default();
+        e.add(&image(0.3), &reference).unwrap();
+        e.add(&image(0.4), &reference).unwrap();
+        let (rmse, _) = e.get();
+        assert!((rmse - (0.125f64).sqrt()).abs() < 1e-6, "{rmse}");
+    }
 }

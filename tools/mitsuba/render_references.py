@@ -19,10 +19,11 @@ Scenes in NO_MITSUBA_REFERENCE (prism.xml: dispersion) are skipped with the reas
 
 Other modes:
     --material path/to/material.xml   also render a material written by `thinfilm estimate`
-    --bench SCENE --spp 16,64,256 --out-dir DIR --json [--sampler TYPE]
+    --bench SCENE --spp 16,64,256 --out-dir DIR --json [--sampler TYPE] [--repeats N]
                                       timed renders for `thinfilm bench render --mitsuba`
-                                      with the scene's sampler type (or TYPE); prints one
-                                      JSON object to stdout.
+                                      with the scene's sampler type (or TYPE), N per spp
+                                      (seeds SEED … SEED + N − 1); prints one JSON object
+                                      to stdout.
 
 The sensor of each scene is replaced by an equivalent one (same to_world, horizontal field
 of view, clip planes) with a `size`-pixel-wide hdrfilm (height keeps the aspect ratio), a box
@@ -228,7 +229,8 @@ def main():
     ap.add_argument("--skip-tmm-check", action="store_true")
     ap.add_argument("--sampler", help="bench mode: Mitsuba sampler type (default: the scene's)")
     ap.add_argument("--repeats", type=int, default=1,
-                    help="bench mode: timed renders per spp; the fastest is reported")
+                    help="bench mode: renders per spp, run j with seed SEED + j; the fastest "
+                         "time is reported, and each run's EXR is written")
     args = ap.parse_args()
 
     variant = thinfilm_mitsuba.setup(args.variant)
@@ -249,15 +251,17 @@ def main():
         render(mi, scene, sensor, min(spps), args.seed + 99)
         results = []
         for spp in spps:
-            arr, secs = render(mi, scene, sensor, spp, args.seed)
-            every = [secs]
-            for _ in range(1, args.repeats):
-                # Same seed and spp: the same image; report the fastest run (and each).
-                every.append(render(mi, scene, sensor, spp, args.seed)[1])
+            # Run j uses seed + j: the fastest run is the time, and the error is scored over
+            # every run's image (one seed's error is luck where a few pixels hold most of it).
+            every, exrs = [], []
+            for j in range(args.repeats):
+                arr, secs = render(mi, scene, sensor, spp, args.seed + j)
+                out = os.path.join(args.out_dir, f"mitsuba_{spp}spp_{j}.exr")
+                write_exr(mi, out, arr)
+                every.append(secs)
+                exrs.append(out)
             secs = min(every)
-            out = os.path.join(args.out_dir, f"mitsuba_{spp}spp.exr")
-            write_exr(mi, out, arr)
-            results.append({"spp": spp, "seconds": secs, "every_seconds": every, "exr": out})
+            results.append({"spp": spp, "seconds": secs, "every_seconds": every, "exrs": exrs})
             log(f"  {spp:5d} spp  {secs:8.3f} s")
         doc = {
             "variant": variant,

@@ -16,13 +16,10 @@ use std::io::Write;
 use thinfilm::render::camera::Ray;
 use thinfilm::scene::Geometry;
 
-fn main() -> std::process::ExitCode {
-    match run() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            std::process::ExitCode::FAILURE
-        }
+fn main() {
+    if let Err(err) = run() {
+        eprintln!("error: {err:#}");
+        std::process::exit(1);
     }
 }
 
@@ -32,7 +29,10 @@ fn run() -> Result<()> {
         bail!("usage: trace_rays SCENE RAYS.f32 [N]");
     };
     let n: usize = match rest.first() {
-        Some(s) => s.parse().with_context(|| format!("N '{s}'"))?,
+        Some(s) => match s.parse() {
+            Ok(n) if n > 0 => n,
+            _ => bail!("N '{s}': expected a positive number of rays"),
+        },
         None => 1_000_000,
     };
     let scene = thinfilm::scene::load(std::path::Path::new(scene_path), &[])?;

@@ -11,6 +11,8 @@ reuse an earlier run's result.
 """
 
 import argparse
+import os
+import sys
 import time
 
 import numpy as np
@@ -22,12 +24,17 @@ def main():
     ap.add_argument("rays", help="RAYS.f32 from examples/trace_rays.rs")
     ap.add_argument("--variant", default="llvm_ad_rgb")
     args = ap.parse_args()
+    if not os.path.isfile(args.rays):
+        sys.exit(f"{args.rays}: no such file (write it with examples/trace_rays.rs)")
+    raw = np.fromfile(args.rays, dtype=np.float32)
+    if raw.size == 0 or raw.size % 6:
+        sys.exit(f"{args.rays}: {raw.size} floats, not a whole number of rays (6 floats each)")
+    a = raw.reshape(-1, 6)
     import drjit as dr
     import mitsuba as mi
 
     mi.set_variant(args.variant)
     scene = mi.load_file(args.scene)
-    a = np.fromfile(args.rays, dtype=np.float32).reshape(-1, 6)
     n = len(a)
     o = mi.Point3f(*[mi.Float(a[:, i]) for i in range(3)])
     d = mi.Vector3f(*[mi.Float(a[:, i]) for i in range(3, 6)])

@@ -1702,7 +1702,8 @@ mod tests {
             };
             assert_eq!(
                 fast.map(|(t, id)| (t.to_bits(), id)),
-                of.map(|(t, id)| (t.to_bits(), id))
+                of.map(|(t, id)| (t.to_bits(), id)),
+                "ray {i}"
             );
             assert_eq!(occ, occ_of, "ray {i}");
             hits += base.is_some() as u32;

@@ -67,6 +67,9 @@ pub struct Accel {
     spheres: Vec<SphereGeom>,
     /// The CPU has AVX2 (checked once at build): traversal uses the 8-wide node test.
     avx2: bool,
+    /// Each BVH node's child boxes decoded to f32 for the AVX2 traversal (empty without
+    /// AVX2, and for large BVHs): see [`ChildPlanes`].
+    planes: Vec<ChildPlanes>,
     /// Meshes by shape index (None for non-mesh shapes), shared with the scene.
     meshes: Vec<Option<std::sync::Arc<TriangleMesh>>>,
 }
@@ -142,6 +145,11 @@ impl Accel {
         } else {
             Vec::new()
         };
+        let avx2 = cpu_has_avx2();
+        let planes = match &bvh {
+            Some(bvh) if avx2 => ChildPlanes::for_bvh(bvh),
+            _ => Vec::new(),
+        };
         Ok((
             Accel {
                 bvh,
@@ -149,7 +157,8 @@ impl Accel {
                 small_groups,
                 tri_ref,
                 spheres,
-                avx2: cpu_has_avx2(),
+                avx2,
+                planes,
                 meshes,
             },
             dropped,
@@ -190,8 +199,8 @@ impl Accel {
             };
             #[cfg(target_arch = "x86_64")]
             let found = if self.avx2 {
-                // SAFETY: the CPU supports AVX2 (checked at build time).
-                unsafe { x86::closest_hit_of(bvh, &self.rt_tris, ray) }
+                // SAFETY: the CPU supports AVX2 and FMA (checked at build time).
+                unsafe { x86::closest_hit_of(bvh, &self.planes, &self.rt_tris, ray) }
             } else {
                 scalar()
             };
@@ -260,9 +269,15 @@ impl Accel {
                         *p = obvhs::ray::Ray::new(r.origin.into(), r.dir.into(), r.tmin, r.tmax);
                     }
                     let mut best = [u32::MAX; PACKET];
-                    // SAFETY: the CPU supports AVX2 (checked at build time).
+                    // SAFETY: the CPU supports AVX2 and FMA (checked at build time).
                     let t = unsafe {
-                        x86::closest_hit_packet_avx2(bvh, &self.rt_tris, &packet[..m], &mut best)
+                        x86::closest_hit_packet_avx2(
+                            bvh,
+                            &self.planes,
+                            &self.rt_tris,
+                            &packet[..m],
+                            &mut best,
+                        )
                     };
                     for (i, &j) in members[..m].iter().enumerate() {
                         let r = &window[j];
@@ -451,8 +466,8 @@ impl Accel {
         if let Some(bvh) = &self.bvh {
             #[cfg(target_arch = "x86_64")]
             if self.avx2 {
-                // SAFETY: the CPU supports AVX2 (checked at build time).
-                return unsafe { x86::any_hit_of(bvh, &self.rt_tris, ray) };
+                // SAFETY: the CPU supports AVX2 and FMA (checked at build time).
+                return unsafe { x86::any_hit_of(bvh, &self.planes, &self.rt_tris, ray) };
             }
             let r = obvhs::ray::Ray::new(ray.origin.into(), ray.dir.into(), ray.tmin, ray.tmax);
             return any_hit(bvh, &self.rt_tris, r);
@@ -1210,10 +1225,85 @@ fn any_hit(bvh: &CwBvh, tris: &[RtTriangle], ray: obvhs::ray::Ray) -> bool {
     hit
 }
 
+/// One CWBVH node's eight child boxes as f32 planes, in the node's slot order: rows min x,
+/// max x, min y, max y, min z, max z (the order of `CwBvhNode`'s quantised planes). obvhs
+/// stores each plane as a byte, q, scaled from the node's origin p by a power of two, e; the
+/// node test then widens 48 bytes and rescales the ray per node. Decoded once here (p + q·e,
+/// rounded outwards to f32, so each box still contains the quantised one), the test is one
+/// fused multiply-add per plane with per-ray constants (~30 instructions fewer per node), for
+/// 192 more bytes per node (three cache lines, aligned).
+///
+/// That pays while the planes stay in cache: on incoherent rays (one thread) 10–18 % less
+/// time per ray from 992 to 102k triangles (2 MB of planes), on par at 313k (6 MB), slower
+/// at 999k (19 MB: 10–20 % more per closest hit). Above [`PLANES_MAX_BYTES`] the traversal
+/// keeps the quantised planes (docs/performance.md, "Ninth round").
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct ChildPlanes([[f32; 8]; 6]);
+
+/// The largest BVH, in bytes of [`ChildPlanes`], whose nodes are tested on f32 planes
+/// (~20k nodes, ~200k triangles; between the measured 2 MB that gained and 6 MB that did not).
+const PLANES_MAX_BYTES: usize = 4 << 20;
+
+impl ChildPlanes {
+    /// The planes of every node of `bvh`, or none if they would take more than
+    /// [`PLANES_MAX_BYTES`].
+    fn for_bvh(bvh: &CwBvh) -> Vec<Self> {
+        if bvh.nodes.len() * std::mem::size_of::<Self>() > PLANES_MAX_BYTES {
+            return Vec::new();
+        }
+        Self::of(bvh)
+    }
+
+    fn of(bvh: &CwBvh) -> Vec<Self> {
+        use rayon::prelude::*;
+        let decode = |n: &obvhs::cwbvh::node::CwBvhNode| {
+            let ext = n.compute_extent();
+            let rows = [
+                (&n.child_min_x, n.p.x, ext.x, false),
+                (&n.child_max_x, n.p.x, ext.x, true),
+                (&n.child_min_y, n.p.y, ext.y, false),
+                (&n.child_max_y, n.p.y, ext.y, true),
+                (&n.child_min_z, n.p.z, ext.z, false),
+                (&n.child_max_z, n.p.z, ext.z, true),
+            ];
+            ChildPlanes(rows.map(|(q, p, e, up)| {
+                q.map(|q| {
+                    // Exact in f64 (an f32 plus a byte times a power of two), then rounded
+                    // towards the outside of the box.
+                    let exact = p as f64 + q as f64 * e as f64;
+                    let f = exact as f32;
+                    if (up && (f as f64) < exact) || (!up && (f as f64) > exact) {
+                        next_f32(f, up)
+                    } else {
+                        f
+                    }
+                })
+            }))
+        };
+        bvh.nodes.par_iter().map(decode).collect()
+    }
+}
+
+/// The f32 next to finite `f` upwards (`up`) or downwards (`f32::next_up`/`next_down`, not
+/// in the minimum Rust version).
+fn next_f32(f: f32, up: bool) -> f32 {
+    if f == 0.0 {
+        let tiny = f32::from_bits(1);
+        return if up { tiny } else { -tiny };
+    }
+    let bits = f.to_bits();
+    // Away from zero is one more in the magnitude bits, towards zero one less.
+    f32::from_bits(if (f > 0.0) == up { bits + 1 } else { bits - 1 })
+}
+
+/// Whether the AVX2 traversal can run: AVX2, FMA, POPCNT and LZCNT (every AVX2 CPU has the
+/// other three; checked all the same).
 fn cpu_has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
             && std::arch::is_x86_feature_detected!("popcnt")
             && std::arch::is_x86_feature_detected!("lzcnt")
     }
@@ -1223,17 +1313,19 @@ fn cpu_has_avx2() -> bool {
     }
 }
 
-/// The same traversals compiled for AVX2 (runtime-detected; the release build targets
-/// baseline x86-64): the CWBVH node test does all eight children in one 256-bit register,
-/// widening the quantised child planes with `vpmovzxbd` instead of obvhs' eight scalar
-/// u8→f32 conversions per half (its most expensive step). The arithmetic is obvhs'
-/// `intersect_ray_simd` operation for operation (mul then add, same max/min argument
-/// order, no FMA), so hit masks — and images — are bit-identical to the baseline path
-/// (`tests::avx2_traversal_matches_baseline`).
+/// The same traversals compiled for AVX2 and FMA (runtime-detected; the release build
+/// targets baseline x86-64): the CWBVH node test does all eight children in one 256-bit
+/// register, on the node's [`ChildPlanes`] where the BVH has them (its quantised boxes
+/// decoded to f32 once, rounded outwards), else on the quantised bytes with obvhs'
+/// arithmetic. On f32 planes a node may be entered where obvhs' test rounds the other way at
+/// a box's face, never skipped where a triangle in it is hit; the traversal order and the
+/// triangle test are obvhs', so the hits are the baseline path's either way
+/// (`tests::avx2_traversal_matches_baseline`, `child_planes_contain_what_their_slots_hold`).
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::{closer, intersect_triangle, RayLanes, RtTriangle, TriScalars, PACKET};
-    use glam::Vec3A;
+    use super::{
+        closer, intersect_triangle, ChildPlanes, RayLanes, RtTriangle, TriScalars, PACKET,
+    };
     use obvhs::cwbvh::node::CwBvhNode;
     use obvhs::cwbvh::CwBvh;
     use obvhs::ray::Ray;
@@ -1242,79 +1334,104 @@ mod x86 {
     /// obvhs' node-test epsilon (`cwbvh::node::EPSILON`, crate-private there).
     const NODE_EPSILON: f32 = 0.0001;
 
-    /// Per-ray constants of the node test: lanes all-ones where the direction component is
-    /// negative (the near plane of a child box is then its max plane).
+    /// Per-ray constants of the node test: for each axis, the inverse direction and
+    /// −origin × inverse direction in all lanes (a plane at x is crossed at
+    /// t = x·inv + (−o·inv)), which [`ChildPlanes`] rows hold the planes the ray meets first
+    /// and last (min then max where the direction component is non-negative), and the byte
+    /// offsets of the same planes among a [`CwBvhNode`]'s quantised ones.
     #[derive(Clone, Copy)]
-    struct RaySigns {
-        neg: [__m256; 3],
+    struct RayPlanes {
+        inv: [__m256; 3],
+        neg_o_inv: [__m256; 3],
+        near: [usize; 3],
+        far: [usize; 3],
+        quantised_near: [usize; 3],
+        quantised_far: [usize; 3],
     }
 
     #[inline]
-    #[target_feature(enable = "avx2")]
-    fn ray_signs(ray: &Ray) -> RaySigns {
-        let m = |neg: bool| _mm256_castsi256_ps(_mm256_set1_epi32(if neg { -1 } else { 0 }));
-        RaySigns {
-            neg: [
-                m(ray.direction.x < 0.0),
-                m(ray.direction.y < 0.0),
-                m(ray.direction.z < 0.0),
-            ],
+    #[target_feature(enable = "avx2,fma")]
+    fn ray_planes(ray: &Ray) -> RayPlanes {
+        let (o, inv) = (ray.origin.to_array(), ray.inv_direction.to_array());
+        let neg = ray.direction.to_array().map(|d| d < 0.0);
+        let near = std::array::from_fn(|k| 2 * k + usize::from(neg[k]));
+        let far = std::array::from_fn(|k| 2 * k + 1 - usize::from(neg[k]));
+        // The quantised rows are eight bytes each, in the same order, from `child_min_x`.
+        let quantised = |row: usize| std::mem::offset_of!(CwBvhNode, child_min_x) + 8 * row;
+        RayPlanes {
+            inv: inv.map(|v| _mm256_set1_ps(v)),
+            neg_o_inv: std::array::from_fn(|k| _mm256_set1_ps(-(o[k] * inv[k]))),
+            near,
+            far,
+            quantised_near: near.map(quantised),
+            quantised_far: far.map(quantised),
         }
     }
 
-    /// A node's quantised child planes widened to f32, once per node (shared by the rays of
-    /// a packet).
-    #[derive(Clone, Copy)]
-    struct NodePlanes {
-        lo: [__m256; 3],
-        hi: [__m256; 3],
-    }
-
+    /// Which of a node's eight child slots the ray's slab test hits (bit j: slot j): on the
+    /// node's f32 planes where the BVH has them ([`ChildPlanes::for_bvh`]: `planes` is empty
+    /// otherwise), else on its quantised ones.
     #[inline]
-    #[target_feature(enable = "avx2")]
-    fn node_planes(node: &CwBvhNode) -> NodePlanes {
-        #[inline]
-        #[target_feature(enable = "avx2")]
-        fn widen(v: &[u8; 8]) -> __m256 {
-            // SAFETY: reads exactly the 8 bytes of `v`.
-            unsafe {
-                _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(
-                    v.as_ptr() as *const __m128i
-                )))
-            }
-        }
-        NodePlanes {
-            lo: [
-                widen(&node.child_min_x),
-                widen(&node.child_min_y),
-                widen(&node.child_min_z),
-            ],
-            hi: [
-                widen(&node.child_max_x),
-                widen(&node.child_max_y),
-                widen(&node.child_max_z),
-            ],
-        }
-    }
-
-    /// Which of the node's eight child slots the ray's slab test hits (bit j: slot j).
-    #[inline]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     fn child_slots(
         node: &CwBvhNode,
-        planes: &NodePlanes,
+        index: usize,
+        planes: &[ChildPlanes],
         ray: &Ray,
-        signs: &RaySigns,
+        ray_planes: &RayPlanes,
         ray_tmax: f32,
     ) -> u32 {
+        match planes.get(index) {
+            Some(planes) => float_slots(planes, ray_planes, ray_tmax),
+            None => quantised_slots(node, ray, ray_planes, ray_tmax),
+        }
+    }
+
+    /// [`child_slots`] on f32 planes: one fused multiply-add per plane.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    fn float_slots(planes: &ChildPlanes, ray: &RayPlanes, ray_tmax: f32) -> u32 {
+        let cross = |row: usize, axis: usize| {
+            // SAFETY: `row` < 6 (see `ray_planes`); rows are 32-byte aligned 8-float arrays.
+            let plane = unsafe { _mm256_load_ps(planes.0.get_unchecked(row).as_ptr()) };
+            _mm256_fmadd_ps(plane, ray.inv[axis], ray.neg_o_inv[axis])
+        };
+        let near = |k: usize| cross(ray.near[k], k);
+        let far = |k: usize| cross(ray.far[k], k);
+        let tmin = _mm256_max_ps(
+            _mm256_max_ps(near(0), near(1)),
+            _mm256_max_ps(near(2), _mm256_set1_ps(NODE_EPSILON)),
+        );
+        let tmax = _mm256_min_ps(
+            _mm256_min_ps(far(0), far(1)),
+            _mm256_min_ps(far(2), _mm256_set1_ps(ray_tmax)),
+        );
+        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32
+    }
+
+    /// [`child_slots`] on the quantised planes: obvhs' `intersect_ray_simd` arithmetic
+    /// operation for operation (the ray moved into the node's byte grid, mul then add, the
+    /// same max/min order, no FMA), so the same slots as obvhs' node test, with all eight
+    /// children in one register and each near and far plane widened straight from the node
+    /// at the ray's offsets.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn quantised_slots(node: &CwBvhNode, ray: &Ray, planes: &RayPlanes, ray_tmax: f32) -> u32 {
         let adj_dir_inv = node.compute_extent() * ray.inv_direction;
-        let adj_orig = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
-        // Near/far planes picked per ray with a blend instead of a branch per axis and node.
+        let adj_orig = (glam::Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+        let base = node as *const CwBvhNode as *const u8;
+        let widen = |offset: usize| {
+            // SAFETY: `offset` starts one of the node's `[u8; 8]` plane rows (`ray_planes`).
+            unsafe {
+                _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(
+                    base.add(offset) as *const __m128i
+                )))
+            }
+        };
         let slab = |axis: usize, dinv: f32, orig: f32| {
-            let (q_lo, q_hi, neg) = (planes.lo[axis], planes.hi[axis], signs.neg[axis]);
-            let near = _mm256_blendv_ps(q_lo, q_hi, neg);
-            let far = _mm256_blendv_ps(q_hi, q_lo, neg);
             let (d, o) = (_mm256_set1_ps(dinv), _mm256_set1_ps(orig));
+            let near = widen(planes.quantised_near[axis]);
+            let far = widen(planes.quantised_far[axis]);
             (
                 _mm256_add_ps(_mm256_mul_ps(near, d), o),
                 _mm256_add_ps(_mm256_mul_ps(far, d), o),
@@ -1348,21 +1465,27 @@ mod x86 {
     }
 
     #[inline]
-    #[target_feature(enable = "avx2,popcnt,lzcnt")]
-    fn node_hits(node: &CwBvhNode, ray: &Ray, signs: &RaySigns, oct_inv4: u32) -> u32 {
-        let slots = child_slots(node, &node_planes(node), ray, signs, ray.tmax);
+    #[target_feature(enable = "avx2,fma,popcnt,lzcnt")]
+    fn node_hits(
+        (node, index): (&CwBvhNode, usize),
+        planes: &[ChildPlanes],
+        (ray, ray_planes): (&Ray, &RayPlanes),
+        ray_tmax: f32,
+        oct_inv4: u32,
+    ) -> u32 {
+        let slots = child_slots(node, index, planes, ray, ray_planes, ray_tmax);
         slot_hit_bits(node, slots, oct_inv4)
     }
 
     /// CWBVH traversal with the AVX2 node test: obvhs' `traverse!` macro step for step (same
-    /// node and primitive visiting order, same saturating 32-entry stack), so hits are
-    /// bit-identical, but written as one tight loop: the traversal state stays in registers
+    /// child and primitive visiting order, same saturating 32-entry stack), so the hits are
+    /// its hits, but written as one tight loop: the traversal state stays in registers
     /// (through the macro's `Traversal` struct it lived on the stack and was stored back on
     /// every step), the stack is not zeroed per ray, and the bit counts compile to single
     /// `popcnt`/`lzcnt` instructions (enabled together with AVX2: every AVX2 CPU has them,
     /// and [`super::cpu_has_avx2`] checks all of them).
     ///
-    /// `node_mask(state, node)` is the node test (obvhs' hit mask for octant `oct_inv4`);
+    /// `node_mask(state, node, index)` is the node test (obvhs' hit mask for octant `oct_inv4`);
     /// `on_prim(state, id)` tests primitive `id`, may shorten the ray(s) in `state`, and
     /// returns true to stop the traversal (any-hit queries).
     #[inline(always)]
@@ -1370,7 +1493,7 @@ mod x86 {
         bvh: &CwBvh,
         oct_inv4: u32,
         state: &mut S,
-        node_mask: impl Fn(&S, &CwBvhNode) -> u32,
+        node_mask: impl Fn(&S, &CwBvhNode, usize) -> u32,
         mut on_prim: impl FnMut(&mut S, u32) -> bool,
     ) {
         const STACK_SIZE: usize = 32;
@@ -1404,8 +1527,9 @@ mod x86 {
                 }
                 let slot_index = (child_index_offset - 24) ^ (oct_inv4 & 0xff);
                 let relative_index = (hits_imask & !(0xffff_ffffu32 << slot_index)).count_ones();
-                let node = &nodes[(cur_base + relative_index) as usize];
-                let hitmask = node_mask(state, node);
+                let index = (cur_base + relative_index) as usize;
+                let node = &nodes[index];
+                let hitmask = node_mask(state, node, index);
                 cur_base = node.child_base_idx;
                 cur_bits = (hitmask & 0xff00_0000) | node.imask as u32;
                 prim_base = node.primitive_base_idx;
@@ -1426,22 +1550,23 @@ mod x86 {
     /// [`super::closest_hit`] with the AVX2 node test.
     ///
     /// # Safety
-    /// The CPU must support AVX2, POPCNT and LZCNT.
+    /// The CPU must support AVX2, FMA, POPCNT and LZCNT.
     #[inline]
-    #[target_feature(enable = "avx2,popcnt,lzcnt")]
+    #[target_feature(enable = "avx2,fma,popcnt,lzcnt")]
     pub(super) unsafe fn closest_hit_avx2(
         bvh: &CwBvh,
+        planes: &[ChildPlanes],
         tris: &[RtTriangle],
         ray: Ray,
     ) -> Option<(f32, u32)> {
-        let signs = ray_signs(&ray);
+        let ray_planes = ray_planes(&ray);
         let oct_inv4 = octant_inv4(&ray);
         let mut state = (ray, u32::MAX);
         traverse_avx2(
             bvh,
             oct_inv4,
             &mut state,
-            |(r, _), node| node_hits(node, r, &signs, oct_inv4),
+            |(r, _), node, i| node_hits((node, i), planes, (&ray, &ray_planes), r.tmax, oct_inv4),
             |(r, best_id), id| {
                 let t = intersect_triangle(&tris[id as usize], r);
                 if closer(t, id, r.tmax, *best_id) {
@@ -1466,17 +1591,18 @@ mod x86 {
     ///
     /// # Safety
     /// As [`closest_hit_avx2`].
-    #[target_feature(enable = "avx2,popcnt,lzcnt")]
+    #[target_feature(enable = "avx2,fma,popcnt,lzcnt")]
     pub(super) unsafe fn closest_hit_packet_avx2(
         bvh: &CwBvh,
+        planes: &[ChildPlanes],
         tris: &[RtTriangle],
         rays: &[Ray],
         best: &mut [u32; PACKET],
     ) -> [f32; PACKET] {
         let n = rays.len().min(PACKET);
-        let mut signs = [ray_signs(&rays[0]); PACKET];
-        for (s, r) in signs.iter_mut().zip(&rays[..n]).skip(1) {
-            *s = ray_signs(r);
+        let mut ray_planes = [ray_planes(&rays[0]); PACKET];
+        for (p, r) in ray_planes.iter_mut().zip(&rays[..n]).skip(1) {
+            *p = self::ray_planes(r);
         }
         let oct_inv4 = octant_inv4(&rays[0]);
         let mut lanes = RayLanes::new(&rays[..n]);
@@ -1484,11 +1610,10 @@ mod x86 {
             bvh,
             oct_inv4,
             &mut (&mut lanes, &mut *best),
-            |(lanes, _), node| {
-                let planes = node_planes(node);
+            |(lanes, _), node, index| {
                 let mut slots = 0;
-                for (i, (r, s)) in rays[..n].iter().zip(&signs).enumerate() {
-                    slots |= child_slots(node, &planes, r, s, lanes.tmax[i]);
+                for (i, (r, p)) in rays[..n].iter().zip(&ray_planes).enumerate() {
+                    slots |= child_slots(node, index, planes, r, p, lanes.tmax[i]);
                 }
                 slot_hit_bits(node, slots, oct_inv4)
             },
@@ -1505,16 +1630,21 @@ mod x86 {
     /// # Safety
     /// As [`closest_hit_avx2`].
     #[inline]
-    #[target_feature(enable = "avx2,popcnt,lzcnt")]
-    pub(super) unsafe fn any_hit_avx2(bvh: &CwBvh, tris: &[RtTriangle], ray: Ray) -> bool {
-        let signs = ray_signs(&ray);
+    #[target_feature(enable = "avx2,fma,popcnt,lzcnt")]
+    pub(super) unsafe fn any_hit_avx2(
+        bvh: &CwBvh,
+        planes: &[ChildPlanes],
+        tris: &[RtTriangle],
+        ray: Ray,
+    ) -> bool {
+        let ray_planes = ray_planes(&ray);
         let oct_inv4 = octant_inv4(&ray);
         let mut hit = false;
         traverse_avx2(
             bvh,
             oct_inv4,
             &mut hit,
-            |_, node| node_hits(node, &ray, &signs, oct_inv4),
+            |_, node, i| node_hits((node, i), planes, (&ray, &ray_planes), ray.tmax, oct_inv4),
             |hit, id| {
                 *hit = intersect_triangle(&tris[id as usize], &ray) < ray.tmax;
                 *hit
@@ -1531,24 +1661,30 @@ mod x86 {
     ///
     /// # Safety
     /// As [`closest_hit_avx2`].
-    #[target_feature(enable = "avx2,popcnt,lzcnt")]
+    #[target_feature(enable = "avx2,fma,popcnt,lzcnt")]
     pub(super) unsafe fn closest_hit_of(
         bvh: &CwBvh,
+        planes: &[ChildPlanes],
         tris: &[RtTriangle],
         ray: &super::Ray,
     ) -> Option<(f32, u32)> {
         let r = Ray::new(ray.origin.into(), ray.dir.into(), ray.tmin, ray.tmax);
-        closest_hit_avx2(bvh, tris, r)
+        closest_hit_avx2(bvh, planes, tris, r)
     }
 
     /// [`any_hit_avx2`] of a renderer ray (see [`closest_hit_of`]).
     ///
     /// # Safety
     /// As [`closest_hit_avx2`].
-    #[target_feature(enable = "avx2,popcnt,lzcnt")]
-    pub(super) unsafe fn any_hit_of(bvh: &CwBvh, tris: &[RtTriangle], ray: &super::Ray) -> bool {
+    #[target_feature(enable = "avx2,fma,popcnt,lzcnt")]
+    pub(super) unsafe fn any_hit_of(
+        bvh: &CwBvh,
+        planes: &[ChildPlanes],
+        tris: &[RtTriangle],
+        ray: &super::Ray,
+    ) -> bool {
         let r = Ray::new(ray.origin.into(), ray.dir.into(), ray.tmin, ray.tmax);
-        any_hit_avx2(bvh, tris, r)
+        any_hit_avx2(bvh, planes, tris, r)
     }
 
     /// obvhs' `oct_inv4`: per byte, the octant bits of the ray direction, inverted.
@@ -1633,7 +1769,8 @@ mod tests {
     use super::*;
 
     /// The AVX2 traversal returns exactly the baseline traversal's hits (t bits and triangle)
-    /// and occlusion answers, from inside and outside a closed mesh plus a plane.
+    /// and occlusion answers, on f32 and on quantised planes, from inside and outside a
+    /// closed mesh plus a plane.
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn avx2_traversal_matches_baseline() {
@@ -1653,6 +1790,7 @@ mod tests {
             .iter()
             .map(|&i| RtTriangle::from(&tris[i as usize]))
             .collect();
+        let decoded = ChildPlanes::of(&bvh);
         let mut rng = crate::render::sampler::Sampler::from_seed(7);
         let (mut hits, mut occluded) = (0, 0);
         for i in 0..20_000 {
@@ -1676,36 +1814,35 @@ mod tests {
             let tmax = if i % 3 == 0 { 1.5 } else { f32::INFINITY };
             let r = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, tmax);
             let base = closest_hit(&bvh, &rt, r);
-            // SAFETY: AVX2 checked above.
-            let fast = unsafe { x86::closest_hit_avx2(&bvh, &rt, r) };
-            assert_eq!(
-                base.map(|(t, id)| (t.to_bits(), id)),
-                fast.map(|(t, id)| (t.to_bits(), id)),
-                "ray {i}"
-            );
             let occ = any_hit(&bvh, &rt, r);
-            // SAFETY: AVX2 checked above.
-            assert_eq!(occ, unsafe { x86::any_hit_avx2(&bvh, &rt, r) }, "ray {i}");
-            // The renderer's entry points, which build the obvhs ray themselves.
+            // The renderer's entry points build the obvhs ray themselves.
             let ray = Ray {
                 origin: o,
                 dir: d,
                 tmin: 0.0,
                 tmax,
             };
-            // SAFETY: AVX2 checked above.
-            let (of, occ_of) = unsafe {
-                (
-                    x86::closest_hit_of(&bvh, &rt, &ray),
-                    x86::any_hit_of(&bvh, &rt, &ray),
-                )
-            };
-            assert_eq!(
-                fast.map(|(t, id)| (t.to_bits(), id)),
-                of.map(|(t, id)| (t.to_bits(), id)),
-                "ray {i}"
-            );
-            assert_eq!(occ, occ_of, "ray {i}");
+            // Nodes tested on f32 planes, and on the quantised ones (large BVHs).
+            for planes in [&decoded[..], &[]] {
+                // SAFETY: AVX2 checked above.
+                let (fast, fast_occ, of, occ_of) = unsafe {
+                    (
+                        x86::closest_hit_avx2(&bvh, planes, &rt, r),
+                        x86::any_hit_avx2(&bvh, planes, &rt, r),
+                        x86::closest_hit_of(&bvh, planes, &rt, &ray),
+                        x86::any_hit_of(&bvh, planes, &rt, &ray),
+                    )
+                };
+                let bits = |h: Option<(f32, u32)>| h.map(|(t, id)| (t.to_bits(), id));
+                let mode = if planes.is_empty() {
+                    "quantised"
+                } else {
+                    "f32"
+                };
+                assert_eq!(bits(base), bits(fast), "{mode} planes, ray {i}");
+                assert_eq!(bits(base), bits(of), "{mode} planes, ray {i}");
+                assert_eq!((occ, occ), (fast_occ, occ_of), "{mode} planes, ray {i}");
+            }
             hits += base.is_some() as u32;
             occluded += occ as u32;
         }
@@ -1975,6 +2112,7 @@ mod tests {
                 (bvh, rt)
             };
             let ((sah, rt_s), (greedy, rt_g)) = (build(Conversion::Sah), build(Conversion::Greedy));
+            let planes_g = ChildPlanes::of(&greedy);
             let mut prims = greedy.primitive_indices.clone();
             prims.sort_unstable();
             assert_eq!(prims, (0..tris.len() as u32).collect::<Vec<_>>());
@@ -1994,8 +2132,8 @@ mod tests {
                 assert_eq!(any_hit(&greedy, &rt_g, r), a.is_some(), "ray {i}");
                 #[cfg(target_arch = "x86_64")]
                 if cpu_has_avx2() {
-                    // SAFETY: AVX2 (and popcnt/lzcnt) checked just above.
-                    let c = unsafe { x86::closest_hit_avx2(&greedy, &rt_g, r) };
+                    // SAFETY: AVX2 (and fma/popcnt/lzcnt) checked just above.
+                    let c = unsafe { x86::closest_hit_avx2(&greedy, &planes_g, &rt_g, r) };
                     assert_eq!(original(c, &greedy), a, "AVX2, ray {i}");
                 }
                 hits += a.is_some() as u32;
@@ -2005,6 +2143,122 @@ mod tests {
                 assert!(hits > 1_000, "{hits} hits");
             }
         }
+    }
+
+    /// The f32 child planes hold what the node test must not miss: each slot's box contains
+    /// every vertex of every triangle under it, on meshes with flat boxes (a quad in a
+    /// plane), far from the origin (coarse f32 spacing), a closed sphere and a random soup.
+    #[test]
+    fn child_planes_contain_what_their_slots_hold() {
+        let mut rng = crate::render::sampler::Sampler::from_seed(11);
+        let mut soup = Vec::new();
+        for _ in 0..3_000 {
+            let c = Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) * 40.0 - 20.0;
+            let mut v = || c + Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d()) - 0.5;
+            soup.push(Triangle {
+                v0: v().into(),
+                v1: v().into(),
+                v2: v().into(),
+            });
+        }
+        let far = |offset: f32| -> Vec<Triangle> {
+            (soup.iter())
+                .map(|t| Triangle {
+                    v0: t.v0 * 1e-3 + offset,
+                    v1: t.v1 * 1e-3 + offset,
+                    v2: t.v2 * 1e-3 + offset,
+                })
+                .collect()
+        };
+        let (far_pos, far_neg) = (far(1e5), far(-1e5));
+        let mut quad = Vec::new();
+        for i in 0..400 {
+            let (x, z) = ((i % 20) as f32 * 0.1, (i / 20) as f32 * 0.1);
+            let p = |dx: f32, dz: f32| Vec3::new(x + dx, 0.25, z + dz).into();
+            quad.push(Triangle {
+                v0: p(0.0, 0.0),
+                v1: p(0.1, 0.0),
+                v2: p(0.0, 0.1),
+            });
+        }
+        let mut inexact_planes = 0;
+        let sphere = obvhs::test_util::geometry::icosphere(4);
+        for tris in [soup, far_pos, far_neg, quad, sphere] {
+            let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+                &tris,
+                obvhs::BvhBuildParams::medium_build(),
+                &mut std::time::Duration::default(),
+            );
+            let planes = ChildPlanes::of(&bvh);
+            // The primitives under slot `slot` of node `n`.
+            fn under(bvh: &CwBvh, n: usize, slot: usize, out: &mut Vec<u32>) {
+                let node = &bvh.nodes[n];
+                let meta = node.child_meta[slot];
+                if meta == 0 {
+                    return;
+                }
+                if node.is_leaf(slot) {
+                    let (first, count) = ((meta & 0b11111) as u32, (meta >> 5).count_ones());
+                    let base = node.primitive_base_idx + first;
+                    out.extend((base..base + count).map(|j| bvh.primitive_indices[j as usize]));
+                } else {
+                    let below = (node.imask & ((1u8 << slot) - 1)).count_ones();
+                    let child = (node.child_base_idx + below) as usize;
+                    for s in 0..8 {
+                        under(bvh, child, s, out);
+                    }
+                }
+            }
+            let mut ids = Vec::new();
+            let (mut checked, mut inexact) = (0usize, 0usize);
+            for (n, rows) in planes.iter().enumerate() {
+                // Each plane is on the outer side of the quantised one (exact in f64).
+                let node = &bvh.nodes[n];
+                let e = node.compute_extent().to_array();
+                let p = node.p.to_array();
+                let q = [
+                    &node.child_min_x,
+                    &node.child_max_x,
+                    &node.child_min_y,
+                    &node.child_max_y,
+                    &node.child_min_z,
+                    &node.child_max_z,
+                ];
+                for (row, q) in q.iter().enumerate() {
+                    for slot in (0..8).filter(|&j| node.child_meta[j] != 0) {
+                        let (k, exact) = (row / 2, rows.0[row][slot] as f64);
+                        let quantised = p[k] as f64 + q[slot] as f64 * e[k] as f64;
+                        inexact += usize::from(exact != quantised);
+                        if row % 2 == 0 {
+                            assert!(exact <= quantised, "node {n} row {row} slot {slot}");
+                        } else {
+                            assert!(exact >= quantised, "node {n} row {row} slot {slot}");
+                        }
+                    }
+                }
+                for slot in 0..8 {
+                    ids.clear();
+                    under(&bvh, n, slot, &mut ids);
+                    for &id in &ids {
+                        let t = &tris[id as usize];
+                        for v in [t.v0, t.v1, t.v2] {
+                            let v = [v.x as f64, v.y as f64, v.z as f64];
+                            assert!(
+                                (0..3).all(|k| rows.0[2 * k][slot] as f64 <= v[k]
+                                    && rows.0[2 * k + 1][slot] as f64 >= v[k]),
+                                "node {n} slot {slot}: vertex {v:?} outside its box"
+                            );
+                            checked += 1;
+                        }
+                    }
+                }
+            }
+            // Every triangle is under the root's slots, and again under each deeper node.
+            assert!(checked >= 3 * tris.len(), "{checked} vertices checked");
+            inexact_planes += inexact;
+        }
+        // The far meshes' planes are not all f32 numbers: the rounding was exercised.
+        assert!(inexact_planes > 0);
     }
 
     /// Axis-aligned rays onto an axis-aligned flat quad (a zero-thickness box, infinite

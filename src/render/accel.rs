@@ -2145,6 +2145,72 @@ mod tests {
         }
     }
 
+    /// Packet traversals (coherent rays: one camera's neighbouring directions, and bundles
+    /// reflected off one spot) find obvhs' single-ray closest hits, bit for bit, on a mesh
+    /// whose BVH has f32 planes and on the same BVH without them (as a large mesh's).
+    #[test]
+    fn packets_find_the_single_ray_hits_on_both_kinds_of_planes() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/teapot_diffuse.xml");
+        let scene = crate::scene::load(&path, &[]).unwrap();
+        let (mut accel, _) = Accel::build(&scene, 1 << 24).unwrap();
+        if !accel.avx2 {
+            eprintln!("no AVX2 on this CPU: no packet traversal");
+            return;
+        }
+        assert!(!accel.is_small() && !accel.planes.is_empty());
+        let (lo, hi) = accel.rt_tris.iter().fold(
+            (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+            |(lo, hi), t| (lo.min(t.v0.into()), hi.max(t.v0.into())),
+        );
+        let mut rng = crate::render::sampler::Sampler::from_seed(3);
+        let mut rays = Vec::new();
+        for bundle in 0..400 {
+            // A bundle of 16 rays from near one point towards near one point of the mesh.
+            let mut u = || Vec3::new(rng.next_1d(), rng.next_1d(), rng.next_1d());
+            let (from, to) = (lo + (hi - lo) * (u() * 3.0 - 1.0), lo + (hi - lo) * u());
+            let spread = (hi - lo).length() * if bundle % 2 == 0 { 0.01 } else { 0.1 };
+            for i in 0..16 {
+                let origin = from + (u() - 0.5) * spread * 0.1;
+                let dir = (to + (u() - 0.5) * spread - origin).normalize();
+                let tmax = if i % 5 == 0 {
+                    0.5 * (to - from).length()
+                } else {
+                    f32::INFINITY
+                };
+                rays.push(Ray {
+                    origin,
+                    dir,
+                    tmin: 0.0,
+                    tmax,
+                });
+            }
+        }
+        let key = |h: Option<(f32, u32)>| h.map(|(t, id)| (t.to_bits(), id));
+        let bvh = accel.bvh.clone().unwrap();
+        let single: Vec<_> = (rays.iter())
+            .map(|r| {
+                let o = obvhs::ray::Ray::new(r.origin.into(), r.dir.into(), r.tmin, r.tmax);
+                key(closest_hit(&bvh, &accel.rt_tris, o))
+            })
+            .collect();
+        assert!(single.iter().filter(|h| h.is_some()).count() > 1_000);
+        for planes in ["f32", "quantised"] {
+            if planes == "quantised" {
+                accel.planes.clear();
+            }
+            let mut hits = Vec::new();
+            accel.intersect_batch(&rays, &mut hits);
+            for (i, (h, s)) in hits.iter().zip(&single).enumerate() {
+                let h = h.map(|h| match h.prim {
+                    Prim::Triangle(id) => (h.t, id),
+                    Prim::Sphere(_) => unreachable!("no spheres in the scene"),
+                });
+                assert_eq!(key(h), *s, "{planes} planes, ray {i}");
+            }
+        }
+    }
+
     /// The f32 child planes hold what the node test must not miss: each slot's box contains
     /// every vertex of every triangle under it, on meshes with flat boxes (a quad in a
     /// plane), far from the origin (coarse f32 spacing), a closed sphere and a random soup.

@@ -1396,16 +1396,21 @@ mod x86 {
             let plane = unsafe { _mm256_load_ps(planes.0.get_unchecked(row).as_ptr()) };
             _mm256_fmadd_ps(plane, ray.inv[axis], ray.neg_o_inv[axis])
         };
-        let near = |k: usize| cross(ray.near[k], k);
-        let far = |k: usize| cross(ray.far[k], k);
-        let tmin = _mm256_max_ps(
-            _mm256_max_ps(near(0), near(1)),
-            _mm256_max_ps(near(2), _mm256_set1_ps(NODE_EPSILON)),
-        );
-        let tmax = _mm256_min_ps(
-            _mm256_min_ps(far(0), far(1)),
-            _mm256_min_ps(far(2), _mm256_set1_ps(ray_tmax)),
-        );
+        let near = std::array::from_fn(|k| cross(ray.near[k], k));
+        let far = std::array::from_fn(|k| cross(ray.far[k], k));
+        overlapping_slots(near, far, ray_tmax)
+    }
+
+    /// The slots whose slab interval, from the latest of the `near` crossings to the
+    /// earliest `far` one (per axis x, y, z), overlaps [`NODE_EPSILON`, `ray_tmax`]: obvhs'
+    /// reduction order (the crossings are finite, so max/min are exact in any order).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn overlapping_slots(near: [__m256; 3], far: [__m256; 3], ray_tmax: f32) -> u32 {
+        let tmin = _mm256_max_ps(near[0], _mm256_max_ps(near[1], near[2]));
+        let tmax = _mm256_min_ps(far[0], _mm256_min_ps(far[1], far[2]));
+        let tmin = _mm256_max_ps(tmin, _mm256_set1_ps(NODE_EPSILON));
+        let tmax = _mm256_min_ps(tmax, _mm256_set1_ps(ray_tmax));
         _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32
     }
 
@@ -1440,11 +1445,7 @@ mod x86 {
         let (tmin_x, tmax_x) = slab(0, adj_dir_inv.x, adj_orig.x);
         let (tmin_y, tmax_y) = slab(1, adj_dir_inv.y, adj_orig.y);
         let (tmin_z, tmax_z) = slab(2, adj_dir_inv.z, adj_orig.z);
-        let tmin = _mm256_max_ps(tmin_x, _mm256_max_ps(tmin_y, tmin_z));
-        let tmax = _mm256_min_ps(tmax_x, _mm256_min_ps(tmax_y, tmax_z));
-        let tmin = _mm256_max_ps(tmin, _mm256_set1_ps(NODE_EPSILON));
-        let tmax = _mm256_min_ps(tmax, _mm256_set1_ps(ray_tmax));
-        _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OS>(tmin, tmax)) as u32
+        overlapping_slots([tmin_x, tmin_y, tmin_z], [tmax_x, tmax_y, tmax_z], ray_tmax)
     }
 
     /// obvhs' node hit mask (child node bits in the high byte in traversal order, leaf

@@ -96,7 +96,7 @@ impl Accel {
     ///
     /// `beside` runs on another thread while the BVH is built: set-up work that needs only
     /// the triangles' vertices (the camera's screen bins: ~11 ms for the 36k-triangle teapot
-    /// at 256²) overlaps the build's serial stages (obvhs' CWBVH conversion). It sees the
+    /// at 256²) overlaps the build's serial stages (the CWBVH conversion). It sees the
     /// triangles in scene order; [`Self::bvh_order`] maps them to the BVH's ids.
     pub fn build_beside<R: Send>(
         scene: &Scene,
@@ -844,12 +844,7 @@ fn build_bvh(
     );
     bvh2.parents = Vec::new();
     let mut bvh = match effort.conversion {
-        Conversion::Sah => obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(
-            &bvh2,
-            params.max_prims_per_leaf.clamp(1, 3),
-            true,
-            false,
-        ),
+        Conversion::Sah => super::bvh_sah::convert(&bvh2, params.max_prims_per_leaf.clamp(1, 3)),
         Conversion::Greedy => super::bvh_collapse::collapse(&bvh2),
     };
     // The node array was reserved at one node per triangle (80 bytes each); ~1/8 is used.
@@ -903,7 +898,8 @@ struct BuildEffort {
 /// How the BVH2 becomes a CWBVH.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Conversion {
-    /// obvhs' converter: children chosen by SAH dynamic programming and ordered by octant.
+    /// obvhs' converter ([`super::bvh_sah`]: its output, ordered faster): children chosen by
+    /// SAH dynamic programming and ordered by octant.
     Sah,
     /// [`super::bvh_collapse`]: open the largest child, no cost table, no ordering.
     Greedy,
@@ -918,9 +914,11 @@ enum Conversion {
 /// samples per triangle, whose build is a small part of them whatever it costs. Its
 /// reinsertion pass grows faster than the triangle count (2M-triangle sphere: 4.3 s of CPU
 /// against 1.9 s for the whole render with fast_build at 256², 4 spp). Below two samples per
-/// triangle the children are not ordered either: the ordering (a fifth of the conversion)
-/// saved less render time than it cost (2M-triangle sphere, 256², 4 spp: 1.93–2.24 s of CPU
-/// for the whole render without, 2.24–2.44 s with). A closest hit does not depend on the BVH
+/// triangle the children are not ordered either: the ordering (then obvhs' own, a fifth of
+/// the conversion; with [`super::bvh_sah`]'s the 36k teapot converts in 8 ms, not 28) saved less render time than it
+/// cost (2M-triangle sphere, 256², 4 spp: 1.93–2.24 s of CPU for the whole render without,
+/// 2.24–2.44 s with), and the SAH conversion's cost table is the build's peak memory
+/// ([`super::bvh_collapse`]). A closest hit does not depend on the BVH
 /// except at exact ties (smaller id in BVH order), so this trades time, not images.
 fn build_effort(samples: u64, tris: usize) -> BuildEffort {
     let per_tri = samples as f64 / tris.max(1) as f64;

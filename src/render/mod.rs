@@ -16,6 +16,7 @@ pub mod accel;
 pub mod batch;
 pub mod bsdf;
 mod bvh_collapse;
+mod bvh_sah;
 pub mod camera;
 pub mod counters;
 pub mod effects;

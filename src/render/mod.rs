@@ -514,6 +514,19 @@ struct StartedBatch {
     lanes: std::ops::Range<usize>,
 }
 
+impl StartedBatch {
+    /// A slot of the wavefront, filled by [`start_batch`] (in place: see
+    /// [`batch::CameraBatch::generate`]).
+    fn empty() -> Self {
+        StartedBatch {
+            cam: batch::CameraBatch::empty(),
+            radiance: [[0.0; BATCH]; 4],
+            hit_index: [0; BATCH],
+            lanes: 0..0,
+        }
+    }
+}
+
 /// What [`trace_batches`] keeps between calls (one per thread).
 struct WaveScratch<C> {
     paths: integrator::PathScratch<C>,
@@ -560,11 +573,12 @@ fn trace_batches<C: Carrier>(
     } = scratch;
     paths.lanes.clear();
     paths.first_hits.clear();
-    started.clear();
-    started.extend(
-        jobs.iter()
-            .map(|job| start_batch(scene, setup, job, paths, rays, hits)),
-    );
+    if started.len() < jobs.len() {
+        started.resize_with(jobs.len(), StartedBatch::empty);
+    }
+    for (job, s) in jobs.iter().zip(started.iter_mut()) {
+        start_batch(scene, setup, job, paths, rays, hits, s);
+    }
     if !paths.lanes.is_empty() {
         integrator::trace_lanes(scene, setup, paths);
     }
@@ -617,9 +631,9 @@ fn camera_hits(
     first_hits
 }
 
-/// The first stages of [`trace_batches`] for one camera batch: camera samples, first hits
-/// ([`camera_hits`]), the environment of escaped rays; the samples that hit become lanes of
-/// `paths`.
+/// The first stages of [`trace_batches`] for one camera batch, into `out`: camera samples,
+/// first hits ([`camera_hits`]), the environment of escaped rays; the samples that hit
+/// become lanes of `paths`.
 fn start_batch<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
@@ -627,9 +641,16 @@ fn start_batch<C: Carrier>(
     paths: &mut integrator::PathScratch<C>,
     rays: &mut Vec<camera::Ray>,
     hits: &mut Vec<Option<accel::Hit>>,
-) -> StartedBatch {
+    out: &mut StartedBatch,
+) {
     let m = span.lanes();
-    let cam = batch::CameraBatch::generate(
+    let StartedBatch {
+        cam,
+        radiance,
+        hit_index,
+        lanes,
+    } = out;
+    cam.generate(
         &scene.camera,
         scene.sampler,
         scene.seed,
@@ -637,12 +658,12 @@ fn start_batch<C: Carrier>(
         [scene.width, scene.height],
         !scene.effects.dispersion,
     );
-    let hits = camera_hits(scene, span, &cam, rays, hits);
+    let hits = camera_hits(scene, span, cam, rays, hits);
     // Rays that escape see the infinite lights (one batch of lookups, straight on the camera
     // batch's lanes); the others start paths.
-    let mut radiance = [[0.0f32; BATCH]; 4];
+    *radiance = [[0.0f32; BATCH]; 4];
     let mut escaped = [false; BATCH];
-    let mut hit_index = [0usize; BATCH];
+    *hit_index = [0usize; BATCH];
     let first_lane = paths.lanes.len();
     for i in 0..m {
         match hits[i] {
@@ -667,7 +688,7 @@ fn start_batch<C: Carrier>(
             &cam.lambda,
             &cam.d65_lanes(),
             &escaped,
-            &mut radiance,
+            radiance,
         );
         let pass = C::direct_view(setup);
         if pass != 1.0 {
@@ -680,12 +701,7 @@ fn start_batch<C: Carrier>(
             }
         }
     }
-    StartedBatch {
-        cam,
-        radiance,
-        hit_index,
-        lanes: first_lane..paths.lanes.len(),
-    }
+    *lanes = first_lane..paths.lanes.len();
 }
 
 /// The last stage of [`trace_batches`] for one camera batch: its samples' film values from

@@ -5,9 +5,10 @@
 //! ([`BatchSpan`]) — share their row and camera origin, and their camera steps are the same
 //! arithmetic on different numbers: sample numbers
 //! ([`PixelSampler::camera_samples`]), hero wavelengths, film positions, ray directions
-//! ([`super::camera::PerspectiveCamera::generate_rays`]) and the colour-matching rows of their wavelengths.
-//! Written as loops over lanes, each step compiles to SIMD (16 lanes are one AVX-512 or two
-//! AVX2 registers). A lane's values do not depend on the other lanes (test
+//! ([`super::camera::PerspectiveCamera::generate_rays`]). Written as loops over lanes, each
+//! step compiles to SIMD (16 lanes are one AVX-512 or two AVX2 registers); the
+//! colour-matching rows of their wavelengths are table rows, interpolated four channels at a
+//! time. A lane's values do not depend on the other lanes (test
 //! `render::tests::samples_do_not_depend_on_their_batch`: bit for bit against each sample
 //! traced alone).
 //!
@@ -99,9 +100,12 @@ pub struct CameraBatch {
     /// The four wavelengths (nm) and their pdfs, `[k][lane]`.
     pub lambda: [Lanes; 4],
     pub pdf: [Lanes; 4],
-    /// (r̄, ḡ, b̄, D65) at wavelength k: `rows[k][channel][lane]`
-    /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]).
-    pub rows: [[Lanes; 4]; 4],
+    /// (r̄, ḡ, b̄, D65) at wavelength k: `rows[k][lane]`
+    /// ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]). One interpolated table row per
+    /// wavelength, kept as a row: the lerp is one 4-wide operation, and the film sums rows
+    /// (spread over channel lanes, with a 4 × 4 transpose per four lanes, the lookups were
+    /// ~a quarter of a render of camera rays that see only the environment).
+    pub rows: [[[f32; 4]; BATCH]; 4],
     /// The camera rays.
     pub rays: PixelRays,
     /// Per-lane ray origins for cameras without a single pinhole (thin lens, orthographic;
@@ -120,7 +124,7 @@ impl CameraBatch {
             pos: [[0.0; BATCH]; 2],
             lambda: [[0.0; BATCH]; 4],
             pdf: [[0.0; BATCH]; 4],
-            rows: [[[0.0; BATCH]; 4]; 4],
+            rows: [[[0.0; 4]; BATCH]; 4],
             rays: PixelRays {
                 origin: glam::Vec3::ZERO,
                 dir: [[0.0; BATCH]; 3],
@@ -193,7 +197,9 @@ impl CameraBatch {
         }
         (self.lambda, self.pdf) = sample_visible_wavelengths(&u);
         for (rows, lambda) in self.rows.iter_mut().zip(&self.lambda) {
-            *rows = crate::spectrum::sampled::rgb_cmf_d65_f32_lanes(lambda);
+            for (row, &l) in rows.iter_mut().zip(lambda) {
+                *row = crate::spectrum::sampled::rgb_cmf_d65_f32(l);
+            }
         }
         let mut film_uv = [[0.0f32; BATCH]; 2];
         let size = [width as f32, height as f32];
@@ -254,46 +260,44 @@ impl CameraBatch {
     #[inline]
     pub fn d65(&self, i: usize) -> Spec {
         Spec::new(
-            self.rows[0][3][i],
-            self.rows[1][3][i],
-            self.rows[2][3][i],
-            self.rows[3][3][i],
+            self.rows[0][i][3],
+            self.rows[1][i][3],
+            self.rows[2][i][3],
+            self.rows[3][i][3],
         )
     }
 
     /// D65 factors of every lane, `[k][lane]`.
     #[inline]
     pub fn d65_lanes(&self) -> [Lanes; 4] {
-        [
-            self.rows[0][3],
-            self.rows[1][3],
-            self.rows[2][3],
-            self.rows[3][3],
-        ]
+        self.rows.map(|rows| rows.map(|row| row[3]))
     }
 
     /// Linear sRGB of every lane's spectral radiance (`l[k][lane]`, wavelength pdfs
-    /// `pdf[k][lane]`: the batch's, or fewer after a dispersive refraction), `[channel][lane]`:
+    /// `pdf[k][lane]`: the batch's, or fewer after a dispersive refraction), `[lane][channel]`:
     /// Σ_k rgb̄(λ_k)·L_k/p_k over the wavelengths with p_k > 0, per lane the operations of
     /// [`crate::spectrum::spectrum_to_linear_srgb`], so the same values bit for bit
     /// (a skipped wavelength adds +0 to a sum that starts at +0).
     #[inline]
-    pub fn to_rgb_lanes(&self, l: &[Lanes; 4], pdf: &[Lanes; 4]) -> [Lanes; 3] {
-        let mut rgb = [[0.0f32; BATCH]; 3];
+    pub fn to_rgb_lanes(&self, l: &[Lanes; 4], pdf: &[Lanes; 4]) -> [[f32; 3]; BATCH] {
+        let mut s = [[0.0f32; BATCH]; 4];
         for k in 0..4 {
-            let mut s = [0.0f32; BATCH];
             for i in 0..BATCH {
-                s[i] = if pdf[k][i] == 0.0 {
+                s[k][i] = if pdf[k][i] == 0.0 {
                     0.0
                 } else {
                     l[k][i] / pdf[k][i]
                 };
             }
-            for (c, rgb) in rgb.iter_mut().enumerate() {
-                for i in 0..BATCH {
-                    rgb[i] += self.rows[k][c][i] * s[i];
-                }
+        }
+        let mut rgb = [[0.0f32; 3]; BATCH];
+        for (i, rgb) in rgb.iter_mut().enumerate() {
+            // One row of (r̄, ḡ, b̄, D65) times L/p per wavelength, summed in wavelength order.
+            let mut sum = glam::Vec4::ZERO;
+            for (rows, s) in self.rows.iter().zip(&s) {
+                sum += glam::Vec4::from(rows[i]) * s[i];
             }
+            *rgb = sum.truncate().to_array();
         }
         rgb
     }
@@ -421,6 +425,51 @@ mod tests {
             for k in 0..4 {
                 assert_eq!(lambda[k][i].to_bits(), l1[k][0].to_bits());
                 assert_eq!(pdf[k][i].to_bits(), p1[k][0].to_bits());
+            }
+        }
+    }
+
+    /// A batch's rows are the one-wavelength table lookups of its samples' wavelengths, and
+    /// its film values are [`crate::spectrum::spectrum_to_linear_srgb`] of each lane bit for
+    /// bit: radiances of every magnitude, zero, and wavelengths whose pdf was zeroed (a
+    /// dispersive refraction's).
+    #[test]
+    fn film_values_are_the_spectrum_module_s() {
+        let scene = crate::figure::teapot_scene(&Default::default());
+        let camera = Camera::new(&scene.camera, 64, 48).unwrap();
+        let mut cam = CameraBatch::empty();
+        let mut rng = Sampler::from_seed(17);
+        for (round, y) in (0..48).step_by(5).enumerate() {
+            let span = BatchSpan {
+                x0: 3 * y,
+                y,
+                pixels: 1 + round as u32 % 3,
+                first: 7 * y,
+                len: 5,
+            };
+            let kind = [SamplerKind::Independent, SamplerKind::Sobol][round % 2];
+            cam.generate(&camera, kind, 5, &span, [64, 48], round % 3 != 0);
+            let mut l = [[0.0f32; BATCH]; 4];
+            let mut pdf = cam.pdf;
+            for k in 0..4 {
+                for i in 0..BATCH {
+                    l[k][i] = [0.0, 1e-30, 0.37, 12.5, 3e4][(i + k) % 5] * rng.next_1d();
+                    if rng.next_1d() < 0.2 {
+                        pdf[k][i] = 0.0;
+                    }
+                }
+            }
+            let rgb = cam.to_rgb_lanes(&l, &pdf);
+            for i in 0..BATCH {
+                let lambda = [0, 1, 2, 3].map(|k| cam.lambda[k][i]);
+                for (k, &lambda) in lambda.iter().enumerate() {
+                    let one = crate::spectrum::sampled::rgb_cmf_d65_f32(lambda);
+                    assert_eq!(cam.rows[k][i].map(f32::to_bits), one.map(f32::to_bits));
+                }
+                let wl = SampledWavelengths::new(lambda, [0, 1, 2, 3].map(|k| pdf[k][i]));
+                let l = Spec::new(l[0][i], l[1][i], l[2][i], l[3][i]);
+                let one = crate::spectrum::spectrum_to_linear_srgb(l, &wl);
+                assert_eq!(rgb[i].map(f32::to_bits), one.map(f32::to_bits), "lane {i}");
             }
         }
     }

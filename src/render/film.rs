@@ -1,7 +1,7 @@
 //! The film: spectral samples → linear sRGB, pixel reconstruction and exact-merge accumulation.
 //!
 //! Each sample's spectrum becomes linear sRGB through the RGB matching functions
-//! ([`crate::spectrum::sampled::rgb_cmf_d65_f32_lanes`]: the mean over the four wavelengths of
+//! ([`crate::spectrum::sampled::rgb_cmf_d65_f32`]: the mean over the four wavelengths of
 //! cmf·L/pdf, Mitsuba/pbrt-v4; Rec.709, D65, no adaptation, no clamping;
 //! `docs/physics-and-formats.md`, "Film").
 //!

@@ -723,7 +723,7 @@ fn finish_batch<C: Carrier>(
     }
     let rgb = s.cam.to_rgb_lanes(&radiance, &pdf);
     for (i, o) in out.iter_mut().enumerate() {
-        let rgb = finite_rgb([rgb[0][i], rgb[1][i], rgb[2][i]]);
+        let rgb = finite_rgb(rgb[i]);
         *o = (Vec2::new(s.cam.pos[0][i], s.cam.pos[1][i]), rgb);
     }
 }

@@ -82,51 +82,6 @@ pub fn rgb_cmf_d65_f32(lambda_nm: f32) -> [f32; 4] {
     lerp_table(&RGB_CMF_F32, lambda_nm).to_array()
 }
 
-/// [`rgb_cmf_d65_f32`] for `N` wavelengths at once, `[channel][lane]`: the same index,
-/// weight and lerp operations per lane (so the same values bit for bit), written as loops
-/// over lanes so that the index arithmetic and the lerps compile to SIMD.
-#[inline]
-pub fn rgb_cmf_d65_f32_lanes<const N: usize>(lambda_nm: &[f32; N]) -> [[f32; N]; 4] {
-    let n = super::N_TABLE_NM;
-    let x: [f32; N] = std::array::from_fn(|i| lambda_nm[i] - LAMBDA_MIN_NM as f32);
-    let inside: [bool; N] = std::array::from_fn(|i| x[i] >= 0.0 && x[i] <= (n - 1) as f32);
-    let index: [u32; N] = std::array::from_fn(|i| {
-        if inside[i] {
-            (x[i] as i32 as u32).min(n as u32 - 2)
-        } else {
-            0
-        }
-    });
-    let t: [f32; N] = std::array::from_fn(|i| x[i] - index[i] as f32);
-    let row = |i: usize| {
-        let a = glam::Vec4::from(RGB_CMF_F32[index[i] as usize]);
-        let b = glam::Vec4::from(RGB_CMF_F32[index[i] as usize + 1]);
-        if inside[i] {
-            a + (b - a) * t[i]
-        } else {
-            glam::Vec4::ZERO
-        }
-    };
-    let mut out = [[0.0f32; N]; 4];
-    let mut i = 0;
-    // Four lanes' rows at a time, transposed in registers (a 4×4 shuffle) into the channels.
-    while i + 4 <= N {
-        let m = glam::Mat4::from_cols(row(i), row(i + 1), row(i + 2), row(i + 3)).transpose();
-        for (c, out) in out.iter_mut().enumerate() {
-            out[i..i + 4].copy_from_slice(&m.col(c).to_array());
-        }
-        i += 4;
-    }
-    while i < N {
-        let r = row(i);
-        for (c, out) in out.iter_mut().enumerate() {
-            out[i] = r[c];
-        }
-        i += 1;
-    }
-    out
-}
-
 /// Wavelengths carried by one path.
 pub const N_SPECTRUM_SAMPLES: usize = 4;
 
@@ -261,25 +216,6 @@ mod tests {
             let a = rgb_cmf_d65_f32(lambda)[3];
             let b = cmf_d65_f32(lambda)[3];
             assert_eq!(a.to_bits(), b.to_bits(), "λ = {lambda}");
-        }
-        // And the lane version is the one-λ version, in range, at its ends and outside.
-        let mut lambdas = [0.0f32; 8];
-        for i in 0..=2000 {
-            for (j, l) in lambdas.iter_mut().enumerate() {
-                *l = 355.0 + (i * 8 + j) as f32 * 0.0297;
-            }
-            lambdas[7] = [360.0, 830.0, f32::NAN, 829.9999][i % 4];
-            let rows = rgb_cmf_d65_f32_lanes(&lambdas);
-            for (j, &l) in lambdas.iter().enumerate() {
-                let one = rgb_cmf_d65_f32(l);
-                for c in 0..4 {
-                    assert_eq!(
-                        rows[c][j].to_bits(),
-                        one[c].to_bits(),
-                        "λ = {l}, channel {c}"
-                    );
-                }
-            }
         }
     }
 

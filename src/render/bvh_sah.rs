@@ -149,10 +149,16 @@ fn order_children(bvh2: &Bvh2, parent: usize, children: &mut [u32; 8], count: us
     }
     let mut slot_of = [usize::MAX; 8];
     for _ in 0..count {
-        // Branch-free minimum, then the first pair that holds it.
-        let least = cost
-            .iter()
-            .fold(f32::INFINITY, |m, &x| if x < m { x } else { m });
+        // Branch-free minimum, slot by slot over the children (eight independent minima in
+        // SIMD lanes, not one chain of 64), then the first pair that holds it. No cost is NaN,
+        // so the order the minimum is taken in does not change it (±0 compare equal below).
+        let mut per_slot = [f32::INFINITY; 8];
+        for row in cost.chunks_exact(8) {
+            for (m, &x) in per_slot.iter_mut().zip(row) {
+                *m = if x < *m { x } else { *m };
+            }
+        }
+        let least = (per_slot.iter()).fold(f32::INFINITY, |m, &x| if x < m { x } else { m });
         if least == f32::INFINITY {
             break;
         }

@@ -915,10 +915,10 @@ enum Conversion {
 /// reinsertion pass grows faster than the triangle count (2M-triangle sphere: 4.3 s of CPU
 /// against 1.9 s for the whole render with fast_build at 256², 4 spp). Below two samples per
 /// triangle the children are not ordered either: the ordering (then obvhs' own, a fifth of
-/// the conversion; with [`super::bvh_sah`]'s the 36k teapot converts in 8 ms, not 28) saved less render time than it
-/// cost (2M-triangle sphere, 256², 4 spp: 1.93–2.24 s of CPU for the whole render without,
-/// 2.24–2.44 s with), and the SAH conversion's cost table is the build's peak memory
-/// ([`super::bvh_collapse`]). A closest hit does not depend on the BVH
+/// the conversion; with [`super::bvh_sah`]'s the 36k teapot converts in 8 ms, not 28) saved
+/// less render time than it cost (2M-triangle sphere, 256², 4 spp: 1.93–2.24 s of CPU for
+/// the whole render without, 2.24–2.44 s with), and the SAH conversion's cost table is the
+/// build's peak memory ([`super::bvh_collapse`]). A closest hit does not depend on the BVH
 /// except at exact ties (smaller id in BVH order), so this trades time, not images.
 fn build_effort(samples: u64, tris: usize) -> BuildEffort {
     let per_tri = samples as f64 / tris.max(1) as f64;

@@ -13,7 +13,8 @@
 //! The layout is obvhs' (node quantisation, child metadata, contiguous interior children
 //! and leaf primitives), so the renderer's CWBVH traversals run on it unchanged; children
 //! are not ordered by octant. Any BVH over the same triangles gives the same closest hits
-//! (test `greedy_collapse_finds_the_hits_of_obvhs_conversion`).
+//! (test `greedy_collapse_finds_the_hits_of_obvhs_conversion`). The node encoding (grid,
+//! child boxes, leaf metadata) is shared with the SAH conversion ([`super::bvh_sah`]).
 
 use glam::Vec3A;
 use obvhs::bvh2::Bvh2;
@@ -115,46 +116,17 @@ fn fill_node(
     slots: &[u32],
 ) -> Vec<(usize, usize)> {
     let aabb = bvh2.nodes[node2].aabb();
-    let mut node = CwBvhNode {
-        p: aabb.min.into(),
-        ..Default::default()
-    };
-    // Per-axis scale: a power of two so the quantised boxes stay conservative (obvhs'
-    // `convert_to_cwbvh_impl`).
-    let e = ((aabb.max - aabb.min).max(Vec3A::splat(1e-20)) * DENOM)
-        .log2()
-        .ceil()
-        .exp2();
-    let rcp_e = 1.0 / e;
-    node.e = e.to_array().map(|c| (c.to_bits() >> 23) as u8);
+    let mut node = CwBvhNode::default();
+    let rcp_e = set_grid(&mut node, aabb);
     node.primitive_base_idx = out.primitive_indices.len() as u32;
     node.child_base_idx = out.nodes.len() as u32;
     let mut interior = Vec::new();
     let mut prims_in_node = 0u8;
     for (i, &c) in slots.iter().enumerate() {
-        let child = bvh2.nodes[c as usize].aabb();
-        let lo = ((child.min - aabb.min) * rcp_e)
-            .floor()
-            .clamp(Vec3A::ZERO, Vec3A::splat(255.0));
-        let hi = ((child.max - aabb.min) * rcp_e)
-            .ceil()
-            .clamp(Vec3A::ZERO, Vec3A::splat(255.0));
-        (
-            node.child_min_x[i],
-            node.child_min_y[i],
-            node.child_min_z[i],
-        ) = (lo.x as u8, lo.y as u8, lo.z as u8);
-        (
-            node.child_max_x[i],
-            node.child_max_y[i],
-            node.child_max_z[i],
-        ) = (hi.x as u8, hi.y as u8, hi.z as u8);
+        set_child_box(&mut node, i, bvh2.nodes[c as usize].aabb(), aabb.min, rcp_e);
         if small[c as usize] <= MAX_LEAF_PRIMS {
-            let before = out.primitive_indices.len();
-            push_primitives(bvh2, c, &mut out.primitive_indices);
-            let n = (out.primitive_indices.len() - before) as u8;
-            // Unary primitive count in the top three bits, offset in the low five.
-            node.child_meta[i] = prims_in_node | (((1u8 << n) - 1) << 5);
+            let n = push_primitives(bvh2, c, &mut out.primitive_indices);
+            node.child_meta[i] = leaf_meta(prims_in_node, n);
             prims_in_node += n;
         } else {
             node.imask |= 1 << i;
@@ -168,14 +140,71 @@ fn fill_node(
     interior
 }
 
-/// Appends the primitives of BVH2 subtree `c` (at most three) in left-to-right order.
-fn push_primitives(bvh2: &Bvh2, c: u32, prims: &mut Vec<u32>) {
+/// Appends the primitives of BVH2 subtree `c` (at most three) in left-to-right order and
+/// returns how many.
+pub(super) fn push_primitives(bvh2: &Bvh2, c: u32, prims: &mut Vec<u32>) -> u8 {
+    let before = prims.len();
+    push_subtree(bvh2, c, prims);
+    (prims.len() - before) as u8
+}
+
+fn push_subtree(bvh2: &Bvh2, c: u32, prims: &mut Vec<u32>) {
     let node = &bvh2.nodes[c as usize];
     if node.is_leaf() {
         let first = node.first_index as usize;
         prims.extend_from_slice(&bvh2.primitive_indices[first..first + node.prim_count as usize]);
     } else {
-        push_primitives(bvh2, node.first_index, prims);
-        push_primitives(bvh2, node.first_index + 1, prims);
+        push_subtree(bvh2, node.first_index, prims);
+        push_subtree(bvh2, node.first_index + 1, prims);
     }
+}
+
+/// A leaf slot's metadata: the unary count of its `n` (1–3) primitives in the top three
+/// bits, the offset of its first among the node's primitives in the low five.
+pub(super) fn leaf_meta(offset: u8, n: u8) -> u8 {
+    assert!(
+        (1..=MAX_LEAF_PRIMS).contains(&n),
+        "a CWBVH leaf slot holds 1–3 primitives, not {n}"
+    );
+    offset | (((1u8 << n) - 1) << 5)
+}
+
+/// Sets `node`'s quantisation grid over `aabb` and returns 1/e (obvhs'
+/// `convert_to_cwbvh_impl`): origin p = the box's minimum, per axis the smallest power of
+/// two e whose 255 steps span the box, so that the quantised child boxes stay conservative.
+pub(super) fn set_grid(node: &mut CwBvhNode, aabb: &obvhs::aabb::Aabb) -> Vec3A {
+    node.p = aabb.min.into();
+    let e = ((aabb.max - aabb.min).max(Vec3A::splat(1e-20)) * DENOM)
+        .log2()
+        .ceil()
+        .exp2();
+    node.e = e.to_array().map(|c| (c.to_bits() >> 23) as u8);
+    1.0 / e
+}
+
+/// Slot `i`'s box `child` on the node's grid (origin `p`, steps 1/`rcp_e`), rounded
+/// outwards and clamped to the 8-bit range.
+pub(super) fn set_child_box(
+    node: &mut CwBvhNode,
+    i: usize,
+    child: &obvhs::aabb::Aabb,
+    p: Vec3A,
+    rcp_e: Vec3A,
+) {
+    let lo = ((child.min - p) * rcp_e)
+        .floor()
+        .clamp(Vec3A::ZERO, Vec3A::splat(255.0));
+    let hi = ((child.max - p) * rcp_e)
+        .ceil()
+        .clamp(Vec3A::ZERO, Vec3A::splat(255.0));
+    (
+        node.child_min_x[i],
+        node.child_min_y[i],
+        node.child_min_z[i],
+    ) = (lo.x as u8, lo.y as u8, lo.z as u8);
+    (
+        node.child_max_x[i],
+        node.child_max_y[i],
+        node.child_max_z[i],
+    ) = (hi.x as u8, hi.y as u8, hi.z as u8);
 }

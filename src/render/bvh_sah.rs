@@ -14,13 +14,11 @@
 //! critical path. Here the 64 costs are computed once into one array and each pick is a
 //! branch-free minimum over it; the costs, and which pair wins a tie, are obvhs'.
 
-use glam::Vec3A;
+use super::bvh_collapse::{leaf_meta, push_primitives, set_child_box, set_grid};
 use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::bvh2_to_cwbvh::{Bvh2Converter, DecisionKind};
 use obvhs::cwbvh::{node::CwBvhNode, CwBvh};
 
-/// 1 / (2⁸ − 1): child boxes are quantised to 8 bits per axis and side.
-const DENOM: f32 = 1.0 / 255.0;
 /// An empty child slot.
 const EMPTY: u32 = u32::MAX;
 
@@ -48,15 +46,7 @@ fn fill_node(c: &mut Bvh2Converter, wide: usize, node2: usize) {
     let bvh2 = c.bvh2;
     let mut node = c.nodes[wide];
     let aabb = bvh2.nodes[node2].aabb();
-    let node_p = aabb.min;
-    node.p = node_p.into();
-    // The grid: the smallest power of two per axis that spans the box in 255 steps.
-    let e = ((aabb.max - aabb.min).max(Vec3A::splat(1e-20)) * DENOM)
-        .log2()
-        .ceil()
-        .exp2();
-    let rcp_e = 1.0 / e;
-    node.e = e.to_array().map(|c| (c.to_bits() >> 23) as u8);
+    let rcp_e = set_grid(&mut node, aabb);
 
     let mut children = [EMPTY; 8];
     let mut child_count = 0;
@@ -67,35 +57,22 @@ fn fill_node(c: &mut Bvh2Converter, wide: usize, node2: usize) {
     node.primitive_base_idx = c.primitive_indices.len() as u32;
     node.child_base_idx = c.nodes.len() as u32;
     let mut interior = 0;
-    let mut primitives = 0u32;
+    let mut primitives = 0u8;
     for (i, &child) in children.iter().enumerate() {
         if child == EMPTY {
             continue;
         }
-        let child_aabb = bvh2.nodes[child as usize].aabb();
-        let lo = ((child_aabb.min - node_p) * rcp_e).floor();
-        let hi = ((child_aabb.max - node_p) * rcp_e).ceil();
-        let (lo, hi) = (
-            lo.clamp(Vec3A::ZERO, Vec3A::splat(255.0)),
-            hi.clamp(Vec3A::ZERO, Vec3A::splat(255.0)),
+        set_child_box(
+            &mut node,
+            i,
+            bvh2.nodes[child as usize].aabb(),
+            aabb.min,
+            rcp_e,
         );
-        node.child_min_x[i] = lo.x as u8;
-        node.child_min_y[i] = lo.y as u8;
-        node.child_min_z[i] = lo.z as u8;
-        node.child_max_x[i] = hi.x as u8;
-        node.child_max_y[i] = hi.y as u8;
-        node.child_max_z[i] = hi.z as u8;
         match c.decisions[child as usize * 7].kind {
             DecisionKind::LEAF => {
-                let count = push_primitives(bvh2, &mut c.primitive_indices, child as usize);
-                // The unary primitive count in the three high bits.
-                let unary = match count {
-                    1 => 0b0010_0000,
-                    2 => 0b0110_0000,
-                    3 => 0b1110_0000,
-                    _ => panic!("a CWBVH leaf slot holds 1–3 primitives, not {count}"),
-                };
-                node.child_meta[i] = primitives as u8 | unary;
+                let count = push_primitives(bvh2, child, &mut c.primitive_indices);
+                node.child_meta[i] = leaf_meta(primitives, count);
                 primitives += count;
             }
             DecisionKind::INTERNAL => {
@@ -116,17 +93,6 @@ fn fill_node(c: &mut Bvh2Converter, wide: usize, node2: usize) {
             offset += 1;
         }
     }
-}
-
-/// Appends the primitives under BVH2 node `index` (left to right) and returns their count.
-fn push_primitives(bvh2: &Bvh2, out: &mut Vec<u32>, index: usize) -> u32 {
-    let node = &bvh2.nodes[index];
-    if node.is_leaf() {
-        out.push(bvh2.primitive_indices[node.first_index as usize]);
-        return node.prim_count;
-    }
-    push_primitives(bvh2, out, node.first_index as usize)
-        + push_primitives(bvh2, out, node.first_index as usize + 1)
 }
 
 /// Puts the `count` children of BVH2 node `parent` into octant slots: repeatedly the

@@ -760,3 +760,95 @@ fn effect_analysis_switches_fresnel_splitting() {
         .iter()
         .any(|r| r.starts_with("Fresnel splitting: off")));
 }
+
+/// Camera rays that see the environment directly take its closed-form colour (the mean of
+/// the film's spectral estimate over the wavelengths): samples that hit the scene are
+/// untouched (pixels they alone cover are the same bit for bit), the background converges
+/// to the same colours as a wavelength-sampled render, without its colour noise.
+#[test]
+fn closed_form_background_keeps_the_expectation_without_colour_noise() {
+    let mut sky = thinfilm::image_io::RgbImage::new(16, 8);
+    for (i, p) in sky.pixels.iter_mut().enumerate() {
+        *p = match i % 4 {
+            0 => [3.0, 0.1, 0.0],
+            1 => [0.0, 0.8, 1.5],
+            2 => [0.2, 0.2, 0.2],
+            _ => [0.0, 0.0, 0.0],
+        };
+    }
+    let env = EmitterDesc::Envmap {
+        image: std::sync::Arc::new(sky),
+        scale: 1.0,
+        to_world: glam::Mat4::IDENTITY,
+        path: None,
+    };
+    let mut scene = base_scene(
+        vec![sphere(0)],
+        vec![Bsdf::from(Diffuse::new(&constant(0.5)))],
+        vec![env],
+        24,
+        64,
+    );
+    scene.sampler = SamplerKind::Independent;
+    let run = |spp: u32, spectral: bool| {
+        let options = RenderOptions {
+            spp: Some(spp),
+            spectral_background: spectral,
+            ..Default::default()
+        };
+        let lines = thinfilm::render::prepare(&scene, &options)
+            .unwrap()
+            .effects()
+            .lines();
+        let want = if spectral {
+            "wavelength sampling of the environment seen directly: ON — asked for"
+        } else {
+            "wavelength sampling of the environment seen directly: off"
+        };
+        assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
+        render(&scene, &options).unwrap().image
+    };
+    let (closed, sampled) = (run(64, false), run(64, true));
+    let truth = run(4096, true);
+    // The sphere (radius 1 at distance 4, 40° field of view) covers the centre pixels.
+    let (w, h) = (closed.width, closed.height);
+    let centre = (h / 2) * w + w / 2;
+    assert_eq!(
+        bits_of(&closed.pixels[centre]),
+        bits_of(&sampled.pixels[centre])
+    );
+    let same = (closed.pixels.iter().zip(&sampled.pixels))
+        .filter(|(a, b)| bits_of(a) == bits_of(b))
+        .count();
+    assert!(same >= w * h / 10, "only {same} pixels identical");
+    // The background: the image's outer ring, which only the environment covers.
+    let ring: Vec<usize> = (0..w * h)
+        .filter(|i| i % w < 3 || i % w >= w - 3 || i / w < 3 || i / w >= h - 3)
+        .collect();
+    let error = |img: &thinfilm::image_io::RgbImage| {
+        let (mut mean, mut sq) = (0.0f64, 0.0f64);
+        for &i in &ring {
+            for c in 0..3 {
+                let d = (img.pixels[i][c] - truth.pixels[i][c]) as f64;
+                mean += d;
+                sq += d * d;
+            }
+        }
+        let n = (3 * ring.len()) as f64;
+        (mean / n, (sq / n).sqrt())
+    };
+    let ((bias_closed, rmse_closed), (_, rmse_sampled)) = (error(&closed), error(&sampled));
+    assert!(
+        rmse_closed < 0.3 * rmse_sampled,
+        "background RMSE closed form {rmse_closed} vs sampled {rmse_sampled}"
+    );
+    // The reference's own noise (4096 samples) bounds what is left, bias included.
+    assert!(
+        bias_closed.abs() < 0.2 * rmse_sampled / 8.0 + 1e-4,
+        "bias {bias_closed}"
+    );
+}
+
+fn bits_of(p: &[f32; 3]) -> [u32; 3] {
+    p.map(f32::to_bits)
+}

@@ -34,6 +34,9 @@ pub enum Effect {
     Polarization,
     /// How camera rays find their first hit (screen bins or the BVH).
     CameraRays,
+    /// Wavelength sampling for camera rays that see the environment directly; off, their
+    /// colour is the environment's expectation over wavelengths, integrated once per texel.
+    SpectralBackground,
 }
 
 impl Effect {
@@ -48,6 +51,7 @@ impl Effect {
             Effect::MicrofacetSampling => "microfacet sampling",
             Effect::Polarization => "polarisation",
             Effect::CameraRays => "Camera rays",
+            Effect::SpectralBackground => "wavelength sampling of the environment seen directly",
         }
     }
 }

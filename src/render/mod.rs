@@ -71,6 +71,10 @@ pub struct RenderOptions {
     /// Trace with Stokes vectors even where no polariser asks for it (a check of the
     /// polarised transport: without a polariser it must give the unpolarised image).
     pub force_polarization: bool,
+    /// Sample wavelengths also for camera rays that see the environment directly (by
+    /// default their colour is its closed-form expectation over wavelengths:
+    /// [`effects::Effect::SpectralBackground`]).
+    pub spectral_background: bool,
     /// Asked before each row whether to stop (a Ctrl-C handler's flag); see
     /// [`render_prepared`].
     pub cancel: Option<Cancel>,
@@ -183,6 +187,9 @@ pub struct PreparedScene {
     primary_bins: Option<primary::PrimaryBins>,
     /// Participating media (media branch hook; None: surfaces only).
     media: Option<std::sync::Arc<medium::SceneMedia>>,
+    /// Camera rays that escape take the environment's expected colour instead of a
+    /// wavelength-sampled estimate ([`effects::Effect::SpectralBackground`] off).
+    closed_form_background: bool,
 }
 
 /// A surface point of a prepared scene: its geometry (a [`SurfaceInteraction`], by `Deref`)
@@ -414,6 +421,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         },
     });
     let lights = lights::LightSet::build(scene, &accel, emitters?)?;
+    let closed_form_background = background_decision(scene, options, &lights, &mut effects);
     let shape_bsdf = scene.shapes.iter().map(|s| s.bsdf as u32).collect();
     let polarized = if effects.polarization || options.force_polarization {
         if let Some(r) = scene.bsdfs.iter().find_map(|b| b.polarized().err()) {
@@ -445,7 +453,43 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         polarized,
         primary_bins,
         media: scene.media.clone(),
+        closed_form_background,
     })
+}
+
+/// Whether camera rays that escape see the environment's closed-form colour (the
+/// [`effects::Effect::SpectralBackground`] decision, added to `effects`): the film value of
+/// such a ray depends on its wavelengths only through the environment's spectrum, so its
+/// mean over the wavelengths — the same expectation, without colour noise — can be
+/// integrated once per texel instead of sampled per ray.
+fn background_decision(
+    scene: &Scene,
+    options: &RenderOptions,
+    lights: &lights::LightSet,
+    effects: &mut Effects,
+) -> bool {
+    let spectral = if options.spectral_background {
+        Some("asked for (--spectral-background)")
+    } else if scene
+        .media
+        .as_ref()
+        .is_some_and(|m| m.sensor != medium::NO_MEDIUM)
+    {
+        Some("the camera is inside a medium")
+    } else if !lights.background_colour_in_closed_form() {
+        Some("an infinite light without a closed-form colour")
+    } else {
+        None
+    };
+    effects.decisions.push(effects::Decision {
+        effect: effects::Effect::SpectralBackground,
+        on: spectral.is_some(),
+        reason: spectral.map_or_else(
+            || "the environment seen directly takes its texels' expected colour (each texel's spectrum integrated once)".to_string(),
+            str::to_string,
+        ),
+    });
+    spectral.is_none()
 }
 
 /// The global sample indices to render: the options' range, else 0..spp.
@@ -509,6 +553,9 @@ const WAVEFRONT_JOBS: usize = 16;
 struct StartedBatch {
     cam: batch::CameraBatch,
     radiance: [Lanes; 4],
+    /// The expected colour of the lanes whose rays escaped, where it is in closed form
+    /// (`PreparedScene::closed_form_background`; those lanes' radiance is left zero).
+    escaped_rgb: Option<([bool; BATCH], [[f32; 3]; BATCH])>,
     /// Sample of the batch traced by wavefront lane `lanes.start + j`.
     hit_index: [usize; BATCH],
     lanes: std::ops::Range<usize>,
@@ -521,6 +568,7 @@ impl StartedBatch {
         StartedBatch {
             cam: batch::CameraBatch::empty(),
             radiance: [[0.0; BATCH]; 4],
+            escaped_rgb: None,
             hit_index: [0; BATCH],
             lanes: 0..0,
         }
@@ -647,6 +695,7 @@ fn start_batch<C: Carrier>(
     let StartedBatch {
         cam,
         radiance,
+        escaped_rgb,
         hit_index,
         lanes,
     } = out;
@@ -681,7 +730,18 @@ fn start_batch<C: Carrier>(
             }
         }
     }
-    if escaped.iter().any(|&e| e) {
+    *escaped_rgb = None;
+    if escaped.iter().any(|&e| e) && scene.closed_form_background {
+        let mut rgb = [[0.0f32; 3]; BATCH];
+        if !scene.settings().hide_emitters {
+            (scene.lights()).add_background_colour_lanes(&cam.rays.dir, &escaped, &mut rgb);
+            let pass = C::direct_view(setup);
+            if pass != 1.0 {
+                rgb = rgb.map(|c| c.map(|v| v * pass));
+            }
+        }
+        *escaped_rgb = Some((escaped, rgb));
+    } else if escaped.iter().any(|&e| e) {
         integrator::escaped_camera_radiance_lanes(
             scene,
             &cam.rays.dir,
@@ -721,7 +781,14 @@ fn finish_batch<C: Carrier>(
             pdf[k][i] = lane.wl.pdf[k];
         }
     }
-    let rgb = s.cam.to_rgb_lanes(&radiance, &pdf);
+    let mut rgb = s.cam.to_rgb_lanes(&radiance, &pdf);
+    if let Some((escaped, colour)) = &s.escaped_rgb {
+        for ((rgb, &e), c) in rgb.iter_mut().zip(escaped).zip(colour) {
+            if e {
+                *rgb = *c;
+            }
+        }
+    }
     for (i, o) in out.iter_mut().enumerate() {
         let rgb = finite_rgb(rgb[i]);
         *o = (Vec2::new(s.cam.pos[0][i], s.cam.pos[1][i]), rgb);

@@ -97,7 +97,11 @@ pub struct CameraBatch {
     pub n: usize,
     /// Film position in pixels.
     pub pos: [Lanes; 2],
-    /// The four wavelengths (nm) and their pdfs, `[k][lane]`.
+    /// Each sample's wavelength number u (its hero set: {u + k/4}), from which
+    /// [`Self::sample_wavelengths`] makes `lambda`, `pdf` and `rows`.
+    wavelength_u: Lanes,
+    /// The four wavelengths (nm) and their pdfs, `[k][lane]` (after
+    /// [`Self::sample_wavelengths`]).
     pub lambda: [Lanes; 4],
     pub pdf: [Lanes; 4],
     /// (r̄, ḡ, b̄, D65) at wavelength k: `rows[k][lane]`
@@ -122,6 +126,7 @@ impl CameraBatch {
         CameraBatch {
             n: 0,
             pos: [[0.0; BATCH]; 2],
+            wavelength_u: [0.0; BATCH],
             lambda: [[0.0; BATCH]; 4],
             pdf: [[0.0; BATCH]; 4],
             rows: [[[0.0; 4]; BATCH]; 4],
@@ -139,7 +144,9 @@ impl CameraBatch {
     /// Makes this the camera samples of `span`, in place (a batch is ~2.7 kB: returned by
     /// value and moved into the wavefront it was copied twice, ~5 % of a render of camera
     /// rays that see only the environment). Lanes from `span.lanes()` on hold further samples
-    /// of its last pixel and are ignored.
+    /// of its last pixel and are ignored. The wavelengths are drawn but not yet mapped to
+    /// nanometres: [`Self::sample_wavelengths`] does that for batches whose samples need them
+    /// (not one whose rays all see the environment's closed-form colour).
     pub fn generate(
         &mut self,
         camera: &Camera,
@@ -191,15 +198,8 @@ impl CameraBatch {
                 samplers,
             );
         }
-        let mut u = [0.0f32; BATCH];
-        for (u, &b) in u.iter_mut().zip(&bits) {
+        for (u, &b) in self.wavelength_u.iter_mut().zip(&bits) {
             *u = super::hero_wavelength_u(b);
-        }
-        (self.lambda, self.pdf) = sample_visible_wavelengths(&u);
-        for (rows, lambda) in self.rows.iter_mut().zip(&self.lambda) {
-            for (row, &l) in rows.iter_mut().zip(lambda) {
-                *row = crate::spectrum::sampled::rgb_cmf_d65_f32(l);
-            }
         }
         let mut film_uv = [[0.0f32; BATCH]; 2];
         let size = [width as f32, height as f32];
@@ -223,6 +223,17 @@ impl CameraBatch {
                 self.origins = None;
             }
             None => (self.rays, self.origins) = lens_rays(camera, &film_uv, samplers),
+        }
+    }
+
+    /// The samples' wavelengths, pdfs and colour-matching rows (`lambda`, `pdf`, `rows`)
+    /// from the wavelength numbers [`Self::generate`] drew.
+    pub fn sample_wavelengths(&mut self) {
+        (self.lambda, self.pdf) = sample_visible_wavelengths(&self.wavelength_u);
+        for (rows, lambda) in self.rows.iter_mut().zip(&self.lambda) {
+            for (row, &l) in rows.iter_mut().zip(lambda) {
+                *row = crate::spectrum::sampled::rgb_cmf_d65_f32(l);
+            }
         }
     }
 
@@ -449,6 +460,7 @@ mod tests {
             };
             let kind = [SamplerKind::Independent, SamplerKind::Sobol][round % 2];
             cam.generate(&camera, kind, 5, &span, [64, 48], round % 3 != 0);
+            cam.sample_wavelengths();
             let mut l = [[0.0f32; BATCH]; 4];
             let mut pdf = cam.pdf;
             for k in 0..4 {

@@ -712,12 +712,20 @@ fn start_batch<C: Carrier>(
     // batch's lanes); the others start paths.
     *radiance = [[0.0f32; BATCH]; 4];
     let mut escaped = [false; BATCH];
+    for i in 0..m {
+        // (Media hook: a camera inside a medium may scatter before the void it sees.)
+        escaped[i] = hits[i].is_none() && !scene.camera_in_medium();
+    }
+    // perf: a batch whose rays all see the environment's closed-form colour needs no
+    // wavelengths (most of a teapot scene's batches).
+    if !(scene.closed_form_background && escaped[..m].iter().all(|&e| e)) {
+        cam.sample_wavelengths();
+    }
     *hit_index = [0usize; BATCH];
     let first_lane = paths.lanes.len();
     for i in 0..m {
         match hits[i] {
-            // (Media hook: a camera inside a medium may scatter before the void it sees.)
-            None if !scene.camera_in_medium() => escaped[i] = true,
+            _ if escaped[i] => {}
             hit => {
                 hit_index[paths.lanes.len() - first_lane] = i;
                 paths.lanes.push(integrator::Lane::camera(
@@ -781,7 +789,11 @@ fn finish_batch<C: Carrier>(
             pdf[k][i] = lane.wl.pdf[k];
         }
     }
-    let mut rgb = s.cam.to_rgb_lanes(&radiance, &pdf);
+    let mut rgb = match &s.escaped_rgb {
+        // Every lane saw the closed-form background: no wavelengths were drawn.
+        Some((escaped, _)) if escaped[..s.cam.n].iter().all(|&e| e) => [[0.0; 3]; BATCH],
+        _ => s.cam.to_rgb_lanes(&radiance, &pdf),
+    };
     if let Some((escaped, colour)) = &s.escaped_rgb {
         for ((rgb, &e), c) in rgb.iter_mut().zip(escaped).zip(colour) {
             if e {

@@ -5,8 +5,11 @@
 # process against Mitsuba's median warm call, and the fastest against the fastest (the
 # machine is shared: like statistics on both sides, medians first).
 # Usage: tools/scaling/whole_process.sh "BIN_A BIN_B ..." [SPP] [SIZE] [REPEATS] SCENE...
+# OURS_SPP=N renders ours at N spp against Mitsuba's SPP (time at equal error, where
+# `bench render --mitsuba --sampler independent` shows ours at N spp no noisier).
 set -eu
 BINS=$1; SPP=${2:-64}; SIZE=${3:-256}; REP=${4:-3}; shift 4
+OURS_SPP=${OURS_SPP:-$SPP}
 export DRJIT_LIBLLVM_PATH=${DRJIT_LIBLLVM_PATH:-/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1}
 T=$(mktemp -d)
 median() { sort -n | awk '{ a[NR] = $1 } END { print a[int((NR + 1) / 2)] }'; }
@@ -21,7 +24,7 @@ for scene in "$@"; do
     for b in $BINS; do
         for i in $(seq "$REP"); do
             start=$(date +%s%N)
-            "$b" render "$scene" --sampler independent --spp "$SPP" \
+            "$b" render "$scene" --sampler independent --spp "$OURS_SPP" \
                 --resolution "${SIZE}x$SIZE" --quiet -o "$T/o.exr" >/dev/null
             awk "BEGIN { printf \"%.3f\\n\", ($(date +%s%N) - $start) / 1e9 }"
         done > "$T/times"

@@ -793,7 +793,7 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
     let run = |spp: u32, spectral: bool| {
         let options = RenderOptions {
             spp: Some(spp),
-            spectral_background: spectral,
+            spectral_direct_view: spectral,
             ..Default::default()
         };
         let lines = thinfilm::render::prepare(&scene, &options)
@@ -801,9 +801,9 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
             .effects()
             .lines();
         let want = if spectral {
-            "wavelength sampling of the environment seen directly: ON — asked for"
+            "wavelength sampling of emitters seen directly: ON — asked for"
         } else {
-            "wavelength sampling of the environment seen directly: off"
+            "wavelength sampling of emitters seen directly: off"
         };
         assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
         render(&scene, &options).unwrap().image
@@ -851,4 +851,69 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
 
 fn bits_of(p: &[f32; 3]) -> [u32; 3] {
     p.map(f32::to_bits)
+}
+
+/// An area light seen straight from the camera takes its closed-form colour: the pixels it
+/// fully covers are the same for every seed (no colour noise), equal to the mean of a
+/// wavelength-sampled render; seen from behind (one-sided emission) it stays black.
+#[test]
+fn area_light_seen_directly_takes_its_closed_form_colour() {
+    let quad = Shape {
+        geometry: Geometry::Mesh(std::sync::Arc::new(TriangleMesh {
+            colors: Vec::new(),
+            tangents: Vec::new(),
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(-1.0, 1.0, 0.0),
+            ],
+            normals: vec![],
+            uvs: vec![],
+            // Facing −z, towards the camera at z = −4.
+            indices: vec![[0, 2, 1], [0, 3, 2]],
+        })),
+        bsdf: 0,
+        emission: Some(SpectrumDesc::Rgb([3.0, 1.0, 0.2])),
+        name: Some("panel".into()),
+    };
+    let mut scene = base_scene(
+        vec![quad],
+        vec![Bsdf::from(Diffuse::new(&constant(0.0)))],
+        vec![],
+        9,
+        64,
+    );
+    scene.sampler = SamplerKind::Independent;
+    let centre = |scene: &Scene, spp: u32, seed: u64, spectral: bool| {
+        let options = RenderOptions {
+            spp: Some(spp),
+            seed: Some(seed),
+            spectral_direct_view: spectral,
+            ..Default::default()
+        };
+        let img = render(scene, &options).unwrap().image;
+        img.pixels[(img.height / 2) * img.width + img.width / 2]
+    };
+    let (a, b) = (centre(&scene, 64, 1, false), centre(&scene, 64, 2, false));
+    assert_eq!(bits_of(&a), bits_of(&b), "closed form: {a:?} vs {b:?}");
+    let (sa, sb) = (centre(&scene, 64, 1, true), centre(&scene, 64, 2, true));
+    assert_ne!(
+        bits_of(&sa),
+        bits_of(&sb),
+        "sampled wavelengths have colour noise"
+    );
+    let truth = centre(&scene, 4096, 3, true);
+    for c in 0..3 {
+        assert!(
+            (a[c] - truth[c]).abs() < 0.01 * truth[0],
+            "{a:?} vs {truth:?}"
+        );
+    }
+    // Its linear-sRGB round trip: (3, 1, 0.2) within 1 %.
+    for (v, want) in a.iter().zip([3.0, 1.0, 0.2]) {
+        assert!((v - want).abs() < 0.01 * 3.0, "{a:?}");
+    }
+    scene.camera = camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, 40.0);
+    assert_eq!(centre(&scene, 16, 1, false), [0.0; 3]);
 }

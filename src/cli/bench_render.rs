@@ -66,10 +66,10 @@ pub struct Args {
     /// chosen by Fresnel, as Mitsuba does).
     #[arg(long)]
     pub fresnel_splits: Option<u32>,
-    /// Our renderer samples wavelengths also for camera rays that see the environment
-    /// directly (as Mitsuba does), instead of taking its closed-form expected colour.
+    /// Our renderer samples wavelengths also for camera rays that see an emitter directly
+    /// (as Mitsuba does), instead of taking its closed-form expected colour.
     #[arg(long)]
-    pub spectral_background: bool,
+    pub spectral_direct_view: bool,
     /// Runs per spp, for both renderers, run j with seed `--seed` + j. Each row reports the
     /// fastest run's time (Mitsuba's first render at a new spp can include JIT compilation of
     /// its kernels — seen: 0.42 s instead of 0.14 s for a 64-spp teapot on a cold kernel
@@ -237,7 +237,7 @@ fn render_ours(
                 resolution: Some((k as u32 * r.width as u32, k as u32 * r.height as u32)),
                 sampler: args.sampler,
                 fresnel_splits: args.fresnel_splits,
-                spectral_background: args.spectral_background,
+                spectral_direct_view: args.spectral_direct_view,
                 ..Default::default()
             };
             let out = render(scene, &options)?;

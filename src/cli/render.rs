@@ -62,12 +62,13 @@ pub struct Args {
     /// a material has no polarised form).
     #[arg(long)]
     pub force_polarization: bool,
-    /// Sample wavelengths also for camera rays that see the environment directly. By
-    /// default such a ray's colour is the environment's expected colour over the sampled
-    /// wavelengths (each texel's spectrum integrated once against the film's matching
-    /// functions): the same expected image without the background's colour noise.
+    /// Sample wavelengths also for camera rays that see an emitter directly (the
+    /// environment, an area light). By default such a ray's colour is the emitter's expected
+    /// colour over the sampled wavelengths (each environment texel's and each untextured area
+    /// light's spectrum integrated once against the film's matching functions): the same
+    /// expected image without the colour noise of the background and of visible lights.
     #[arg(long)]
-    pub spectral_background: bool,
+    pub spectral_direct_view: bool,
     /// Environment replacing the scene's own: a lat-long EXR/HDR file (Mitsuba `envmap`
     /// layout), `constant:V` (D65 of luminance V) or `constant:R,G,B` (RGB illuminant).
     #[arg(long, value_name = "FILE|constant:V|constant:R,G,B")]
@@ -283,7 +284,7 @@ fn options(args: &Args, scene_spp: u32, report: Output) -> Result<RenderOptions>
         progress: report.progress(),
         cancel: Some(Cancel::on_flag(cancel_on_interrupt())),
         force_polarization: args.force_polarization,
-        spectral_background: args.spectral_background,
+        spectral_direct_view: args.spectral_direct_view,
     })
 }
 

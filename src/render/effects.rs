@@ -34,9 +34,10 @@ pub enum Effect {
     Polarization,
     /// How camera rays find their first hit (screen bins or the BVH).
     CameraRays,
-    /// Wavelength sampling for camera rays that see the environment directly; off, their
-    /// colour is the environment's expectation over wavelengths, integrated once per texel.
-    SpectralBackground,
+    /// Wavelength sampling for camera rays that see an emitter directly (the environment, an
+    /// untextured area light); off, their colour is the emitter's expectation over
+    /// wavelengths, integrated once per texel or light.
+    SpectralDirectView,
 }
 
 impl Effect {
@@ -51,7 +52,7 @@ impl Effect {
             Effect::MicrofacetSampling => "microfacet sampling",
             Effect::Polarization => "polarisation",
             Effect::CameraRays => "Camera rays",
-            Effect::SpectralBackground => "wavelength sampling of the environment seen directly",
+            Effect::SpectralDirectView => "wavelength sampling of emitters seen directly",
         }
     }
 }

@@ -297,6 +297,9 @@ pub(super) struct Branch<C> {
 pub(super) struct Lane<C> {
     branch: Branch<C>,
     radiance: Spec,
+    /// Film colour (linear sRGB) collected in closed form: an emitter seen straight from the
+    /// camera ([`PathScratch::closed_form_direct_view`]).
+    colour: [f32; 3],
     pub sampler: Sampler,
     pub wl: SampledWavelengths,
     /// D65 factor at the path's wavelengths (for the environment lookups).
@@ -316,6 +319,7 @@ impl<C: Carrier> Lane<C> {
                 carrier: C::camera(ray.dir),
             },
             radiance: Spec::ZERO,
+            colour: [0.0; 3],
             sampler,
             wl,
             d65,
@@ -327,6 +331,13 @@ impl<C: Carrier> Lane<C> {
     #[inline]
     pub fn radiance(&self) -> Spec {
         self.radiance
+    }
+
+    /// Film colour the path collected in closed form, added to the film value of
+    /// [`Self::radiance`] (complete after [`trace_lanes`]).
+    #[inline]
+    pub fn colour(&self) -> [f32; 3] {
+        self.colour
     }
 }
 
@@ -388,6 +399,8 @@ struct Requests<'a, C> {
     /// The texture coordinates of the lane's ray on the sole environment map, if it escaped
     /// and they were computed for the round's escaped rays together.
     env_uv: Option<Vec2>,
+    /// [`PathScratch::closed_form_direct_view`].
+    closed_form: bool,
 }
 
 /// The paths of a batch and the reusable buffers of [`trace_lanes`] (one set per worker
@@ -395,6 +408,10 @@ struct Requests<'a, C> {
 pub struct PathScratch<C> {
     /// The batch's paths, filled by the caller with [`Lane::camera`].
     pub(super) lanes: Vec<Lane<C>>,
+    /// An area light seen straight from the camera adds its closed-form film colour
+    /// ([`super::lights::Light::direct_colour`]) to the lane's [`Lane::colour`] instead of
+    /// its spectral radiance (the renderer's batches; not [`li`], which returns radiance).
+    pub(super) closed_form_direct_view: bool,
     /// Closest hit of each lane's camera ray.
     pub(super) first_hits: Vec<Option<Hit>>,
     /// Branches set aside at Fresnel splits, per lane.
@@ -425,6 +442,7 @@ impl<C> Default for PathScratch<C> {
     fn default() -> Self {
         PathScratch {
             lanes: Vec::new(),
+            closed_form_direct_view: false,
             first_hits: Vec::new(),
             pending: Vec::new(),
             env: Vec::new(),
@@ -539,6 +557,7 @@ pub(super) fn trace_lanes<C: Carrier>(
 ) {
     let PathScratch {
         lanes,
+        closed_form_direct_view,
         first_hits,
         pending,
         env,
@@ -557,6 +576,7 @@ pub(super) fn trace_lanes<C: Carrier>(
         d65s,
         ..
     } = scratch;
+    let closed_form = *closed_form_direct_view && scene.media().is_none();
     let n = lanes.len();
     if pending.len() < n {
         pending.resize_with(n, Vec::new);
@@ -573,6 +593,7 @@ pub(super) fn trace_lanes<C: Carrier>(
             env_samples,
             shadow,
             env_uv: None,
+            closed_form,
         };
         lane.active = step(scene, setup, lane, hit, &mut requests);
     }
@@ -629,6 +650,7 @@ pub(super) fn trace_lanes<C: Carrier>(
                 } else {
                     None
                 },
+                closed_form,
             };
             lanes[i].active = step(scene, setup, &mut lanes[i], hit, &mut requests);
         }
@@ -759,6 +781,7 @@ fn vertex<C: Carrier>(
     let Lane {
         branch: b,
         radiance,
+        colour,
         sampler,
         wl,
         ..
@@ -803,16 +826,9 @@ fn vertex<C: Carrier>(
         b.carrier
             .at_first_vertex(setup, ray.dir, Some(si.shading.n));
     }
-    if let Some(light) = si.emitter() {
-        if !hide_emitter {
-            if let Some(le) = light.emitted(si.ng, si.uv, ray.dir, wl) {
-                let w = b.path.emitter_hit_weight(|prev_p| {
-                    // From the MIS vertex, which may lie before null interactions (gltf hook).
-                    sel_pdf * light.pdf_direction(prev_p, ray.dir, (si.p - prev_p).length(), si.ng)
-                });
-                *radiance += b.carrier.s0() * le * w;
-            }
-        }
+    if let (Some(light), false) = (si.emitter(), hide_emitter) {
+        let closed_form = requests.closed_form;
+        add_emission_seen(b, &si, light, sel_pdf, closed_form, wl, radiance, colour);
     }
 
     // Media hook: a null interface is crossed without a path vertex (as `volpath` does).
@@ -895,6 +911,41 @@ fn vertex<C: Carrier>(
         return false;
     };
     advance(scene, b, &si, &v, &bs, &value, wl, sampler)
+}
+
+/// Adds what the area light `light` under hit `si` emits towards branch `b`'s ray: its
+/// spectral radiance (MIS-weighted against light sampling) to `radiance`, or — seen straight
+/// from the camera (MIS weight 1: no earlier vertex), untextured, with a carrier equal at
+/// every wavelength, and `closed_form` — its closed-form film colour to `colour`: the mean
+/// of its radiance's film value over the wavelengths, without their noise.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn add_emission_seen<C: Carrier>(
+    b: &Branch<C>,
+    si: &SurfaceInteraction,
+    light: &super::lights::Light,
+    sel_pdf: f32,
+    closed_form: bool,
+    wl: &SampledWavelengths,
+    radiance: &mut Spec,
+    colour: &mut [f32; 3],
+) {
+    let ray = b.path.ray;
+    let s0 = b.carrier.s0();
+    let direct = (b.path.depth == 0 && closed_form && s0 == Spec::splat(s0.x))
+        .then(|| light.direct_colour(si.ng, ray.dir))
+        .flatten();
+    if let Some(c) = direct {
+        for (acc, c) in colour.iter_mut().zip(c) {
+            *acc += s0.x * c;
+        }
+    } else if let Some(le) = light.emitted(si.ng, si.uv, ray.dir, wl) {
+        let w = b.path.emitter_hit_weight(|prev_p| {
+            // From the MIS vertex, which may lie before null interactions (gltf hook).
+            sel_pdf * light.pdf_direction(prev_p, ray.dir, (si.p - prev_p).length(), si.ng)
+        });
+        *radiance += s0 * le * w;
+    }
 }
 
 /// What `bsdf` sees of the shading point `si` besides the directions (the segment length for

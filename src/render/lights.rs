@@ -1039,6 +1039,9 @@ pub enum Light {
     Area {
         shape: u32,
         radiance: Spectrum,
+        /// The expected film colour of `radiance` ([`ColourQuadrature`]; None with a
+        /// texture): what a camera ray that sees the light takes ([`Light::direct_colour`]).
+        colour: Option<[f32; 3]>,
         geometry: AreaGeometry,
         /// Per-texel emission (glTF `emissiveTexture`), replacing `radiance` where set.
         texture: Option<Box<TexturedEmission>>,
@@ -1264,6 +1267,19 @@ impl Light {
                 texture: Some(t), ..
             } if ng.dot(-dir) > 0.0 => Some(t.radiance(uv, wl)),
             Light::Area { radiance, .. } if ng.dot(-dir) > 0.0 => Some(radiance.eval(wl)),
+            _ => None,
+        }
+    }
+
+    /// The expected film colour (linear sRGB) of what an untextured area light emits along
+    /// `dir` at a point of normal `ng` ([`Self::emitted`]: black from behind), over the
+    /// sampled wavelengths — for camera rays that see it directly; None for other lights
+    /// and textured emission (no closed form here: their rays sample wavelengths).
+    pub fn direct_colour(&self, ng: Vec3, dir: Vec3) -> Option<[f32; 3]> {
+        match self {
+            Light::Area {
+                colour: Some(c), ..
+            } => Some(if ng.dot(-dir) > 0.0 { *c } else { [0.0; 3] }),
             _ => None,
         }
     }
@@ -1714,10 +1730,17 @@ impl LightSet {
                 }
             }
         };
+        let texture = TexturedEmission::of_shape(scene, accel, si, radiance);
+        let radiance = Spectrum::illuminant(radiance);
+        let colour = texture.is_none().then(|| {
+            ColourQuadrature::get()
+                .expected_rgb(|l| radiance.eval(&SampledWavelengths::new([l; 4], [1.0; 4]))[0])
+        });
         Ok(Some(Light::Area {
             shape: si as u32,
-            radiance: Spectrum::illuminant(radiance),
-            texture: TexturedEmission::of_shape(scene, accel, si, radiance),
+            radiance,
+            colour,
+            texture,
             geometry,
         }))
     }

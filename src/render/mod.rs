@@ -71,10 +71,10 @@ pub struct RenderOptions {
     /// Trace with Stokes vectors even where no polariser asks for it (a check of the
     /// polarised transport: without a polariser it must give the unpolarised image).
     pub force_polarization: bool,
-    /// Sample wavelengths also for camera rays that see the environment directly (by
-    /// default their colour is its closed-form expectation over wavelengths:
-    /// [`effects::Effect::SpectralBackground`]).
-    pub spectral_background: bool,
+    /// Sample wavelengths also for camera rays that see an emitter directly (by default
+    /// their colour is its closed-form expectation over wavelengths:
+    /// [`effects::Effect::SpectralDirectView`]).
+    pub spectral_direct_view: bool,
     /// Asked before each row whether to stop (a Ctrl-C handler's flag); see
     /// [`render_prepared`].
     pub cancel: Option<Cancel>,
@@ -187,9 +187,9 @@ pub struct PreparedScene {
     primary_bins: Option<primary::PrimaryBins>,
     /// Participating media (media branch hook; None: surfaces only).
     media: Option<std::sync::Arc<medium::SceneMedia>>,
-    /// Camera rays that escape take the environment's expected colour instead of a
-    /// wavelength-sampled estimate ([`effects::Effect::SpectralBackground`] off).
-    closed_form_background: bool,
+    /// Camera rays that see an emitter directly take its expected colour instead of a
+    /// wavelength-sampled estimate ([`effects::Effect::SpectralDirectView`] off).
+    closed_form_direct_view: bool,
 }
 
 /// A surface point of a prepared scene: its geometry (a [`SurfaceInteraction`], by `Deref`)
@@ -421,7 +421,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         },
     });
     let lights = lights::LightSet::build(scene, &accel, emitters?)?;
-    let closed_form_background = background_decision(scene, options, &lights, &mut effects);
+    let closed_form_direct_view = direct_view_decision(scene, options, &lights, &mut effects);
     let shape_bsdf = scene.shapes.iter().map(|s| s.bsdf as u32).collect();
     let polarized = if effects.polarization || options.force_polarization {
         if let Some(r) = scene.bsdfs.iter().find_map(|b| b.polarized().err()) {
@@ -453,23 +453,24 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         polarized,
         primary_bins,
         media: scene.media.clone(),
-        closed_form_background,
+        closed_form_direct_view,
     })
 }
 
-/// Whether camera rays that escape see the environment's closed-form colour (the
-/// [`effects::Effect::SpectralBackground`] decision, added to `effects`): the film value of
-/// such a ray depends on its wavelengths only through the environment's spectrum, so its
-/// mean over the wavelengths — the same expectation, without colour noise — can be
-/// integrated once per texel instead of sampled per ray.
-fn background_decision(
+/// Whether camera rays that see an emitter directly — the environment, where they escape,
+/// or an untextured area light — take its closed-form colour (the
+/// [`effects::Effect::SpectralDirectView`] decision, added to `effects`): the film value of
+/// such a ray depends on its wavelengths only through the emitter's spectrum, so its mean
+/// over the wavelengths — the same expectation, without colour noise — can be integrated
+/// once per texel or light instead of sampled per ray.
+fn direct_view_decision(
     scene: &Scene,
     options: &RenderOptions,
     lights: &lights::LightSet,
     effects: &mut Effects,
 ) -> bool {
-    let spectral = if options.spectral_background {
-        Some("asked for (--spectral-background)")
+    let spectral = if options.spectral_direct_view {
+        Some("asked for (--spectral-direct-view)")
     } else if scene
         .media
         .as_ref()
@@ -482,10 +483,10 @@ fn background_decision(
         None
     };
     effects.decisions.push(effects::Decision {
-        effect: effects::Effect::SpectralBackground,
+        effect: effects::Effect::SpectralDirectView,
         on: spectral.is_some(),
         reason: spectral.map_or_else(
-            || "the environment seen directly takes its texels' expected colour (each texel's spectrum integrated once)".to_string(),
+            || "the environment and area lights seen directly take their expected colour (each texel's and light's spectrum integrated once)".to_string(),
             str::to_string,
         ),
     });
@@ -554,7 +555,7 @@ struct StartedBatch {
     cam: batch::CameraBatch,
     radiance: [Lanes; 4],
     /// The expected colour of the lanes whose rays escaped, where it is in closed form
-    /// (`PreparedScene::closed_form_background`; those lanes' radiance is left zero).
+    /// (`PreparedScene::closed_form_direct_view`; those lanes' radiance is left zero).
     escaped_rgb: Option<([bool; BATCH], [[f32; 3]; BATCH])>,
     /// Sample of the batch traced by wavefront lane `lanes.start + j`.
     hit_index: [usize; BATCH],
@@ -621,6 +622,7 @@ fn trace_batches<C: Carrier>(
     } = scratch;
     paths.lanes.clear();
     paths.first_hits.clear();
+    paths.closed_form_direct_view = scene.closed_form_direct_view;
     if started.len() < jobs.len() {
         started.resize_with(jobs.len(), StartedBatch::empty);
     }
@@ -718,7 +720,7 @@ fn start_batch<C: Carrier>(
     }
     // perf: a batch whose rays all see the environment's closed-form colour needs no
     // wavelengths (most of a teapot scene's batches).
-    if !(scene.closed_form_background && escaped[..m].iter().all(|&e| e)) {
+    if !(scene.closed_form_direct_view && escaped[..m].iter().all(|&e| e)) {
         cam.sample_wavelengths();
     }
     *hit_index = [0usize; BATCH];
@@ -739,7 +741,7 @@ fn start_batch<C: Carrier>(
         }
     }
     *escaped_rgb = None;
-    if escaped.iter().any(|&e| e) && scene.closed_form_background {
+    if escaped.iter().any(|&e| e) && scene.closed_form_direct_view {
         let mut rgb = [[0.0f32; 3]; BATCH];
         if !scene.settings().hide_emitters {
             (scene.lights()).add_background_colour_lanes(&cam.rays.dir, &escaped, &mut rgb);
@@ -799,6 +801,12 @@ fn finish_batch<C: Carrier>(
             if e {
                 *rgb = *c;
             }
+        }
+    }
+    // Emitters the traced lanes saw directly, in closed form.
+    for (&i, lane) in s.hit_index.iter().zip(&lanes[s.lanes.clone()]) {
+        for (v, c) in rgb[i].iter_mut().zip(lane.colour()) {
+            *v += c;
         }
     }
     for (i, o) in out.iter_mut().enumerate() {

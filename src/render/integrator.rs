@@ -915,9 +915,9 @@ fn vertex<C: Carrier>(
 
 /// Adds what the area light `light` under hit `si` emits towards branch `b`'s ray: its
 /// spectral radiance (MIS-weighted against light sampling) to `radiance`, or — seen straight
-/// from the camera (MIS weight 1: no earlier vertex), untextured, with a carrier equal at
-/// every wavelength, and `closed_form` — its closed-form film colour to `colour`: the mean
-/// of its radiance's film value over the wavelengths, without their noise.
+/// from the camera, untextured, with a carrier equal at every wavelength, and
+/// `closed_form` — its closed-form film colour to `colour`: the mean of its radiance's film
+/// value over the wavelengths, without their noise.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn add_emission_seen<C: Carrier>(
@@ -932,19 +932,22 @@ fn add_emission_seen<C: Carrier>(
 ) {
     let ray = b.path.ray;
     let s0 = b.carrier.s0();
+    let weight = || {
+        b.path.emitter_hit_weight(|prev_p| {
+            // From the MIS vertex, which may lie before null interactions (gltf hook).
+            sel_pdf * light.pdf_direction(prev_p, ray.dir, (si.p - prev_p).length(), si.ng)
+        })
+    };
     let direct = (b.path.depth == 0 && closed_form && s0 == Spec::splat(s0.x))
         .then(|| light.direct_colour(si.ng, ray.dir))
         .flatten();
     if let Some(c) = direct {
+        let w = s0.x * weight();
         for (acc, c) in colour.iter_mut().zip(c) {
-            *acc += s0.x * c;
+            *acc += w * c;
         }
     } else if let Some(le) = light.emitted(si.ng, si.uv, ray.dir, wl) {
-        let w = b.path.emitter_hit_weight(|prev_p| {
-            // From the MIS vertex, which may lie before null interactions (gltf hook).
-            sel_pdf * light.pdf_direction(prev_p, ray.dir, (si.p - prev_p).length(), si.ng)
-        });
-        *radiance += s0 * le * w;
+        *radiance += s0 * le * weight();
     }
 }
 

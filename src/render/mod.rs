@@ -803,10 +803,13 @@ fn finish_batch<C: Carrier>(
             }
         }
     }
-    // Emitters the traced lanes saw directly, in closed form.
+    // Emitters the traced lanes saw directly, in closed form (only where there are some:
+    // adding +0 would turn a −0 into +0).
     for (&i, lane) in s.hit_index.iter().zip(&lanes[s.lanes.clone()]) {
-        for (v, c) in rgb[i].iter_mut().zip(lane.colour()) {
-            *v += c;
+        if lane.colour() != [0.0; 3] {
+            for (v, c) in rgb[i].iter_mut().zip(lane.colour()) {
+                *v += c;
+            }
         }
     }
     for (i, o) in out.iter_mut().enumerate() {

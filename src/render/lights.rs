@@ -516,7 +516,7 @@ impl EnvMap {
         // misses in the 9 MB table), on every worker: set-up runs it beside the BVH build. A
         // texel equal to the one before it (flat regions: 80 % of the studio map's) reuses
         // its row.
-        // Its expected film colour is integrated on the same pass (~0.3 µs per distinct texel).
+        // Its expected film colour is integrated on the same pass (~0.2 µs per distinct texel).
         let mut texel_rows = vec![[0.0f32; 4]; image.pixels.len()];
         let mut texel_rgb = vec![[0.0f32; 4]; image.pixels.len()];
         let nodes = ColourNodes::with_d65();

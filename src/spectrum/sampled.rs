@@ -207,9 +207,9 @@ pub fn spectrum_to_linear_srgb(s: Spec, wavelengths: &SampledWavelengths) -> [f3
 /// sampling of [`spectrum_to_linear_srgb`], E[Σ_k rgb̄(λ_k)·L(λ_k)/p(λ_k)] = N·∫ rgb̄(λ) L(λ) dλ
 /// over 360–830 nm (each of the N wavelengths is distributed as p), as quadrature nodes and
 /// weights: Σ_j `weight[c][j]`·L(`lambda_nm[j]`). Composite Simpson on every 1 nm interval of
-/// the tables (nodes at whole and half nanometres): exact where L is a cubic within an
-/// interval, and rgb̄ is linear there, so for the smooth spectra it is used on (sigmoid
-/// spectra, D65 between table rows) the error is far below f32 rounding of the sum.
+/// the tables (nodes at whole and half nanometres): rgb̄ is linear within an interval, so the
+/// rule is exact where L is quadratic there, and for the smooth spectra it is used on
+/// (sigmoid spectra, D65 between table rows) the error is far below f32 rounding of the sum.
 /// Padded to a multiple of 8 nodes (weight 0 at 360 nm) for 8-lane loops.
 pub struct ColourQuadrature {
     pub lambda_nm: Vec<f32>,

@@ -440,32 +440,24 @@ impl ColourNodes {
         }))
     }
 
-    /// [`Self::sigmoid_colour`] with [`RgbSigmoidPolynomial::eval`]'s operations, eight
-    /// nodes at a time; a group of nodes where the sigmoid's argument is not finite takes
-    /// `eval` itself (S(±∞) = 1 or 0).
+    /// [`Self::sigmoid_colour`] with the exact sigmoid ([`RgbSigmoidPolynomial::eval4`], which
+    /// maps S(±∞) to 1 or 0), four nodes at a time.
     fn sigmoid_colour_exact(&self, c: [f32; 3]) -> [f32; 3] {
         let poly = RgbSigmoidPolynomial { c };
-        let mut acc = [[0.0f32; 8]; 3];
-        for (j, l) in self.lambda_nm.chunks_exact(8).enumerate() {
-            let mut s = [0.0f32; 8];
-            let mut finite = true;
-            for i in 0..8 {
-                let x = (c[0] * l[i] + c[1]) * l[i] + c[2];
-                finite &= x.is_finite();
-                s[i] = 0.5 + x / (2.0 * (1.0 + x * x).sqrt());
-            }
-            if !finite {
-                s = std::array::from_fn(|i| poly.eval(l[i]));
-            }
+        let mut acc = [Vec4::ZERO; 3];
+        for (j, l) in self.lambda_nm.chunks_exact(4).enumerate() {
+            let s = poly.eval4(Vec4::from_slice(l));
             for (acc, w) in acc.iter_mut().zip(&self.weight) {
-                let w = &w[8 * j..8 * j + 8];
-                for i in 0..8 {
-                    acc[i] += w[i] * s[i];
-                }
+                *acc += Vec4::from_slice(&w[4 * j..4 * j + 4]) * s;
             }
         }
-        acc.map(|a| a.iter().sum())
+        acc.map(|a| a.element_sum())
     }
+}
+
+/// The expected film colour of spectrum `s` seen directly ([`ColourQuadrature`]).
+fn film_colour(s: &Spectrum) -> [f32; 3] {
+    ColourQuadrature::get().expected_rgb(|l| s.eval(&SampledWavelengths::new([l; 4], [1.0; 4]))[0])
 }
 
 /// Lat-long environment map.
@@ -1732,10 +1724,7 @@ impl LightSet {
         };
         let texture = TexturedEmission::of_shape(scene, accel, si, radiance);
         let radiance = Spectrum::illuminant(radiance);
-        let colour = texture.is_none().then(|| {
-            ColourQuadrature::get()
-                .expected_rgb(|l| radiance.eval(&SampledWavelengths::new([l; 4], [1.0; 4]))[0])
-        });
+        let colour = texture.is_none().then(|| film_colour(&radiance));
         Ok(Some(Light::Area {
             shape: si as u32,
             radiance,
@@ -1774,8 +1763,7 @@ impl LightSet {
         let mut constant_rgb = [0.0f32; 3];
         for &li in &infinite {
             if let Light::Constant(s) = &lights[li as usize] {
-                let rgb = ColourQuadrature::get()
-                    .expected_rgb(|l| s.eval(&SampledWavelengths::new([l; 4], [1.0; 4]))[0]);
+                let rgb = film_colour(s);
                 for (sum, c) in constant_rgb.iter_mut().zip(rgb) {
                     *sum += c;
                 }

@@ -557,6 +557,9 @@ struct StartedBatch {
     /// The expected colour of the lanes whose rays escaped, where it is in closed form
     /// (`PreparedScene::closed_form_direct_view`; those lanes' radiance is left zero).
     escaped_rgb: Option<([bool; BATCH], [[f32; 3]; BATCH])>,
+    /// Whether the batch's wavelengths were mapped ([`batch::CameraBatch::sample_wavelengths`]):
+    /// not when every ray saw the closed-form background.
+    wavelengths: bool,
     /// Sample of the batch traced by wavefront lane `lanes.start + j`.
     hit_index: [usize; BATCH],
     lanes: std::ops::Range<usize>,
@@ -570,6 +573,7 @@ impl StartedBatch {
             cam: batch::CameraBatch::empty(),
             radiance: [[0.0; BATCH]; 4],
             escaped_rgb: None,
+            wavelengths: false,
             hit_index: [0; BATCH],
             lanes: 0..0,
         }
@@ -698,6 +702,7 @@ fn start_batch<C: Carrier>(
         cam,
         radiance,
         escaped_rgb,
+        wavelengths,
         hit_index,
         lanes,
     } = out;
@@ -720,7 +725,8 @@ fn start_batch<C: Carrier>(
     }
     // perf: a batch whose rays all see the environment's closed-form colour needs no
     // wavelengths (most of a teapot scene's batches).
-    if !(scene.closed_form_direct_view && escaped[..m].iter().all(|&e| e)) {
+    *wavelengths = !(scene.closed_form_direct_view && escaped[..m].iter().all(|&e| e));
+    if *wavelengths {
         cam.sample_wavelengths();
     }
     *hit_index = [0usize; BATCH];
@@ -741,7 +747,8 @@ fn start_batch<C: Carrier>(
         }
     }
     *escaped_rgb = None;
-    if escaped.iter().any(|&e| e) && scene.closed_form_direct_view {
+    let any_escaped = escaped.iter().any(|&e| e);
+    if any_escaped && scene.closed_form_direct_view {
         let mut rgb = [[0.0f32; 3]; BATCH];
         if !scene.settings().hide_emitters {
             (scene.lights()).add_background_colour_lanes(&cam.rays.dir, &escaped, &mut rgb);
@@ -751,7 +758,7 @@ fn start_batch<C: Carrier>(
             }
         }
         *escaped_rgb = Some((escaped, rgb));
-    } else if escaped.iter().any(|&e| e) {
+    } else if any_escaped {
         integrator::escaped_camera_radiance_lanes(
             scene,
             &cam.rays.dir,
@@ -791,10 +798,10 @@ fn finish_batch<C: Carrier>(
             pdf[k][i] = lane.wl.pdf[k];
         }
     }
-    let mut rgb = match &s.escaped_rgb {
-        // Every lane saw the closed-form background: no wavelengths were drawn.
-        Some((escaped, _)) if escaped[..s.cam.n].iter().all(|&e| e) => [[0.0; 3]; BATCH],
-        _ => s.cam.to_rgb_lanes(&radiance, &pdf),
+    let mut rgb = if s.wavelengths {
+        s.cam.to_rgb_lanes(&radiance, &pdf)
+    } else {
+        [[0.0; 3]; BATCH]
     };
     if let Some((escaped, colour)) = &s.escaped_rgb {
         for ((rgb, &e), c) in rgb.iter_mut().zip(escaped).zip(colour) {

@@ -70,6 +70,10 @@ pub struct Args {
     /// (as Mitsuba does), instead of taking its closed-form expected colour.
     #[arg(long)]
     pub spectral_direct_view: bool,
+    /// Our renderer draws environment light samples by radiance alone over the whole sphere
+    /// (as Mitsuba does), instead of from the hemisphere a reflecting surface faces.
+    #[arg(long)]
+    pub plain_env_sampling: bool,
     /// Runs per spp, for both renderers, run j with seed `--seed` + j. Each row reports the
     /// fastest run's time (Mitsuba's first render at a new spp can include JIT compilation of
     /// its kernels — seen: 0.42 s instead of 0.14 s for a 64-spp teapot on a cold kernel
@@ -238,6 +242,7 @@ fn render_ours(
                 sampler: args.sampler,
                 fresnel_splits: args.fresnel_splits,
                 spectral_direct_view: args.spectral_direct_view,
+                plain_env_sampling: args.plain_env_sampling,
                 ..Default::default()
             };
             let out = render(scene, &options)?;

@@ -69,6 +69,12 @@ pub struct Args {
     /// expected image without the colour noise of the background and of visible lights.
     #[arg(long)]
     pub spectral_direct_view: bool,
+    /// Draw environment light samples by radiance alone over the whole sphere, as Mitsuba
+    /// does. By default a surface that only reflects draws them from the hemisphere its normal
+    /// faces (radiance × the largest cosine towards each region of the map, per bin of
+    /// normals): the same expected image, with fewer samples wasted below the horizon.
+    #[arg(long)]
+    pub plain_env_sampling: bool,
     /// Environment replacing the scene's own: a lat-long EXR/HDR file (Mitsuba `envmap`
     /// layout), `constant:V` (D65 of luminance V) or `constant:R,G,B` (RGB illuminant).
     #[arg(long, value_name = "FILE|constant:V|constant:R,G,B")]
@@ -285,6 +291,7 @@ fn options(args: &Args, scene_spp: u32, report: Output) -> Result<RenderOptions>
         cancel: Some(Cancel::on_flag(cancel_on_interrupt())),
         force_polarization: args.force_polarization,
         spectral_direct_view: args.spectral_direct_view,
+        plain_env_sampling: args.plain_env_sampling,
     })
 }
 

@@ -38,6 +38,10 @@ pub enum Effect {
     /// untextured area light); off, their colour is the emitter's expectation over
     /// wavelengths, integrated once per texel or light.
     SpectralDirectView,
+    /// Environment light samples at reflecting surfaces drawn from the hemisphere their
+    /// normal faces (radiance × the largest cosine, per normal bin) instead of by radiance
+    /// over the whole sphere ([`super::env_sampling`]).
+    HemisphereEnvSampling,
 }
 
 impl Effect {
@@ -53,6 +57,7 @@ impl Effect {
             Effect::Polarization => "polarisation",
             Effect::CameraRays => "Camera rays",
             Effect::SpectralDirectView => "wavelength sampling of emitters seen directly",
+            Effect::HemisphereEnvSampling => "hemisphere-aware environment sampling",
         }
     }
 }

@@ -20,9 +20,10 @@
 //! in `scenes/lens.xml`.
 
 use super::accel::Hit;
-use super::bsdf::{Bsdf, BsdfSample, Lobes, ShadingCtx};
+use super::bsdf::{Bsdf, BsdfFlags, BsdfSample, Lobes, ShadingCtx};
 use super::camera::Ray;
 use super::counters::{count, Counter};
+use super::env_sampling::NormalBin;
 use super::geometry::{mis_power, offset_ray_origin, Frame, SurfaceInteraction};
 use super::lights::LANES;
 use super::sampler::Sampler;
@@ -104,6 +105,9 @@ pub struct VertexFrame {
     pub frame: Frame,
     pub wi: Vec3,
     pub wi_world: Vec3,
+    /// The vertex's environment-sampling bin: its environment light samples are drawn from
+    /// it, and the MIS weight of the ray it scatters into, if that escapes, uses it.
+    pub normal_bin: NormalBin,
 }
 
 /// The spectral throughput of an unpolarised path.
@@ -192,14 +196,24 @@ pub(super) struct PathState {
     pub ray: Ray,
     pub eta: f32,
     pub depth: u32,
-    /// Previous vertex and how its direction was sampled, for MIS on emitters hit.
-    prev_p: Vec3,
-    prev_bsdf_pdf: f32,
-    prev_bsdf_delta: bool,
+    /// The previous vertex, for MIS on emitters hit.
+    pub mis: MisVertex,
     /// Fresnel splits already made on the way here.
     pub splits: u32,
     /// The medium the ray travels in ([`super::medium::NO_MEDIUM`] outside every medium).
     medium: u32,
+}
+
+/// The vertex a ray left and how its direction was sampled: what the MIS weight of an
+/// emitter the ray hits needs.
+#[derive(Clone, Copy)]
+pub(super) struct MisVertex {
+    pub p: Vec3,
+    pub bsdf_pdf: f32,
+    /// A Dirac sample (or no light sampling there): emitters hit count in full.
+    pub bsdf_delta: bool,
+    /// [`VertexFrame::normal_bin`].
+    pub normal_bin: NormalBin,
 }
 
 impl PathState {
@@ -208,22 +222,26 @@ impl PathState {
             ray,
             eta: 1.0,
             depth: 0,
-            prev_p: ray.origin,
-            prev_bsdf_pdf: 1.0,
-            prev_bsdf_delta: true,
+            mis: MisVertex {
+                p: ray.origin,
+                bsdf_pdf: 1.0,
+                bsdf_delta: true,
+                normal_bin: NormalBin::WHOLE_SPHERE,
+            },
             splits: 0,
             medium: super::medium::SENSOR_MEDIUM,
         }
     }
 
     /// MIS weight of an emitter this ray hit, against light sampling from the previous
-    /// vertex; `light_pdf(prev_p)` is evaluated only if the ray was not a delta sample.
+    /// vertex; `light_pdf(previous vertex)` is evaluated only if the ray was not a delta
+    /// sample.
     #[inline]
-    pub fn emitter_hit_weight(&self, light_pdf: impl FnOnce(Vec3) -> f32) -> f32 {
-        if self.prev_bsdf_delta {
+    pub fn emitter_hit_weight(&self, light_pdf: impl FnOnce(&MisVertex) -> f32) -> f32 {
+        if self.mis.bsdf_delta {
             1.0
         } else {
-            mis_power(self.prev_bsdf_pdf, light_pdf(self.prev_p))
+            mis_power(self.mis.bsdf_pdf, light_pdf(&self.mis))
         }
     }
 
@@ -235,14 +253,13 @@ impl PathState {
     pub fn cross(
         &mut self,
         si: &SurfaceInteraction,
-        frame: &Frame,
-        wi: Vec3,
+        v: &VertexFrame,
         bs: &BsdfSample,
     ) -> Option<Vec3> {
-        let wo_world = frame.to_world(bs.wo);
+        let wo_world = v.frame.to_world(bs.wo);
         let geo_cos_o = si.ng.dot(wo_world);
         let geo_cos_i = si.ng.dot(-self.ray.dir);
-        let reflected = bs.wo.z * wi.z > 0.0;
+        let reflected = bs.wo.z * v.wi.z > 0.0;
         if geo_cos_o == 0.0
             || (reflected && geo_cos_o * geo_cos_i < 0.0)
             || (!reflected && geo_cos_o * geo_cos_i > 0.0)
@@ -250,9 +267,12 @@ impl PathState {
             return None;
         }
         self.eta *= bs.eta;
-        self.prev_p = si.p;
-        self.prev_bsdf_pdf = bs.pdf;
-        self.prev_bsdf_delta = bs.is_delta();
+        self.mis = MisVertex {
+            p: si.p,
+            bsdf_pdf: bs.pdf,
+            bsdf_delta: bs.is_delta(),
+            normal_bin: v.normal_bin,
+        };
         self.ray = Ray {
             origin: offset_ray_origin(si.p, si.ng, wo_world),
             dir: wo_world,
@@ -807,9 +827,9 @@ fn vertex<C: Carrier>(
             for &li in &lights.infinite {
                 let light = &lights.lights[li as usize];
                 let uv = requests.env_uv;
-                let w = b
-                    .path
-                    .emitter_hit_weight(|prev_p| sel_pdf * light.pdf_escaped(prev_p, ray.dir, uv));
+                let w = b.path.emitter_hit_weight(|m| {
+                    sel_pdf * light.pdf_escaped(m.p, ray.dir, uv, m.normal_bin)
+                });
                 requests.env.push(EnvRequest {
                     lane: requests.lane,
                     light: li,
@@ -848,6 +868,7 @@ fn vertex<C: Carrier>(
         frame,
         wi: frame.to_local(-ray.dir),
         wi_world: -ray.dir,
+        normal_bin: env_normal_bin(scene, bsdf, &frame, -ray.dir),
     };
     let ctx = shading_ctx(wl, &si, bsdf);
 
@@ -913,6 +934,21 @@ fn vertex<C: Carrier>(
     advance(scene, b, &si, &v, &bs, &value, wl, sampler)
 }
 
+/// The environment-sampling bin of a vertex with BSDF `bsdf` in shading frame `frame`, seen
+/// from `wi_world` ([`super::env_sampling`]): the bin of the normal on the side the path
+/// arrives from, where a surface without a non-Dirac transmission lobe receives all the light
+/// that light sampling can find; radiance-only sampling elsewhere, in scenes with media (their
+/// light samples are drawn whole-sphere) and where hemisphere sampling is off.
+#[inline]
+fn env_normal_bin(scene: &PreparedScene, bsdf: &Bsdf, frame: &Frame, wi_world: Vec3) -> NormalBin {
+    let transmits = BsdfFlags::DIFFUSE_TRANSMISSION | BsdfFlags::GLOSSY_TRANSMISSION;
+    if !scene.hemisphere_env_sampling() || bsdf.flags().intersects(transmits) {
+        return NormalBin::WHOLE_SPHERE;
+    }
+    let n = frame.n;
+    NormalBin::of(if n.dot(wi_world) >= 0.0 { n } else { -n })
+}
+
 /// Adds what the area light `light` under hit `si` emits towards branch `b`'s ray: its
 /// spectral radiance (MIS-weighted against light sampling) to `radiance`, or — seen straight
 /// from the camera, untextured, with a carrier equal at every wavelength, and
@@ -933,9 +969,9 @@ fn add_emission_seen<C: Carrier>(
     let ray = b.path.ray;
     let s0 = b.carrier.s0();
     let weight = || {
-        b.path.emitter_hit_weight(|prev_p| {
+        b.path.emitter_hit_weight(|m| {
             // From the MIS vertex, which may lie before null interactions (gltf hook).
-            sel_pdf * light.pdf_direction(prev_p, ray.dir, (si.p - prev_p).length(), si.ng)
+            sel_pdf * light.pdf_direction(m.p, ray.dir, (si.p - m.p).length(), si.ng)
         })
     };
     let direct = (b.path.depth == 0 && closed_form && s0 == Spec::splat(s0.x))
@@ -1034,11 +1070,14 @@ fn resolve_env_samples<C: Carrier>(
     drawn.clear();
     // perf: every sample's first cache miss is under way before any sample waits on its own
     // (the prefetching draw then starts the texel loads of the radiance stage).
-    samples.iter().for_each(|s| env(s).prefetch_sample(s.u));
+    let bin = |s: &EnvSample<C>| s.v.normal_bin;
     samples
         .iter()
-        .for_each(|s| env(s).prefetch_sample_guided(s.u));
-    drawn.extend((samples.iter()).map(|s| env(s).sample_direction_prefetch(s.u)));
+        .for_each(|s| env(s).prefetch_sample(s.u, bin(s)));
+    samples
+        .iter()
+        .for_each(|s| env(s).prefetch_sample_guided(s.u, bin(s)));
+    drawn.extend((samples.iter()).map(|s| env(s).sample_direction_prefetch(s.u, bin(s))));
     le.clear();
     match lights.sole_env() {
         // perf: the radiances in SIMD lanes ([`super::lights::EnvMap::add_batch`], the
@@ -1102,8 +1141,8 @@ fn advance<C: Carrier>(
     wl: &mut SampledWavelengths,
     sampler: &mut Sampler,
 ) -> bool {
-    let mis_vertex = (b.path.prev_p, b.path.prev_bsdf_pdf, b.path.prev_bsdf_delta);
-    let Some(wo_world) = b.path.cross(si, &v.frame, v.wi, bs) else {
+    let mis_vertex = b.path.mis;
+    let Some(wo_world) = b.path.cross(si, v, bs) else {
         return false;
     };
     // gltf branch hook: passing an alpha cut-out (a null interaction that shadow rays also
@@ -1111,7 +1150,7 @@ fn advance<C: Carrier>(
     if bs.lobe.contains(super::bsdf::BsdfFlags::NULL)
         && super::lights::passes_shadow_rays(scene, si.shape)
     {
-        (b.path.prev_p, b.path.prev_bsdf_pdf, b.path.prev_bsdf_delta) = mis_vertex;
+        b.path.mis = mis_vertex;
     }
     // Media hook: the medium beyond the surface; a thin dielectric's transmission is a null
     // interaction in `volpath` (no vertex: depth and MIS vertex kept).

@@ -20,6 +20,7 @@ mod bvh_sah;
 pub mod camera;
 pub mod counters;
 pub mod effects;
+pub mod env_sampling;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
@@ -75,6 +76,10 @@ pub struct RenderOptions {
     /// their colour is its closed-form expectation over wavelengths:
     /// [`effects::Effect::SpectralDirectView`]).
     pub spectral_direct_view: bool,
+    /// Draw environment light samples by radiance alone, over the whole sphere, as Mitsuba
+    /// does (by default a reflecting surface draws them from the hemisphere it faces:
+    /// [`effects::Effect::HemisphereEnvSampling`]).
+    pub plain_env_sampling: bool,
     /// Asked before each row whether to stop (a Ctrl-C handler's flag); see
     /// [`render_prepared`].
     pub cancel: Option<Cancel>,
@@ -190,6 +195,9 @@ pub struct PreparedScene {
     /// Camera rays that see an emitter directly take its expected colour instead of a
     /// wavelength-sampled estimate ([`effects::Effect::SpectralDirectView`] off).
     closed_form_direct_view: bool,
+    /// Reflecting surfaces draw environment light samples from their normal's bin
+    /// ([`effects::Effect::HemisphereEnvSampling`]).
+    hemisphere_env_sampling: bool,
 }
 
 /// A surface point of a prepared scene: its geometry (a [`SurfaceInteraction`], by `Deref`)
@@ -321,6 +329,13 @@ impl PreparedScene {
         self.media.as_deref()
     }
 
+    /// Whether reflecting surfaces draw environment light samples from the hemisphere they
+    /// face ([`env_sampling`]).
+    #[inline]
+    pub fn hemisphere_env_sampling(&self) -> bool {
+        self.hemisphere_env_sampling
+    }
+
     /// Whether camera rays start inside a medium (then even those that hit nothing are
     /// traced as paths).
     #[inline]
@@ -422,6 +437,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     });
     let lights = lights::LightSet::build(scene, &accel, emitters?)?;
     let closed_form_direct_view = direct_view_decision(scene, options, &lights, &mut effects);
+    let hemisphere_env_sampling = env_sampling_decision(scene, options, &lights, &mut effects);
     let shape_bsdf = scene.shapes.iter().map(|s| s.bsdf as u32).collect();
     let polarized = if effects.polarization || options.force_polarization {
         if let Some(r) = scene.bsdfs.iter().find_map(|b| b.polarized().err()) {
@@ -454,6 +470,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         primary_bins,
         media: scene.media.clone(),
         closed_form_direct_view,
+        hemisphere_env_sampling,
     })
 }
 
@@ -491,6 +508,39 @@ fn direct_view_decision(
         ),
     });
     spectral.is_none()
+}
+
+/// Whether reflecting surfaces draw environment light samples from the hemisphere they face
+/// (the [`effects::Effect::HemisphereEnvSampling`] decision, added to `effects`): where an
+/// environment map lights surfaces, samples below a surface's horizon add nothing, and
+/// drawing them from the normal's bin keeps the expectation with less variance.
+fn env_sampling_decision(
+    scene: &Scene,
+    options: &RenderOptions,
+    lights: &lights::LightSet,
+    effects: &mut Effects,
+) -> bool {
+    let off = if !(lights.lights.iter()).any(|l| matches!(l, lights::Light::Env(_))) {
+        Some("no environment map")
+    } else if options.plain_env_sampling {
+        Some("radiance-only sampling asked for (--plain-env-sampling)")
+    } else if scene.media.is_some() {
+        Some("participating media (their light samples are drawn over the whole sphere)")
+    } else {
+        None
+    };
+    effects.decisions.push(effects::Decision {
+        effect: effects::Effect::HemisphereEnvSampling,
+        on: off.is_none(),
+        reason: off.map_or_else(
+            || format!(
+                "reflecting surfaces draw environment samples from the hemisphere they face ({} normal bins)",
+                env_sampling::NORMAL_BINS
+            ),
+            str::to_string,
+        ),
+    });
+    off.is_none()
 }
 
 /// The global sample indices to render: the options' range, else 0..spp.

@@ -14,11 +14,12 @@
 //!   attenuated by exp(−σ_t d) in each medium they cross (analytic: Mitsuba estimates the
 //!   same transmittance by ratio tracking, with noise).
 
-use super::{Branch, Carrier, PathState, Requests, ShadowRequest};
+use super::{Branch, Carrier, MisVertex, PathState, Requests, ShadowRequest};
 use crate::render::accel::Hit;
 use crate::render::bsdf::{Bsdf, BsdfFlags, BsdfSample, Lobes};
 use crate::render::camera::Ray;
 use crate::render::counters::{count, Counter};
+use crate::render::env_sampling::NormalBin;
 use crate::render::geometry::{mis_power, offset_ray_origin, SurfaceInteraction};
 use crate::render::medium::{
     sample_flight, transmittance, Flight, Medium, NO_MEDIUM, SENSOR_MEDIUM,
@@ -117,9 +118,12 @@ fn scatter<C: Carrier>(
     }
     // Emitters hit next are weighted against light sampling from here — unless this medium
     // does not sample emitters (Mitsuba: they then count in full).
-    b.path.prev_p = p;
-    b.path.prev_bsdf_pdf = pdf;
-    b.path.prev_bsdf_delta = !medium.sample_emitters;
+    b.path.mis = MisVertex {
+        p,
+        bsdf_pdf: pdf,
+        bsdf_delta: !medium.sample_emitters,
+        normal_bin: NormalBin::WHOLE_SPHERE,
+    };
     b.path.ray = Ray {
         origin: p,
         dir: wo,
@@ -197,7 +201,7 @@ pub(super) fn after_crossing(
     si: &SurfaceInteraction,
     bs: &BsdfSample,
     wo_world: Vec3,
-    mis_vertex: (Vec3, f32, bool),
+    mis_vertex: MisVertex,
 ) {
     let Some(media) = scene.media() else {
         return;
@@ -208,7 +212,7 @@ pub(super) fn after_crossing(
     if bs.lobe.contains(BsdfFlags::DELTA_TRANSMISSION)
         && matches!(scene.shape_bsdf_of(si.shape), Bsdf::ThinDielectric(_))
     {
-        (path.prev_p, path.prev_bsdf_pdf, path.prev_bsdf_delta) = mis_vertex;
+        path.mis = mis_vertex;
         path.depth -= 1;
     }
 }

@@ -1,0 +1,374 @@
+//! Environment-map light sampling that knows which side of a surface light can arrive from
+//! (hemisphere-aware importance sampling of an [`super::lights::EnvMap`]).
+//!
+//! Mitsuba and pbrt draw environment light samples by radiance alone: at a surface that only
+//! reflects, the samples that fall below its horizon add nothing, and those above it are
+//! drawn without regard to cos θ. On a diffuse teapot in a studio map that is a third of the
+//! samples wasted, and nearly all of the image's error is direct lighting.
+//!
+//! Here world normals are sorted into [`NORMAL_BINS`] octahedral bins (Cigolle et al. 2014,
+//! "A survey of efficient representations for independent unit vectors"). For each bin, the
+//! map's coarse cells (32 × 16 blocks of its sampling cells) are weighted by their radiance
+//! times the mean of max(0, n · ω) over the bin's normals n and the cell's directions ω, mixed
+//! with a [`DEFENSIVE`] share of radiance-only weights: every direction the radiance-only
+//! distribution can draw keeps a positive density, so a bin's edge, a bump-mapped normal or a
+//! misjudged surface costs variance, never light. A sample picks a coarse cell from its
+//! vertex's bin, then a row of the cell and a sampling cell of that row by radiance (tables
+//! normalised within the coarse cell and within the row's part of it, so a dark corner of a
+//! bright row keeps its
+//! precision), uniformly within it. The density of every direction is exact
+//! ([`HemisphereTables::pdf`]): the MIS weight of a BSDF-sampled ray that escapes uses the
+//! bin of the vertex it left. Same expected image as radiance-only sampling.
+
+use super::lights::Distribution1D;
+use glam::{Mat3, Vec2, Vec3};
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// Octahedral bins per side: [`NORMAL_BINS`] = 64 bins of ~0.2 sr.
+const BINS_PER_SIDE: usize = 16;
+/// Number of normal bins.
+pub const NORMAL_BINS: usize = BINS_PER_SIDE * BINS_PER_SIDE;
+/// Coarse cells across and down the map (fewer where the map has fewer sampling cells).
+const COARSE_COLUMNS: usize = 32;
+const COARSE_ROWS: usize = 16;
+/// The share of a bin's samples drawn by radiance alone (a defensive mixture, Hesterberg
+/// 1995): every direction the radiance-only distribution can draw keeps at least this share
+/// of its density, and at most this share of the samples lands behind the bin's normals.
+pub const DEFENSIVE: f64 = 0.02;
+/// Points per side of a bin's and of a cell's quadrature of the mean clamped cosine.
+const QUAD: usize = 2;
+
+/// Which distribution an environment light sample is drawn from: a surface's normal bin, or
+/// [`NormalBin::WHOLE_SPHERE`] (radiance alone — a medium vertex, a surface that transmits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NormalBin(u16);
+
+impl NormalBin {
+    /// Radiance-only sampling over the whole sphere.
+    pub const WHOLE_SPHERE: Self = NormalBin(u16::MAX);
+
+    /// The bin of a world-space unit normal (a NaN or zero normal falls in bin 0, which the
+    /// floor keeps unbiased).
+    #[inline]
+    pub fn of(n: Vec3) -> Self {
+        let p = octahedral(n) * BINS_PER_SIDE as f32;
+        // `as usize` saturates: NaN → 0, and 1.0 · 8 is clamped into the last bin.
+        let x = (p.x as usize).min(BINS_PER_SIDE - 1);
+        let y = (p.y as usize).min(BINS_PER_SIDE - 1);
+        NormalBin((y * BINS_PER_SIDE + x) as u16)
+    }
+
+    /// The bin's index, or None for [`NormalBin::WHOLE_SPHERE`].
+    #[inline]
+    fn index(self) -> Option<usize> {
+        (self != Self::WHOLE_SPHERE).then_some(self.0 as usize)
+    }
+}
+
+/// Octahedral map of a unit vector to [0, 1]².
+#[inline]
+fn octahedral(n: Vec3) -> Vec2 {
+    let l1 = n.x.abs() + n.y.abs() + n.z.abs();
+    let (x, y) = (n.x / l1, n.y / l1);
+    let (x, y) = if n.z < 0.0 {
+        ((1.0 - y.abs()).copysign(x), (1.0 - x.abs()).copysign(y))
+    } else {
+        (x, y)
+    };
+    Vec2::new(0.5 * x + 0.5, 0.5 * y + 0.5)
+}
+
+/// Inverse of [`octahedral`].
+fn octahedral_inverse(p: Vec2) -> Vec3 {
+    let (x, y) = (2.0 * p.x - 1.0, 2.0 * p.y - 1.0);
+    let z = 1.0 - x.abs() - y.abs();
+    let (x, y) = if z < 0.0 {
+        ((1.0 - y.abs()).copysign(x), (1.0 - x.abs()).copysign(y))
+    } else {
+        (x, y)
+    };
+    Vec3::new(x, y, z).normalize()
+}
+
+/// World direction of the map's sampling-space point (u, v) (θ = π v, φ = 2π u: the mapping
+/// of [`super::lights::EnvMap`]'s samples).
+fn direction(to_world: Mat3, u: f32, v: f32) -> Vec3 {
+    let (st, ct) = (PI * v).sin_cos();
+    let (sp, cp) = (2.0 * PI * u).sin_cos();
+    (to_world * Vec3::new(st * sp, ct, -st * cp)).normalize()
+}
+
+/// The centres of the QUAD × QUAD sub-rectangles of [u0, u1] × [v0, v1], mapped by `dir`:
+/// the points over which a bin's and a cell's mean clamped cosine is taken.
+fn quadrature_points(
+    dir: impl Fn(f32, f32) -> Vec3,
+    (u0, u1): (f32, f32),
+    (v0, v1): (f32, f32),
+) -> [Vec3; QUAD * QUAD] {
+    std::array::from_fn(|k| {
+        let (x, y) = ((k % QUAD) as f32 + 0.5, (k / QUAD) as f32 + 0.5);
+        dir(
+            u0 + x / QUAD as f32 * (u1 - u0),
+            v0 + y / QUAD as f32 * (v1 - v0),
+        )
+    })
+}
+
+/// The cell of a CDF that `u` falls in: (index, probability, `u`'s position within it).
+/// A zero probability (rounding at an empty cell) tells the caller to draw nothing.
+#[inline]
+fn pick(cdf: &[f32], u: f32) -> (usize, f32, f32) {
+    let last = cdf.len() - 2;
+    let k = cdf[1..=last].partition_point(|&c| c <= u);
+    let p = cdf[k + 1] - cdf[k];
+    let rest = if p > 0.0 {
+        ((u - cdf[k]) / p).clamp(0.0, 1.0 - f32::EPSILON)
+    } else {
+        0.5
+    };
+    (k, p, rest)
+}
+
+/// The point `rest` ∈ [0, 1) of the way through cell `index` of `n` on [0, 1), rounded so
+/// that it stays in that cell (as [`HemisphereTables::pdf`] finds it: a rest within an ulp
+/// of 1 would round to the next cell's start).
+#[inline]
+fn within(index: usize, rest: f32, n: usize) -> f32 {
+    let x = (index as f32 + rest) / n as f32;
+    if (x * n as f32) as usize == index {
+        x
+    } else {
+        (index as f32 + 0.5) / n as f32
+    }
+}
+
+/// A CDF of `weights` (non-negative), appended to `out`: len + 1 entries from 0 to 1
+/// (uniform steps where the weights sum to zero). Returns their sum.
+fn push_cdf(weights: impl ExactSizeIterator<Item = f64> + Clone, out: &mut Vec<f32>) -> f64 {
+    let n = weights.len();
+    let total: f64 = weights.clone().sum();
+    out.push(0.0);
+    let mut run = 0.0f64;
+    for (k, w) in weights.enumerate() {
+        run += w;
+        out.push(if k + 1 == n {
+            1.0
+        } else if total > 0.0 {
+            (run / total) as f32
+        } else {
+            (k + 1) as f32 / n as f32
+        });
+    }
+    total
+}
+
+/// The per-bin sampling tables of one environment map (module docs).
+#[derive(Debug, Clone)]
+pub struct HemisphereTables {
+    /// Sampling cells across (the map's columns) and down (its rows − 1).
+    nu: usize,
+    nv: usize,
+    /// Coarse column and row boundaries, in sampling cells.
+    cols: Vec<u32>,
+    rows: Vec<u32>,
+    /// The coarse column of each sampling column, the coarse row of each sampling row.
+    col_cell: Vec<u16>,
+    row_cell: Vec<u16>,
+    /// Per coarse cell (row-major), a CDF over its rows by their radiance in the cell, from
+    /// `row_cdf_start[c]`.
+    row_cdf: Vec<f32>,
+    row_cdf_start: Vec<u32>,
+    /// Per sampling row `i` and coarse column `b`, a CDF over the row's cells in the column,
+    /// from `i · (nu + cu) + cols[b] + b`.
+    seg_cdf: Vec<f32>,
+    /// Per normal bin, the distribution over coarse cells.
+    bins: Vec<Distribution1D>,
+}
+
+impl HemisphereTables {
+    /// Tables for the sampling weights `func` (`nu` × `nv`, row-major: the map's
+    /// radiance-only distribution's) of a map turned by `to_world`; None if the map is black.
+    pub fn new(func: &[f32], nu: usize, nv: usize, to_world: Mat3) -> Option<Self> {
+        let total: f64 = func.iter().map(|&f| f as f64).sum();
+        if !(total > 0.0 && total.is_finite()) || func.len() != nu * nv {
+            return None;
+        }
+        let (cu, cv) = (COARSE_COLUMNS.min(nu), COARSE_ROWS.min(nv));
+        let cols: Vec<u32> = (0..=cu).map(|b| (b * nu / cu) as u32).collect();
+        let rows: Vec<u32> = (0..=cv).map(|a| (a * nv / cv) as u32).collect();
+        let cell_of = |bounds: &[u32], n: usize| -> Vec<u16> {
+            (0..n)
+                .map(|i| (bounds.partition_point(|&b| b as usize <= i) - 1) as u16)
+                .collect()
+        };
+        // Per row and coarse column: the CDF of the row's part and its mass.
+        let mut seg_cdf = Vec::with_capacity(nv * (nu + cu));
+        let mut seg_mass = vec![0.0f64; nv * cu];
+        for i in 0..nv {
+            for b in 0..cu {
+                let part = &func[i * nu + cols[b] as usize..i * nu + cols[b + 1] as usize];
+                seg_mass[i * cu + b] = push_cdf(part.iter().map(|&f| f as f64), &mut seg_cdf);
+            }
+        }
+        let mut row_cdf = Vec::new();
+        let mut row_cdf_start = Vec::with_capacity(cu * cv);
+        let mut mass = Vec::with_capacity(cu * cv);
+        for a in 0..cv {
+            for b in 0..cu {
+                row_cdf_start.push(row_cdf.len() as u32);
+                let rows_of = rows[a] as usize..rows[a + 1] as usize;
+                mass.push(push_cdf(
+                    rows_of.map(|i| seg_mass[i * cu + b]),
+                    &mut row_cdf,
+                ));
+            }
+        }
+        // A cell's weight in a bin: its radiance times the mean of max(0, n · ω) over the
+        // bin's normals n and the cell's directions ω (a quadrature), plus the floor.
+        let cells: Vec<_> = (0..cu * cv)
+            .map(|c| {
+                let (a, b) = (c / cu, c % cu);
+                let u = (cols[b] as f32 / nu as f32, cols[b + 1] as f32 / nu as f32);
+                let v = (rows[a] as f32 / nv as f32, rows[a + 1] as f32 / nv as f32);
+                quadrature_points(|u, v| direction(to_world, u, v), u, v)
+            })
+            .collect();
+        let k = BINS_PER_SIDE as f32;
+        let bins = (0..NORMAL_BINS)
+            .into_par_iter()
+            .map(|bin| {
+                let (x, y) = ((bin % BINS_PER_SIDE) as f32, (bin / BINS_PER_SIDE) as f32);
+                let normals = quadrature_points(
+                    |u, v| octahedral_inverse(Vec2::new(u, v)),
+                    (x / k, (x + 1.0) / k),
+                    (y / k, (y + 1.0) / k),
+                );
+                let cos_weighted: Vec<f64> = (cells.iter().zip(&mass))
+                    .map(|(dirs, &m)| {
+                        let cos: f32 = (normals.iter())
+                            .flat_map(|n| dirs.iter().map(|d| n.dot(*d).max(0.0)))
+                            .sum();
+                        m * cos as f64
+                    })
+                    .collect();
+                let cos_total: f64 = cos_weighted.iter().sum();
+                // The defensive mixture: (1 − α) of the samples by radiance × cosine, α by
+                // radiance alone.
+                let weights: Vec<f32> = (cos_weighted.iter().zip(&mass))
+                    .map(|(&c, &m)| match cos_total > 0.0 {
+                        true => ((1.0 - DEFENSIVE) * c / cos_total + DEFENSIVE * m / total) as f32,
+                        false => (m / total) as f32,
+                    })
+                    .collect();
+                Distribution1D::new(&weights)
+            })
+            .collect();
+        Some(HemisphereTables {
+            nu,
+            nv,
+            col_cell: cell_of(&cols, nu),
+            row_cell: cell_of(&rows, nv),
+            cols,
+            rows,
+            row_cdf,
+            row_cdf_start,
+            seg_cdf,
+            bins,
+        })
+    }
+
+    fn coarse_columns(&self) -> usize {
+        self.cols.len() - 1
+    }
+
+    /// The CDF over coarse cell `c`'s rows.
+    #[inline]
+    fn rows_of(&self, c: usize) -> &[f32] {
+        let a = c / self.coarse_columns();
+        let start = self.row_cdf_start[c] as usize;
+        &self.row_cdf[start..start + (self.rows[a + 1] - self.rows[a]) as usize + 1]
+    }
+
+    /// The CDF over row `i`'s cells in coarse column `b`.
+    #[inline]
+    fn segment(&self, i: usize, b: usize) -> &[f32] {
+        let start = i * (self.nu + self.coarse_columns()) + self.cols[b] as usize + b;
+        &self.seg_cdf[start..start + (self.cols[b + 1] - self.cols[b]) as usize + 1]
+    }
+
+    /// Draws a point of [0, 1)² in the map's sampling space for a vertex in `bin` (not
+    /// [`NormalBin::WHOLE_SPHERE`]): (point, density in that space); density 0 if the draw
+    /// landed on an empty cell by rounding.
+    #[inline]
+    pub fn sample(&self, u: Vec2, bin: NormalBin) -> (Vec2, f32) {
+        let cells = &self.bins[bin.index().unwrap_or(0)];
+        let n = cells.len();
+        let (x, pdf_cell, c) = cells.sample(u.y);
+        // The coarse cell's share of u.y picks its row (sample reuse, pbrt's style).
+        let rest = (x * n as f32 - c as f32).clamp(0.0, 1.0 - f32::EPSILON);
+        let (a, b) = (c / self.coarse_columns(), c % self.coarse_columns());
+        let (k, p_row, dv) = pick(self.rows_of(c), rest);
+        let i = self.rows[a] as usize + k;
+        let (kj, p_col, du) = pick(self.segment(i, b), u.x);
+        let j = self.cols[b] as usize + kj;
+        let point = Vec2::new(within(j, du, self.nu), within(i, dv, self.nv));
+        let p = pdf_cell / n as f32 * p_row * p_col * (self.nu * self.nv) as f32;
+        (point, p)
+    }
+
+    /// Starts loading the row table [`Self::sample`] of `u` reads last.
+    #[inline]
+    pub fn prefetch_sample(&self, u: Vec2, bin: NormalBin) {
+        let cells = &self.bins[bin.index().unwrap_or(0)];
+        let (x, _, c) = cells.sample(u.y);
+        let rest = (x * cells.len() as f32 - c as f32).clamp(0.0, 1.0 - f32::EPSILON);
+        let (a, b) = (c / self.coarse_columns(), c % self.coarse_columns());
+        let (k, _, _) = pick(self.rows_of(c), rest);
+        let segment = self.segment(self.rows[a] as usize + k, b);
+        super::lights::prefetch(&segment[0]);
+    }
+
+    /// Density of [`Self::sample`] for `bin` at the sampling-space point `p`.
+    #[inline]
+    pub fn pdf(&self, p: Vec2, bin: NormalBin) -> f32 {
+        let cells = &self.bins[bin.index().unwrap_or(0)];
+        let i = ((p.y * self.nv as f32) as usize).min(self.nv - 1);
+        let j = ((p.x * self.nu as f32) as usize).min(self.nu - 1);
+        let (a, b) = (self.row_cell[i] as usize, self.col_cell[j] as usize);
+        let c = a * self.coarse_columns() + b;
+        let rows = self.rows_of(c);
+        let k = i - self.rows[a] as usize;
+        let segment = self.segment(i, b);
+        let kj = j - self.cols[b] as usize;
+        let p_cell = cells.pdf_cell(c) / cells.len() as f32;
+        p_cell
+            * (rows[k + 1] - rows[k])
+            * (segment[kj + 1] - segment[kj])
+            * (self.nu * self.nv) as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn octahedral_map_round_trips_and_bins_cover_the_sphere() {
+        let mut seen = [false; NORMAL_BINS];
+        for k in 0..20_000 {
+            // A Fibonacci sphere.
+            let z = 1.0 - 2.0 * (k as f32 + 0.5) / 20_000.0;
+            let phi = k as f32 * 2.399_963;
+            let r = (1.0 - z * z).sqrt();
+            let n = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+            let back = octahedral_inverse(octahedral(n));
+            assert!(back.dot(n) > 1.0 - 1e-5, "{n:?} → {back:?}");
+            seen[NormalBin::of(n).index().unwrap()] = true;
+        }
+        assert!(seen.iter().all(|&s| s), "every bin holds some normals");
+        for bad in [Vec3::ZERO, Vec3::NAN, Vec3::new(f32::INFINITY, 0.0, 0.0)] {
+            assert!(NormalBin::of(bad).index().unwrap() < NORMAL_BINS);
+        }
+    }
+}

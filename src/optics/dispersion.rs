@@ -61,7 +61,7 @@ impl Material {
     /// same order (the same values bit for bit), so the divisions of the wavelengths run
     /// side by side in SIMD lanes.
     pub fn nk_lanes<const N: usize>(&self, lambda_nm: [f64; N]) -> [Complex64; N] {
-        let l2: [f64; N] = std::array::from_fn(|k| {
+        let l2: [f64; N] = super::lanes::lanes(|k| {
             let l_um = lambda_nm[k] * 1e-3;
             l_um * l_um
         });

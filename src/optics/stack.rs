@@ -190,9 +190,9 @@ struct Powers {
 /// Coherent amplitudes of media `m[0] | m[1..len-1] (thicknesses d) | m[len-1]`.
 fn coherent_amplitudes(m: &[Medium], d_nm: &[f64], lambda_nm: f64) -> FilmAmplitudes {
     debug_assert_eq!(m.len(), d_nm.len() + 2);
-    let medium = |j: usize| MediumLanes::from_lanes(&[m[j]]);
+    let media: Vec<MediumLanes<1>> = m.iter().map(|m| MediumLanes::from_lanes(&[*m])).collect();
     let phase = |j: usize, m: &MediumLanes<1>| layer_phase(m, d_nm[j], [lambda_nm]);
-    rouard::<1, true>(m.len(), medium, phase).lane(0)
+    rouard::<1, true>(m.len(), |j| &media[j], phase).lane(0)
 }
 
 /// The Rouard recursion of the module doc over `len` media, from the substrate
@@ -202,18 +202,18 @@ fn coherent_amplitudes(m: &[Medium], d_nm: &[f64], lambda_nm: f64) -> FilmAmplit
 /// wavelengths go through in lanes (the same operations as one at a time, so the same values
 /// bit for bit); `WITH_T` = false skips the transmission amplitudes (left zero).
 #[inline]
-pub(super) fn rouard<const N: usize, const WITH_T: bool>(
+pub(super) fn rouard<'m, const N: usize, const WITH_T: bool>(
     len: usize,
-    medium: impl Fn(usize) -> MediumLanes<N>,
+    medium: impl Fn(usize) -> &'m MediumLanes<N>,
     phase: impl Fn(usize, &MediumLanes<N>) -> LayerPhase<N>,
 ) -> AmplitudeLanes<N> {
     let last = len - 1;
     let mut below = medium(last - 1);
-    let mut acc = interface::<N, WITH_T>(&below, &medium(last));
+    let mut acc = interface::<N, WITH_T>(below, medium(last));
     for j in (1..last).rev() {
         let above = medium(j - 1);
-        let step = interface::<N, WITH_T>(&above, &below);
-        let LayerPhase { e_half, e_full } = phase(j - 1, &below);
+        let step = interface::<N, WITH_T>(above, below);
+        let LayerPhase { e_half, e_full } = phase(j - 1, below);
         let ds = (step.r_s * acc.r_s * e_full).plus(1.0);
         let dp = (step.r_p * acc.r_p * e_full).plus(1.0);
         let (t_s, t_p) = if WITH_T {

@@ -938,11 +938,16 @@ fn vertex<C: Carrier>(
 /// from `wi_world` ([`super::env_sampling`]): the bin of the normal on the side the path
 /// arrives from, where a surface without a non-Dirac transmission lobe receives all the light
 /// that light sampling can find; radiance-only sampling elsewhere, in scenes with media (their
-/// light samples are drawn whole-sphere) and where hemisphere sampling is off.
+/// light samples are drawn whole-sphere) and where hemisphere sampling is off. (A vertex with
+/// Dirac lobes only makes no light sample, and its rays' emitters count in full.)
 #[inline]
 fn env_normal_bin(scene: &PreparedScene, bsdf: &Bsdf, frame: &Frame, wi_world: Vec3) -> NormalBin {
+    let flags = bsdf.flags();
     let transmits = BsdfFlags::DIFFUSE_TRANSMISSION | BsdfFlags::GLOSSY_TRANSMISSION;
-    if !scene.hemisphere_env_sampling() || bsdf.flags().intersects(transmits) {
+    if !scene.hemisphere_env_sampling()
+        || !flags.intersects(BsdfFlags::SMOOTH)
+        || flags.intersects(transmits)
+    {
         return NormalBin::WHOLE_SPHERE;
     }
     let n = frame.n;

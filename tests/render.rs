@@ -825,18 +825,7 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
     let ring: Vec<usize> = (0..w * h)
         .filter(|i| i % w < 3 || i % w >= w - 3 || i / w < 3 || i / w >= h - 3)
         .collect();
-    let error = |img: &thinfilm::image_io::RgbImage| {
-        let (mut mean, mut sq) = (0.0f64, 0.0f64);
-        for &i in &ring {
-            for c in 0..3 {
-                let d = (img.pixels[i][c] - truth.pixels[i][c]) as f64;
-                mean += d;
-                sq += d * d;
-            }
-        }
-        let n = (3 * ring.len()) as f64;
-        (mean / n, (sq / n).sqrt())
-    };
+    let error = |img: &thinfilm::image_io::RgbImage| offset_and_rmse(img, &truth, &ring);
     let ((bias_closed, rmse_closed), (_, rmse_sampled)) = (error(&closed), error(&sampled));
     assert!(
         rmse_closed < 0.3 * rmse_sampled,
@@ -908,18 +897,7 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
             (x * x + y * y).sqrt() < 0.8 * 8.7
         })
         .collect();
-    let error = |img: &thinfilm::image_io::RgbImage| {
-        let (mut mean, mut sq) = (0.0f64, 0.0f64);
-        for &i in &ball {
-            for c in 0..3 {
-                let d = (img.pixels[i][c] - truth.pixels[i][c]) as f64;
-                mean += d;
-                sq += d * d;
-            }
-        }
-        let n = (3 * ball.len()) as f64;
-        (mean / n, (sq / n).sqrt())
-    };
+    let error = |img: &thinfilm::image_io::RgbImage| offset_and_rmse(img, &truth, &ball);
     // Squared errors pooled over four seeds (one seed's ratio varies by ±0.04).
     let pooled = |plain: bool| {
         let sq: f64 = (2..6)
@@ -940,6 +918,24 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
         bias.abs() < bound,
         "mean offset {bias} (noise bound {bound})"
     );
+}
+
+/// Mean difference and RMSE of `img` from `truth` over the pixels `at` (all channels).
+fn offset_and_rmse(
+    img: &thinfilm::image_io::RgbImage,
+    truth: &thinfilm::image_io::RgbImage,
+    at: &[usize],
+) -> (f64, f64) {
+    let (mut mean, mut sq) = (0.0f64, 0.0f64);
+    for &i in at {
+        for c in 0..3 {
+            let d = (img.pixels[i][c] - truth.pixels[i][c]) as f64;
+            mean += d;
+            sq += d * d;
+        }
+    }
+    let n = (3 * at.len()) as f64;
+    (mean / n, (sq / n).sqrt())
 }
 
 fn bits_of(p: &[f32; 3]) -> [u32; 3] {

@@ -39,7 +39,7 @@ pub enum Effect {
     /// wavelengths, integrated once per texel or light.
     SpectralDirectView,
     /// Environment light samples at reflecting surfaces drawn from the hemisphere their
-    /// normal faces (radiance × the largest cosine, per normal bin) instead of by radiance
+    /// normal faces (radiance × the mean clamped cosine, per normal bin) instead of by radiance
     /// over the whole sphere ([`super::env_sampling`]).
     HemisphereEnvSampling,
 }

@@ -50,11 +50,11 @@ impl NormalBin {
     pub const WHOLE_SPHERE: Self = NormalBin(u16::MAX);
 
     /// The bin of a world-space unit normal (a NaN or zero normal falls in bin 0, which the
-    /// floor keeps unbiased).
+    /// defensive mixture keeps unbiased).
     #[inline]
     pub fn of(n: Vec3) -> Self {
         let p = octahedral(n) * BINS_PER_SIDE as f32;
-        // `as usize` saturates: NaN → 0, and 1.0 · 8 is clamped into the last bin.
+        // `as usize` saturates (NaN → 0), and the edge 1.0 is clamped into the last bin.
         let x = (p.x as usize).min(BINS_PER_SIDE - 1);
         let y = (p.y as usize).min(BINS_PER_SIDE - 1);
         NormalBin((y * BINS_PER_SIDE + x) as u16)

@@ -197,7 +197,7 @@ pub(super) struct PathState {
     pub eta: f32,
     pub depth: u32,
     /// The previous vertex, for MIS on emitters hit.
-    pub mis: MisVertex,
+    mis: MisVertex,
     /// Fresnel splits already made on the way here.
     pub splits: u32,
     /// The medium the ray travels in ([`super::medium::NO_MEDIUM`] outside every medium).
@@ -208,12 +208,12 @@ pub(super) struct PathState {
 /// emitter the ray hits needs.
 #[derive(Clone, Copy)]
 pub(super) struct MisVertex {
-    pub p: Vec3,
-    pub bsdf_pdf: f32,
+    p: Vec3,
+    bsdf_pdf: f32,
     /// A Dirac sample (or no light sampling there): emitters hit count in full.
-    pub bsdf_delta: bool,
+    bsdf_delta: bool,
     /// [`VertexFrame::normal_bin`].
-    pub normal_bin: NormalBin,
+    normal_bin: NormalBin,
 }
 
 impl PathState {

@@ -910,6 +910,19 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
         rmse_hemisphere < 0.9 * rmse_plain,
         "RMSE over the ball: hemisphere {rmse_hemisphere} vs radiance-only {rmse_plain}"
     );
+    // A black map has no tables: sampling by radiance alone, and the log says so.
+    let mut dark = scene.clone();
+    dark.emitters = vec![EmitterDesc::Envmap {
+        image: std::sync::Arc::new(thinfilm::image_io::RgbImage::new(8, 4)),
+        scale: 1.0,
+        to_world: glam::Mat4::IDENTITY,
+        path: None,
+    }];
+    let lines = (thinfilm::render::prepare(&dark, &RenderOptions::default()).unwrap())
+        .effects()
+        .lines();
+    let want = "hemisphere-aware environment sampling: off — the environment map is black";
+    assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
     // 1024 spp against 4096: what is left is noise (the 1024-spp render's RMSE, over the
     // square root of the ball's pixel count, bounds the mean), bias included.
     let (bias, rmse) = error(&run(1024, 3, false));

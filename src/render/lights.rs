@@ -925,6 +925,12 @@ impl EnvMap {
         out * self.scale
     }
 
+    /// Whether the map has per-bin sampling tables (not for a black map: every bin samples
+    /// by radiance alone then).
+    pub fn has_hemisphere_tables(&self) -> bool {
+        self.hemispheres.is_some()
+    }
+
     /// Samples a world direction for a vertex in normal bin `bin` (radiance alone for
     /// [`NormalBin::WHOLE_SPHERE`]); returns (dir, solid-angle pdf).
     #[inline]

@@ -520,8 +520,12 @@ fn env_sampling_decision(
     lights: &lights::LightSet,
     effects: &mut Effects,
 ) -> bool {
+    let has_tables =
+        |l: &lights::Light| matches!(l, lights::Light::Env(e) if e.has_hemisphere_tables());
     let off = if !(lights.lights.iter()).any(|l| matches!(l, lights::Light::Env(_))) {
         Some("no environment map")
+    } else if !lights.lights.iter().any(has_tables) {
+        Some("the environment map is black")
     } else if options.plain_env_sampling {
         Some("radiance-only sampling asked for (--plain-env-sampling)")
     } else if scene.media.is_some() {

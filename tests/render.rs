@@ -761,6 +761,30 @@ fn effect_analysis_switches_fresnel_splitting() {
         .any(|r| r.starts_with("Fresnel splitting: off")));
 }
 
+/// A diffuse ball of albedo `albedo` (the [`sphere`], 24², `independent` sampler) lit by the
+/// environment map `sky` turned by `to_world`.
+fn diffuse_ball_under(
+    sky: thinfilm::image_io::RgbImage,
+    to_world: glam::Mat4,
+    albedo: f32,
+) -> Scene {
+    let env = EmitterDesc::Envmap {
+        image: std::sync::Arc::new(sky),
+        scale: 1.0,
+        to_world,
+        path: None,
+    };
+    let mut scene = base_scene(
+        vec![sphere(0)],
+        vec![Bsdf::from(Diffuse::new(&constant(albedo)))],
+        vec![env],
+        24,
+        64,
+    );
+    scene.sampler = SamplerKind::Independent;
+    scene
+}
+
 /// Camera rays that see the environment directly take its closed-form colour (the mean of
 /// the film's spectral estimate over the wavelengths): samples that hit the scene are
 /// untouched (pixels they alone cover are the same bit for bit), the background converges
@@ -776,20 +800,7 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
             _ => [0.0, 0.0, 0.0],
         };
     }
-    let env = EmitterDesc::Envmap {
-        image: std::sync::Arc::new(sky),
-        scale: 1.0,
-        to_world: glam::Mat4::IDENTITY,
-        path: None,
-    };
-    let mut scene = base_scene(
-        vec![sphere(0)],
-        vec![Bsdf::from(Diffuse::new(&constant(0.5)))],
-        vec![env],
-        24,
-        64,
-    );
-    scene.sampler = SamplerKind::Independent;
+    let scene = diffuse_ball_under(sky, glam::Mat4::IDENTITY, 0.5);
     let run = |spp: u32, spectral: bool| {
         let options = RenderOptions {
             spp: Some(spp),
@@ -857,20 +868,7 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
             [0.8, 1.0, 1.6]
         };
     }
-    let env = EmitterDesc::Envmap {
-        image: std::sync::Arc::new(sky),
-        scale: 1.0,
-        to_world: glam::Mat4::from_rotation_y(0.4),
-        path: None,
-    };
-    let mut scene = base_scene(
-        vec![sphere(0)],
-        vec![Bsdf::from(Diffuse::new(&constant(0.7)))],
-        vec![env],
-        24,
-        64,
-    );
-    scene.sampler = SamplerKind::Independent;
+    let scene = diffuse_ball_under(sky, glam::Mat4::from_rotation_y(0.4), 0.7);
     let run = |spp: u32, seed: u64, plain: bool| {
         let options = RenderOptions {
             spp: Some(spp),

@@ -116,7 +116,8 @@ impl Effects {
         self.decisions.iter().map(ToString::to_string).collect()
     }
 
-    fn decide(&mut self, effect: Effect, on: bool, reason: String) -> bool {
+    /// Records that `effect` is on or off and why; returns `on`.
+    pub(super) fn decide(&mut self, effect: Effect, on: bool, reason: String) -> bool {
         self.decisions.push(Decision { effect, on, reason });
         on
     }

@@ -421,20 +421,21 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     });
     let (accel, degenerate_triangles, bins) = built?;
     let primary_bins = bins.map(|b| b.into_bvh_order(accel.bvh_order()));
-    effects.decisions.push(effects::Decision {
-        effect: effects::Effect::CameraRays,
-        on: primary_bins.is_some(),
-        reason: match &primary_bins {
-            Some(b) => {
-                let s = b.stats();
-                format!(
-                    "screen bins ({} candidates, {} pixels via the BVH, {} triangles crossing the camera plane)",
-                    s.candidates, s.bvh_pixels, s.crossing
-                )
-            }
-            None => "BVH (screen bins would not pay here)".to_string(),
-        },
-    });
+    let camera_rays = match &primary_bins {
+        Some(b) => {
+            let s = b.stats();
+            format!(
+                "screen bins ({} candidates, {} pixels via the BVH, {} triangles crossing the camera plane)",
+                s.candidates, s.bvh_pixels, s.crossing
+            )
+        }
+        None => "BVH (screen bins would not pay here)".to_string(),
+    };
+    effects.decide(
+        effects::Effect::CameraRays,
+        primary_bins.is_some(),
+        camera_rays,
+    );
     let lights = lights::LightSet::build(scene, &accel, emitters?)?;
     let closed_form_direct_view = direct_view_decision(scene, options, &lights, &mut effects);
     let hemisphere_env_sampling = env_sampling_decision(scene, options, &lights, &mut effects);
@@ -499,15 +500,15 @@ fn direct_view_decision(
     } else {
         None
     };
-    effects.decisions.push(effects::Decision {
-        effect: effects::Effect::SpectralDirectView,
-        on: spectral.is_some(),
-        reason: spectral.map_or_else(
-            || "the environment and area lights seen directly take their expected colour (each texel's and light's spectrum integrated once)".to_string(),
-            str::to_string,
-        ),
-    });
-    spectral.is_none()
+    let reason = spectral.map_or_else(
+        || "the environment and area lights seen directly take their expected colour (each texel's and light's spectrum integrated once)".to_string(),
+        str::to_string,
+    );
+    !effects.decide(
+        effects::Effect::SpectralDirectView,
+        spectral.is_some(),
+        reason,
+    )
 }
 
 /// Whether reflecting surfaces draw environment light samples from the hemisphere they face
@@ -533,18 +534,18 @@ fn env_sampling_decision(
     } else {
         None
     };
-    effects.decisions.push(effects::Decision {
-        effect: effects::Effect::HemisphereEnvSampling,
-        on: off.is_none(),
-        reason: off.map_or_else(
-            || format!(
-                "reflecting surfaces draw environment samples from the hemisphere they face ({} normal bins)",
-                env_sampling::NORMAL_BINS
-            ),
-            str::to_string,
+    let reason = off.map_or_else(
+        || format!(
+            "reflecting surfaces draw environment samples from the hemisphere they face ({} normal bins)",
+            env_sampling::NORMAL_BINS
         ),
-    });
-    off.is_none()
+        str::to_string,
+    );
+    effects.decide(
+        effects::Effect::HemisphereEnvSampling,
+        off.is_none(),
+        reason,
+    )
 }
 
 /// The global sample indices to render: the options' range, else 0..spp.

@@ -74,6 +74,10 @@ pub struct Args {
     /// (as Mitsuba does), instead of from the hemisphere a reflecting surface faces.
     #[arg(long)]
     pub plain_env_sampling: bool,
+    /// Our renderer carries four wavelengths also on specular reflection chains (as Mitsuba
+    /// does), instead of eight.
+    #[arg(long)]
+    pub plain_specular_chains: bool,
     /// Runs per spp, for both renderers, run j with seed `--seed` + j. Each row reports the
     /// fastest run's time (Mitsuba's first render at a new spp can include JIT compilation of
     /// its kernels — seen: 0.42 s instead of 0.14 s for a 64-spp teapot on a cold kernel
@@ -243,6 +247,7 @@ fn render_ours(
                 fresnel_splits: args.fresnel_splits,
                 spectral_direct_view: args.spectral_direct_view,
                 plain_env_sampling: args.plain_env_sampling,
+                plain_specular_chains: args.plain_specular_chains,
                 ..Default::default()
             };
             let out = render(scene, &options)?;

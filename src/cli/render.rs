@@ -75,6 +75,12 @@ pub struct Args {
     /// normals): the same expected image, with fewer samples wasted below the horizon.
     #[arg(long)]
     pub plain_env_sampling: bool,
+    /// Carry four wavelengths also on paths that only reflect off smooth films and coatings
+    /// (and mirrors after them), as Mitsuba does. By default such a path (its directions the
+    /// same at every wavelength) carries eight, stratified, to the emitter it meets: the same
+    /// expected image with less colour noise on interference films.
+    #[arg(long)]
+    pub plain_specular_chains: bool,
     /// Environment replacing the scene's own: a lat-long EXR/HDR file (Mitsuba `envmap`
     /// layout), `constant:V` (D65 of luminance V) or `constant:R,G,B` (RGB illuminant).
     #[arg(long, value_name = "FILE|constant:V|constant:R,G,B")]
@@ -292,6 +298,7 @@ fn options(args: &Args, scene_spp: u32, report: Output) -> Result<RenderOptions>
         force_polarization: args.force_polarization,
         spectral_direct_view: args.spectral_direct_view,
         plain_env_sampling: args.plain_env_sampling,
+        plain_specular_chains: args.plain_specular_chains,
     })
 }
 

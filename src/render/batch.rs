@@ -267,6 +267,26 @@ impl CameraBatch {
         )
     }
 
+    /// The wavelengths of every lane's `SETS` specular-chain sets
+    /// (`integrator::specular_chain`), `[set][lane]`: set j of a lane with number u is
+    /// {u + (j + 1)/(4·(SETS + 1)) + k/4}, so that with the lane's own set they stratify.
+    pub fn chain_wavelengths<const SETS: usize>(&self) -> [[SampledWavelengths; BATCH]; SETS] {
+        std::array::from_fn(|j| {
+            let u = self.wavelength_u.map(|u| {
+                let u = u + (j + 1) as f32 / (4 * (SETS + 1)) as f32;
+                if u >= 1.0 {
+                    u - 1.0
+                } else {
+                    u
+                }
+            });
+            let (lambda, pdf) = sample_visible_wavelengths(&u);
+            std::array::from_fn(|i| {
+                SampledWavelengths::new(lambda.map(|l| l[i]), pdf.map(|p| p[i]))
+            })
+        })
+    }
+
     /// D65 factor at lane `i`'s four wavelengths.
     #[inline]
     pub fn d65(&self, i: usize) -> Spec {
@@ -427,6 +447,33 @@ mod tests {
 
     /// A lane's wavelengths do not depend on the batch it is drawn in (what the renderer's
     /// bit-identity across batch sizes rests on).
+    /// A lane's own wavelengths and its chain sets' are the strata u + m/(4·(SETS + 1)) of
+    /// the visible distribution: with one set, eight wavelengths an eighth of u apart.
+    #[test]
+    fn chain_sets_stratify_the_wavelength_number() {
+        let mut cam = CameraBatch::empty();
+        for (i, u) in cam.wavelength_u.iter_mut().enumerate() {
+            *u = (i as f32 * 0.0617 + 0.013) % 1.0;
+        }
+        cam.sample_wavelengths();
+        let sets = cam.chain_wavelengths::<1>();
+        for (i, set) in sets[0].iter().enumerate() {
+            let mut all: Vec<f32> = cam.wavelengths(i).lambda.to_vec();
+            all.extend(set.lambda);
+            all.sort_by(f32::total_cmp);
+            let u = cam.wavelength_u[i];
+            let mut strata: Vec<f32> = (0..8)
+                .map(|m| (u + m as f32 / 8.0) % 1.0)
+                .map(crate::spectrum::sampled::sample_visible_wavelength)
+                .collect();
+            strata.sort_by(f32::total_cmp);
+            for (a, b) in all.iter().zip(&strata) {
+                assert!((a - b).abs() < 2e-3, "u {u}: λ {a} vs {b}");
+            }
+            assert!(set.pdf.iter().all(|&p| p > 0.0));
+        }
+    }
+
     #[test]
     fn lanes_are_independent() {
         let u: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.0617 + 0.013) % 1.0);

@@ -42,6 +42,10 @@ pub enum Effect {
     /// normal faces (radiance × the mean clamped cosine, per normal bin) instead of by radiance
     /// over the whole sphere ([`super::env_sampling`]).
     HemisphereEnvSampling,
+    /// Eight wavelengths instead of four on paths that only reflect off Dirac reflectors,
+    /// first off a smooth film or coating, whose directions every wavelength shares
+    /// (`integrator::specular_chain`).
+    SpecularChainWavelengths,
 }
 
 impl Effect {
@@ -58,6 +62,7 @@ impl Effect {
             Effect::CameraRays => "Camera rays",
             Effect::SpectralDirectView => "wavelength sampling of emitters seen directly",
             Effect::HemisphereEnvSampling => "hemisphere-aware environment sampling",
+            Effect::SpecularChainWavelengths => "wavelength supersampling of specular chains",
         }
     }
 }

@@ -35,6 +35,11 @@ use glam::{Vec2, Vec3};
 /// Participating media (Mitsuba's `volpath`): the hooks this file calls where the scene has
 /// media ([`PreparedScene::media`]).
 mod media;
+/// Eight wavelengths on paths that only reflect off Dirac reflectors.
+mod specular_chain;
+
+pub(super) use specular_chain::{starts_chain, EXTRA_SETS};
+use specular_chain::{ChainSets, ChainState, SET_SHARE};
 
 /// What a path carries between vertices besides its state ([`PathState`]): the throughput
 /// that the BSDF values along the path multiply.
@@ -309,6 +314,9 @@ impl PathState {
 pub(super) struct Branch<C> {
     path: PathState,
     carrier: C,
+    /// Its specular chain ([`specular_chain`]; the sets are the lane's
+    /// [`PathScratch`]`::chain_sets` entry).
+    chain: ChainState,
 }
 
 /// One camera sample's path in a batch ([`trace_lanes`]): the branch being followed, what
@@ -337,6 +345,7 @@ impl<C: Carrier> Lane<C> {
             branch: Branch {
                 path: PathState::camera(ray),
                 carrier: C::camera(ray.dir),
+                chain: ChainState::Ended,
             },
             radiance: Spec::ZERO,
             colour: [0.0; 3],
@@ -372,6 +381,9 @@ struct EnvRequest {
     /// computed ([`super::lights::LightSet::sole_env`]).
     uv: Option<Vec2>,
     factor: Spec,
+    /// Whose wavelengths: 0 the lane's own; j > 0 its specular chain's set j − 1, whose
+    /// term joins the lane's [`Lane::colour`].
+    set: u8,
 }
 
 /// A light sample's contribution, added to lane `lane` if its shadow ray is unoccluded.
@@ -421,6 +433,8 @@ struct Requests<'a, C> {
     env_uv: Option<Vec2>,
     /// [`PathScratch::closed_form_direct_view`].
     closed_form: bool,
+    /// The lane's specular-chain sets, if it has some.
+    chain: Option<&'a mut ChainSets>,
 }
 
 /// The paths of a batch and the reusable buffers of [`trace_lanes`] (one set per worker
@@ -456,6 +470,39 @@ pub struct PathScratch<C> {
     /// A round's escaped directions and their environment-map texture coordinates.
     escaped_dirs: Vec<Vec3>,
     escaped_uvs: Vec<Vec2>,
+    /// Lane i's specular-chain sets (where lanes have them: [`Self::push_camera_path`]).
+    chain_sets: Vec<ChainSets>,
+}
+
+impl<C: Carrier> PathScratch<C> {
+    /// Empties the batch of paths.
+    pub(super) fn clear_paths(&mut self) {
+        self.lanes.clear();
+        self.first_hits.clear();
+        self.chain_sets.clear();
+    }
+
+    /// Adds a camera path, `first_hit` the closest hit of its ray; with `chain_wl` it
+    /// carries those extra wavelength sets along a specular chain from the camera
+    /// ([`specular_chain`]; what the chain's emitters add goes to [`Lane::colour`]).
+    pub(super) fn push_camera_path(
+        &mut self,
+        mut lane: Lane<C>,
+        first_hit: Option<Hit>,
+        chain_wl: Option<[SampledWavelengths; specular_chain::EXTRA_SETS]>,
+    ) {
+        if let Some(wl) = chain_wl {
+            let i = self.lanes.len();
+            // Lanes before it without sets get (unused) entries: entry i is lane i's.
+            if self.chain_sets.len() < i {
+                self.chain_sets.resize(i, ChainSets::camera(wl));
+            }
+            self.chain_sets.push(ChainSets::camera(wl));
+            lane.branch.chain = ChainState::Unstarted;
+        }
+        self.lanes.push(lane);
+        self.first_hits.push(first_hit);
+    }
 }
 
 impl<C> Default for PathScratch<C> {
@@ -482,6 +529,7 @@ impl<C> Default for PathScratch<C> {
             le_gathered: Vec::new(),
             escaped_dirs: Vec::new(),
             escaped_uvs: Vec::new(),
+            chain_sets: Vec::new(),
         }
     }
 }
@@ -517,11 +565,9 @@ fn li_with<C: Carrier>(
     let hit = scene.intersect(&ray, pixel);
     count(Counter::Rays, 1);
     let mut scratch = PathScratch::<C>::default();
-    let d65 = Spec::from_array(
-        wl.lambda
-            .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
-    );
-    scratch.lanes.push(Lane::camera(ray, *wl, d65, *sampler));
+    scratch
+        .lanes
+        .push(Lane::camera(ray, *wl, d65_at(wl), *sampler));
     scratch.first_hits.push(hit);
     trace_lanes(scene, setup, &mut scratch);
     let lane = &scratch.lanes[0];
@@ -594,6 +640,7 @@ pub(super) fn trace_lanes<C: Carrier>(
         dirs,
         lambdas,
         d65s,
+        chain_sets,
         ..
     } = scratch;
     let closed_form = *closed_form_direct_view && scene.media().is_none();
@@ -614,6 +661,7 @@ pub(super) fn trace_lanes<C: Carrier>(
             shadow,
             env_uv: None,
             closed_form,
+            chain: chain_sets.get_mut(i),
         };
         lane.active = step(scene, setup, lane, hit, &mut requests);
     }
@@ -671,6 +719,7 @@ pub(super) fn trace_lanes<C: Carrier>(
                     None
                 },
                 closed_form,
+                chain: chain_sets.get_mut(i),
             };
             lanes[i].active = step(scene, setup, &mut lanes[i], hit, &mut requests);
         }
@@ -718,6 +767,7 @@ fn resolve_env<C>(scene: &PreparedScene, scratch: &mut PathScratch<C>) {
         gathered,
         le_gathered,
         escaped_uvs: uvs,
+        chain_sets,
         ..
     } = scratch;
     if env.is_empty() {
@@ -741,8 +791,14 @@ fn resolve_env<C>(scene: &PreparedScene, scratch: &mut PathScratch<C>) {
                     gathered.push(k as u32);
                     dirs.push(r.dir);
                     uvs.extend(r.uv);
-                    lambdas.push(Spec::from_array(lane.wl.lambda));
-                    d65s.push(lane.d65);
+                    if r.set == 0 {
+                        lambdas.push(Spec::from_array(lane.wl.lambda));
+                        d65s.push(lane.d65);
+                    } else {
+                        let wl = chain_sets[r.lane as usize].wavelengths(r.set as usize - 1);
+                        lambdas.push(Spec::from_array(wl.lambda));
+                        d65s.push(d65_at(wl));
+                    }
                 }
             }
             if gathered.is_empty() {
@@ -762,7 +818,31 @@ fn resolve_env<C>(scene: &PreparedScene, scratch: &mut PathScratch<C>) {
         }
     }
     for (r, &l) in env.iter().zip(le.iter()) {
-        lanes[r.lane as usize].radiance += r.factor * l;
+        let lane = &mut lanes[r.lane as usize];
+        if r.set == 0 {
+            lane.radiance += r.factor * l;
+        } else {
+            let wl = chain_sets[r.lane as usize].wavelengths(r.set as usize - 1);
+            add_colour(&mut lane.colour, r.factor * l, wl);
+        }
+    }
+}
+
+/// The D65 factor at `wl` (for an environment lookup).
+#[inline]
+fn d65_at(wl: &SampledWavelengths) -> Spec {
+    Spec::from_array(
+        wl.lambda
+            .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
+    )
+}
+
+/// Adds the film colour of `radiance` at wavelengths `wl` to `colour`.
+#[inline]
+fn add_colour(colour: &mut [f32; 3], radiance: Spec, wl: &SampledWavelengths) {
+    let c = crate::spectrum::sampled::spectrum_to_linear_srgb(radiance, wl);
+    for (acc, c) in colour.iter_mut().zip(c) {
+        *acc += c;
     }
 }
 
@@ -824,20 +904,7 @@ fn vertex<C: Carrier>(
             b.carrier.at_first_vertex(setup, ray.dir, None);
         }
         if !hide_emitter {
-            for &li in &lights.infinite {
-                let light = &lights.lights[li as usize];
-                let uv = requests.env_uv;
-                let w = b.path.emitter_hit_weight(|m| {
-                    sel_pdf * light.pdf_escaped(m.p, ray.dir, uv, m.normal_bin)
-                });
-                requests.env.push(EnvRequest {
-                    lane: requests.lane,
-                    light: li,
-                    dir: ray.dir,
-                    uv,
-                    factor: b.carrier.s0() * w,
-                });
-            }
+            request_infinite_lights(scene, b, requests);
         }
         return false;
     };
@@ -847,8 +914,7 @@ fn vertex<C: Carrier>(
             .at_first_vertex(setup, ray.dir, Some(si.shading.n));
     }
     if let (Some(light), false) = (si.emitter(), hide_emitter) {
-        let closed_form = requests.closed_form;
-        add_emission_seen(b, &si, light, sel_pdf, closed_form, wl, radiance, colour);
+        add_emission_seen(b, &si, light, sel_pdf, requests, wl, radiance, colour);
     }
 
     // Media hook: a null interface is crossed without a path vertex (as `volpath` does).
@@ -915,6 +981,7 @@ fn vertex<C: Carrier>(
     let u1 = sampler.next_1d();
     let u2 = sampler.next_2d();
     if b.path.splits < scene.fresnel_splits() && bsdf.is_fresnel_pair() {
+        b.chain = ChainState::Ended;
         let [reflected, transmitted] = C::sample_split(bsdf, &ctx, &v, u1, u2);
         b.path.splits += 1;
         if let Some((bs, value)) = reflected {
@@ -931,7 +998,54 @@ fn vertex<C: Carrier>(
     let Some((bs, value)) = C::sample(bsdf, &ctx, &v, u1, u2) else {
         return false;
     };
+    (b.chain).scatter(
+        requests.chain.as_deref_mut(),
+        bsdf,
+        &ctx,
+        v.wi,
+        (u1, u2),
+        &bs,
+    );
     advance(scene, b, &si, &v, &bs, &value, wl, sampler)
+}
+
+/// Asks for the infinite lights seen by branch `b`'s escaped ray: one lookup per light,
+/// MIS-weighted against light sampling at the previous vertex, or — at the end of a live
+/// specular chain — one per wavelength set, each with half the weight (`SET_SHARE`).
+#[inline]
+fn request_infinite_lights<C: Carrier>(
+    scene: &PreparedScene,
+    b: &Branch<C>,
+    requests: &mut Requests<C>,
+) {
+    let lights = scene.lights();
+    let sel_pdf = lights.selection_pdf();
+    let ray = b.path.ray;
+    for &li in &lights.infinite {
+        let light = &lights.lights[li as usize];
+        let uv = requests.env_uv;
+        let w = b
+            .path
+            .emitter_hit_weight(|m| sel_pdf * light.pdf_escaped(m.p, ray.dir, uv, m.normal_bin));
+        let request = |factor, set| EnvRequest {
+            lane: requests.lane,
+            light: li,
+            dir: ray.dir,
+            uv,
+            factor,
+            set,
+        };
+        match (b.chain.live(), requests.chain.as_deref()) {
+            (true, Some(sets)) => {
+                let w = w * SET_SHARE;
+                requests.env.push(request(b.carrier.s0() * w, 0));
+                for (j, (_, throughput)) in sets.sets().enumerate() {
+                    requests.env.push(request(throughput * w, j as u8 + 1));
+                }
+            }
+            _ => requests.env.push(request(b.carrier.s0() * w, 0)),
+        }
+    }
 }
 
 /// The environment-sampling bin of a vertex with BSDF `bsdf` in shading frame `frame`, seen
@@ -957,8 +1071,10 @@ fn env_normal_bin(scene: &PreparedScene, bsdf: &Bsdf, frame: &Frame, wi_world: V
 /// Adds what the area light `light` under hit `si` emits towards branch `b`'s ray: its
 /// spectral radiance (MIS-weighted against light sampling) to `radiance`, or — seen straight
 /// from the camera, untextured, with a carrier equal at every wavelength, and
-/// `closed_form` — its closed-form film colour to `colour`: the mean of its radiance's film
-/// value over the wavelengths, without their noise.
+/// `requests.closed_form` — its closed-form film colour to `colour`: the mean of its
+/// radiance's film value over the wavelengths, without their noise. At the end of a live
+/// specular chain, the mean of the chain's sets (the path's own to `radiance`, the others'
+/// film colours to `colour`).
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn add_emission_seen<C: Carrier>(
@@ -966,11 +1082,12 @@ fn add_emission_seen<C: Carrier>(
     si: &SurfaceInteraction,
     light: &super::lights::Light,
     sel_pdf: f32,
-    closed_form: bool,
+    requests: &Requests<C>,
     wl: &SampledWavelengths,
     radiance: &mut Spec,
     colour: &mut [f32; 3],
 ) {
+    let closed_form = requests.closed_form;
     let ray = b.path.ray;
     let s0 = b.carrier.s0();
     let weight = || {
@@ -986,6 +1103,16 @@ fn add_emission_seen<C: Carrier>(
         let w = s0.x * weight();
         for (acc, c) in colour.iter_mut().zip(c) {
             *acc += w * c;
+        }
+    } else if let (true, Some(sets)) = (b.chain.live(), requests.chain.as_deref()) {
+        let w = weight() * SET_SHARE;
+        if let Some(le) = light.emitted(si.ng, si.uv, ray.dir, wl) {
+            *radiance += s0 * le * w;
+        }
+        for (wl, throughput) in sets.sets() {
+            if let Some(le) = light.emitted(si.ng, si.uv, ray.dir, wl) {
+                add_colour(colour, throughput * le * w, wl);
+            }
         }
     } else if let Some(le) = light.emitted(si.ng, si.uv, ray.dir, wl) {
         *radiance += s0 * le * weight();
@@ -1094,10 +1221,7 @@ fn resolve_env_samples<C: Carrier>(
             for (s, d) in samples.iter().zip(drawn.iter()) {
                 dirs.push(d.map_or(Vec3::Z, |(wi, _)| wi));
                 lambdas.push(Spec::from_array(s.wl.lambda));
-                d65s.push(Spec::from_array(
-                    s.wl.lambda
-                        .map(|l| crate::spectrum::sampled::rgb_cmf_d65_f32(l)[3]),
-                ));
+                d65s.push(d65_at(&s.wl));
             }
             le.resize(samples.len(), Spec::ZERO);
             e.add_batch(dirs, lambdas, d65s, le);
@@ -1176,6 +1300,9 @@ fn advance<C: Carrier>(
         Some(q) => {
             if q != 1.0 {
                 b.carrier.divide(q);
+                // The chain ends here: its sets' throughputs would need the same factor, and
+                // a chain may end at any vertex (rare: chains are shorter than `rr_depth`).
+                b.chain = ChainState::Ended;
             }
             true
         }

@@ -80,6 +80,10 @@ pub struct RenderOptions {
     /// does (by default a reflecting surface draws them from the hemisphere it faces:
     /// [`effects::Effect::HemisphereEnvSampling`]).
     pub plain_env_sampling: bool,
+    /// Four wavelengths also on specular reflection chains, as Mitsuba (by default a path
+    /// that only reflects off smooth films and coatings, and metals after them, carries eight:
+    /// [`effects::Effect::SpecularChainWavelengths`]).
+    pub plain_specular_chains: bool,
     /// Asked before each row whether to stop (a Ctrl-C handler's flag); see
     /// [`render_prepared`].
     pub cancel: Option<Cancel>,
@@ -198,6 +202,9 @@ pub struct PreparedScene {
     /// Reflecting surfaces draw environment light samples from their normal's bin
     /// ([`effects::Effect::HemisphereEnvSampling`]).
     hemisphere_env_sampling: bool,
+    /// Paths that only reflect off Dirac reflectors carry eight wavelengths
+    /// ([`effects::Effect::SpecularChainWavelengths`]).
+    specular_chains: bool,
 }
 
 /// A surface point of a prepared scene: its geometry (a [`SurfaceInteraction`], by `Deref`)
@@ -451,6 +458,8 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     if polarized.is_some() && scene.media.is_some() {
         bail!("participating media (volpath) with polarised transport are not supported");
     }
+    let specular_chains =
+        specular_chain_decision(scene, options, polarized.is_some(), &mut effects);
     Ok(PreparedScene {
         accel,
         lights,
@@ -472,6 +481,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         media: scene.media.clone(),
         closed_form_direct_view,
         hemisphere_env_sampling,
+        specular_chains,
     })
 }
 
@@ -543,6 +553,49 @@ fn env_sampling_decision(
     );
     effects.decide(
         effects::Effect::HemisphereEnvSampling,
+        off.is_none(),
+        reason,
+    )
+}
+
+/// Whether paths that only reflect off Dirac reflectors, first off a film or coating, carry
+/// eight wavelengths to the emitter they meet (the
+/// [`effects::Effect::SpecularChainWavelengths`] decision, added to `effects`): along such a
+/// chain the wavelengths share every direction, and most of a smooth film's noise is the
+/// four-wavelength estimate of its interference colour.
+fn specular_chain_decision(
+    scene: &Scene,
+    options: &RenderOptions,
+    polarized: bool,
+    effects: &mut Effects,
+) -> bool {
+    let mut reflectors: Vec<String> = Vec::new();
+    for s in &scene.shapes {
+        let b = &scene.bsdfs[s.bsdf];
+        if integrator::starts_chain(b) && !reflectors.contains(&b.describe()) {
+            reflectors.push(b.describe());
+        }
+    }
+    let off = if reflectors.is_empty() {
+        Some("no smooth film or coating that only reflects")
+    } else if options.plain_specular_chains {
+        Some("four wavelengths asked for (--plain-specular-chains)")
+    } else if polarized {
+        Some("polarised transport (Stokes vectors)")
+    } else if scene.media.is_some() {
+        Some("participating media")
+    } else {
+        None
+    };
+    let reason = off.map_or_else(
+        || format!(
+            "paths from the camera that only reflect off Dirac reflectors, first off a film or coating ({}), carry 8 wavelengths to the emitter they meet",
+            reflectors.join(", ")
+        ),
+        str::to_string,
+    );
+    effects.decide(
+        effects::Effect::SpecularChainWavelengths,
         off.is_none(),
         reason,
     )
@@ -679,8 +732,7 @@ fn trace_batches<C: Carrier>(
         rays,
         hits,
     } = scratch;
-    paths.lanes.clear();
-    paths.first_hits.clear();
+    paths.clear_paths();
     paths.closed_form_direct_view = scene.closed_form_direct_view;
     if started.len() < jobs.len() {
         started.resize_with(jobs.len(), StartedBatch::empty);
@@ -786,18 +838,21 @@ fn start_batch<C: Carrier>(
     }
     *hit_index = [0usize; BATCH];
     let first_lane = paths.lanes.len();
+    let chain_wl = (scene.specular_chains && *wavelengths)
+        .then(|| cam.chain_wavelengths::<{ integrator::EXTRA_SETS }>());
     for i in 0..m {
         match hits[i] {
             _ if escaped[i] => {}
             hit => {
                 hit_index[paths.lanes.len() - first_lane] = i;
-                paths.lanes.push(integrator::Lane::camera(
+                let lane = integrator::Lane::camera(
                     cam.ray(i),
                     cam.wavelengths(i),
                     cam.d65(i),
                     cam.samplers[i],
-                ));
-                paths.first_hits.push(hit);
+                );
+                let sets = chain_wl.as_ref().map(|sets| sets.map(|set| set[i]));
+                paths.push_camera_path(lane, hit, sets);
             }
         }
     }

@@ -425,6 +425,17 @@ impl Bsdf {
         f.lobes() == BsdfFlags::DELTA_REFLECTION | BsdfFlags::DELTA_TRANSMISSION
             && !f.contains(BsdfFlags::DISPERSIVE)
     }
+
+    /// Whether the BSDF only reflects, in Dirac lobes, without acting on polarisation: a
+    /// smooth conductor, film or coating. Its sampled direction is then the same at every
+    /// wavelength, and only its weight depends on them
+    /// ([`super::integrator`]'s specular chains).
+    #[inline]
+    pub fn is_specular_reflector(&self) -> bool {
+        let f = self.flags();
+        f.lobes() == BsdfFlags::DELTA_REFLECTION
+            && !f.intersects(BsdfFlags::DISPERSIVE | BsdfFlags::NEEDS_POLARIZATION)
+    }
 }
 
 #[inline]

@@ -378,8 +378,10 @@ struct EnvRequest {
     light: u32,
     dir: Vec3,
     /// The texture coordinates of `dir` on the scene's only environment map, if already
-    /// computed ([`super::lights::LightSet::sole_env`]).
-    uv: Option<Vec2>,
+    /// computed (`uv_known`; [`super::lights::LightSet::sole_env`]). Not an `Option`: with
+    /// its flag beside `set` the request stays 48 bytes.
+    uv: Vec2,
+    uv_known: bool,
     factor: Spec,
     /// Whose wavelengths: 0 the lane's own; j > 0 its specular chain's set j − 1, whose
     /// term joins the lane's [`Lane::colour`].
@@ -786,11 +788,13 @@ fn resolve_env<C>(scene: &PreparedScene, scratch: &mut PathScratch<C>) {
             lambdas.clear();
             d65s.clear();
             for (k, r) in env.iter().enumerate() {
-                if r.light == li && r.uv.is_some() == known_uv {
+                if r.light == li && r.uv_known == known_uv {
                     let lane = &lanes[r.lane as usize];
                     gathered.push(k as u32);
                     dirs.push(r.dir);
-                    uvs.extend(r.uv);
+                    if r.uv_known {
+                        uvs.push(r.uv);
+                    }
                     if r.set == 0 {
                         lambdas.push(Spec::from_array(lane.wl.lambda));
                         d65s.push(lane.d65);
@@ -1031,7 +1035,8 @@ fn request_infinite_lights<C: Carrier>(
             lane: requests.lane,
             light: li,
             dir: ray.dir,
-            uv,
+            uv: uv.unwrap_or_default(),
+            uv_known: uv.is_some(),
             factor,
             set,
         };

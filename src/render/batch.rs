@@ -445,8 +445,6 @@ mod tests {
         assert!((lambda[0][0] - 360.0).abs() < 1e-3 && pdf[0][0] > 0.0);
     }
 
-    /// A lane's wavelengths do not depend on the batch it is drawn in (what the renderer's
-    /// bit-identity across batch sizes rests on).
     /// A lane's own wavelengths and its chain sets' are the strata u + m/(4·(SETS + 1)) of
     /// the visible distribution: with one set, eight wavelengths an eighth of u apart.
     #[test]
@@ -474,6 +472,8 @@ mod tests {
         }
     }
 
+    /// A lane's wavelengths do not depend on the batch it is drawn in (what the renderer's
+    /// bit-identity across batch sizes rests on).
     #[test]
     fn lanes_are_independent() {
         let u: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.0617 + 0.013) % 1.0);

@@ -11,13 +11,16 @@
 //! and random-number layout are the same code for both, and both run in the wavefront
 //! batches of [`trace_lanes`].
 //!
-//! One departure, which changes the noise and not the expectation: at the first
+//! Two departures, which change the noise and not the expectation. At the first
 //! `fresnel_splits` smooth reflect/transmit interfaces of a path (glass, coated glass,
 //! bubbles; [`Bsdf::is_fresnel_pair`]) *both* lobes are followed with their full Fresnel
 //! weights instead of one chosen with probability R (splitting; Arvo & Kirk 1990), sampled
 //! with lobe masks ([`Bsdf::sample_split`]). Mitsuba picks one; at 4 % reflectance that
 //! leaves a glass surface's mirrored highlights to one sample in 25, the main source of noise
-//! in `scenes/lens.xml`.
+//! in `scenes/lens.xml`. And a path that first reflects off a smooth film or coating, and
+//! only off Dirac reflectors since, carries a second set of four wavelengths to the emitter
+//! it meets ([`specular_chain`]): its directions are every wavelength's, so only the colour
+//! estimate changes.
 
 use super::accel::Hit;
 use super::bsdf::{Bsdf, BsdfFlags, BsdfSample, Lobes, ShadingCtx};
@@ -325,8 +328,9 @@ pub(super) struct Branch<C> {
 pub(super) struct Lane<C> {
     branch: Branch<C>,
     radiance: Spec,
-    /// Film colour (linear sRGB) collected in closed form: an emitter seen straight from the
-    /// camera ([`PathScratch::closed_form_direct_view`]).
+    /// Film colour (linear sRGB) collected outside `radiance`: an emitter seen straight from
+    /// the camera in closed form ([`PathScratch::closed_form_direct_view`]), and the terms of
+    /// a specular chain's extra wavelengths ([`specular_chain`]).
     colour: [f32; 3],
     pub sampler: Sampler,
     pub wl: SampledWavelengths,
@@ -362,8 +366,9 @@ impl<C: Carrier> Lane<C> {
         self.radiance
     }
 
-    /// Film colour the path collected in closed form, added to the film value of
-    /// [`Self::radiance`] (complete after [`trace_lanes`]).
+    /// Film colour the path collected outside its radiance (closed-form emitters, a specular
+    /// chain's extra wavelengths), added to the film value of [`Self::radiance`] (complete
+    /// after [`trace_lanes`]).
     #[inline]
     pub fn colour(&self) -> [f32; 3] {
         self.colour

@@ -572,8 +572,11 @@ fn specular_chain_decision(
     let mut reflectors: Vec<String> = Vec::new();
     for s in &scene.shapes {
         let b = &scene.bsdfs[s.bsdf];
-        if integrator::starts_chain(b) && !reflectors.contains(&b.describe()) {
-            reflectors.push(b.describe());
+        if integrator::starts_chain(b) {
+            let d = b.describe();
+            if !reflectors.contains(&d) {
+                reflectors.push(d);
+            }
         }
     }
     let off = if reflectors.is_empty() {

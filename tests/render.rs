@@ -888,21 +888,10 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
         render(&scene, &options).unwrap().image
     };
     let truth = run(4096, 1, true);
-    // The ball (radius 1 at distance 4, 40° field of view): pixels within 0.8 of its radius.
-    let ball: Vec<usize> = (0..24 * 24)
-        .filter(|i| {
-            let (x, y) = ((i % 24) as f32 - 11.5, (i / 24) as f32 - 11.5);
-            (x * x + y * y).sqrt() < 0.8 * 8.7
-        })
-        .collect();
+    let ball = ball_pixels();
     let error = |img: &thinfilm::image_io::RgbImage| offset_and_rmse(img, &truth, &ball);
     // Squared errors pooled over four seeds (one seed's ratio varies by ±0.04).
-    let pooled = |plain: bool| {
-        let sq: f64 = (2..6)
-            .map(|seed| error(&run(64, seed, plain)).1.powi(2))
-            .sum();
-        (sq / 4.0).sqrt()
-    };
+    let pooled = |plain: bool| pooled_rmse(|seed| error(&run(64, seed, plain)).1);
     let (rmse_plain, rmse_hemisphere) = (pooled(true), pooled(false));
     assert!(
         rmse_hemisphere < 0.9 * rmse_plain,
@@ -992,19 +981,9 @@ fn specular_chains_keep_the_image_with_less_colour_noise() {
     let lines = run(&scene, 1, 1, false).1;
     let want = "wavelength supersampling of specular chains: ON";
     assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
-    let ball: Vec<usize> = (0..24 * 24)
-        .filter(|i| {
-            let (x, y) = ((i % 24) as f32 - 11.5, (i / 24) as f32 - 11.5);
-            (x * x + y * y).sqrt() < 0.8 * 8.7
-        })
-        .collect();
+    let ball = ball_pixels();
     let error = |img: &thinfilm::image_io::RgbImage| offset_and_rmse(img, &truth, &ball);
-    let pooled = |plain: bool| {
-        let sq: f64 = (2..6)
-            .map(|seed| error(&run(&scene, 64, seed, plain).0).1.powi(2))
-            .sum();
-        (sq / 4.0).sqrt()
-    };
+    let pooled = |plain: bool| pooled_rmse(|seed| error(&run(&scene, 64, seed, plain).0).1);
     let (rmse_plain, rmse_chains) = (pooled(true), pooled(false));
     assert!(
         rmse_chains < 0.75 * rmse_plain,
@@ -1024,6 +1003,23 @@ fn specular_chains_keep_the_image_with_less_colour_noise() {
     let lines = run(&gold, 1, 1, false).1;
     let want = "wavelength supersampling of specular chains: off — no smooth film or coating";
     assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
+}
+
+/// The pixels of a 24² render of the unit ball at the origin seen from 4 units away with a 40°
+/// field of view ([`base_scene`]) that lie within 0.8 of its projected radius.
+fn ball_pixels() -> Vec<usize> {
+    (0..24 * 24)
+        .filter(|i| {
+            let (x, y) = ((i % 24) as f32 - 11.5, (i / 24) as f32 - 11.5);
+            (x * x + y * y).sqrt() < 0.8 * 8.7
+        })
+        .collect()
+}
+
+/// The RMSE pooled over seeds 2–5 (the root of the mean squared `rmse(seed)`).
+fn pooled_rmse(rmse: impl Fn(u64) -> f64) -> f64 {
+    let sq: f64 = (2..6).map(|seed| rmse(seed).powi(2)).sum();
+    (sq / 4.0).sqrt()
 }
 
 /// Mean difference and RMSE of `img` from `truth` over the pixels `at` (all channels).

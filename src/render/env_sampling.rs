@@ -8,9 +8,10 @@
 //!
 //! Here world normals are sorted into [`NORMAL_BINS`] octahedral bins (Cigolle et al. 2014,
 //! "A survey of efficient representations for independent unit vectors"). For each bin, the
-//! map's coarse cells (32 × 16 blocks of its sampling cells) are weighted by their radiance
-//! times the mean of max(0, n · ω) over the bin's normals n and the cell's directions ω, mixed
-//! with a [`DEFENSIVE`] share of radiance-only weights: every direction the radiance-only
+//! map's coarse cells (32 × 16 blocks of its sampling cells) are weighted by their radiance,
+//! less a share of the bin's mean radiance ([`COMPENSATION`]), times the mean of
+//! max(0, n · ω) over the bin's normals n and the cell's directions ω, mixed with a
+//! [`DEFENSIVE`] share of radiance-only weights: every direction the radiance-only
 //! distribution can draw keeps a positive density, so a bin's edge, a bump-mapped normal or a
 //! misjudged surface costs variance, never light. A sample picks a coarse cell from its
 //! vertex's bin, then a row of the cell and a sampling cell of that row by radiance (tables
@@ -37,6 +38,15 @@ const COARSE_ROWS: usize = 16;
 /// 1995): every direction the radiance-only distribution can draw keeps at least this share
 /// of its density, and at most this share of the samples lands behind the bin's normals.
 const DEFENSIVE: f64 = 0.02;
+/// MIS compensation (Karlík et al. 2019, "MIS compensation: optimizing sampling techniques
+/// in multiple importance sampling", ACM TOG 38(6)): a bin's light samples are drawn by
+/// (L − δ)⁺ × cosine instead of L × cosine, δ this fraction of the bin's cosine-weighted mean
+/// radiance. BSDF sampling, combined by MIS, already covers light that is about uniform over
+/// the hemisphere; light samples are left to what stands out (the studio map's sources).
+/// Measured on the teapots (independent, 128², 64 spp, 3 seeds, RMSE against 4096 spp):
+/// diffuse 0.01716 → 0.01393 / 0.01395 / 0.01451 with 0.5 / 0.75 / 1, rough film 0.00359 →
+/// 0.00334 / 0.00324 / 0.00321; the same time.
+const COMPENSATION: f64 = 0.75;
 /// Points per side of a bin's and of a cell's quadrature of the mean clamped cosine.
 const QUAD: usize = 2;
 
@@ -187,6 +197,51 @@ pub struct HemisphereTables {
     bins: Vec<Distribution1D>,
 }
 
+/// A normal bin's sampling weights over the coarse cells: its normals' quadrature points
+/// `normals`, each cell's directions `cells`, radiance-only mass `mass` (`total` in all) and
+/// solid angle `solid_angle` (in the units of `mass` per unit radiance). A cell's weight is
+/// its compensated mass, (mass − δ · solid angle)⁺ with δ [`COMPENSATION`] × the bin's
+/// cosine-weighted mean radiance, times the mean of max(0, n · ω) over the bin's normals and
+/// the cell's directions, normalised and mixed with the [`DEFENSIVE`] share of radiance-only
+/// weights (which keeps every direction a positive density).
+fn bin_weights(
+    normals: &[Vec3],
+    cells: &[[Vec3; QUAD * QUAD]],
+    mass: &[f64],
+    solid_angle: &[f64],
+    total: f64,
+) -> Vec<f32> {
+    let cos: Vec<f64> = (cells.iter())
+        .map(|dirs| {
+            let cos: f32 = (normals.iter())
+                .flat_map(|n| dirs.iter().map(|d| n.dot(*d).max(0.0)))
+                .sum();
+            cos as f64
+        })
+        .collect();
+    let lit: f64 = cos.iter().zip(mass).map(|(c, m)| c * m).sum();
+    let area: f64 = cos.iter().zip(solid_angle).map(|(c, o)| c * o).sum();
+    let delta = if area > 0.0 {
+        COMPENSATION * lit / area
+    } else {
+        0.0
+    };
+    let mut cos_weighted: Vec<f64> = (cos.iter().zip(mass).zip(solid_angle))
+        .map(|((&c, &m), &o)| (m - delta * o).max(0.0) * c)
+        .collect();
+    if cos_weighted.iter().sum::<f64>() <= 0.0 {
+        // A uniformly lit hemisphere: nothing stands out, radiance × cosine.
+        cos_weighted = cos.iter().zip(mass).map(|(c, m)| c * m).collect();
+    }
+    let cos_total: f64 = cos_weighted.iter().sum();
+    (cos_weighted.iter().zip(mass))
+        .map(|(&c, &m)| match cos_total > 0.0 {
+            true => ((1.0 - DEFENSIVE) * c / cos_total + DEFENSIVE * m / total) as f32,
+            false => (m / total) as f32,
+        })
+        .collect()
+}
+
 impl HemisphereTables {
     /// Tables for the sampling weights `func` (`nu` × `nv`, row-major: the map's
     /// radiance-only distribution's) of a map turned by `to_world`; None if the map is black.
@@ -215,6 +270,18 @@ impl HemisphereTables {
         let mut row_cdf = Vec::new();
         let mut row_cdf_start = Vec::with_capacity(cu * cv);
         let mut mass = Vec::with_capacity(cu * cv);
+        // Each coarse cell's solid angle, in the units of `func` per unit radiance (func is a
+        // luminance times sin θ per sampling cell).
+        let solid_angle: Vec<f64> = (0..cu * cv)
+            .map(|c| {
+                let (a, b) = (c / cu, c % cu);
+                let width = (cols[b + 1] - cols[b]) as f64;
+                (rows[a]..rows[a + 1])
+                    .map(|i| width * (std::f64::consts::PI * (i as f64 + 0.5) / nv as f64).sin())
+                    .sum()
+            })
+            .collect();
+
         for a in 0..cv {
             for b in 0..cu {
                 row_cdf_start.push(row_cdf.len() as u32);
@@ -225,8 +292,7 @@ impl HemisphereTables {
                 ));
             }
         }
-        // A cell's weight in a bin: its radiance times the mean of max(0, n · ω) over the
-        // bin's normals n and the cell's directions ω (a quadrature), plus the floor.
+        // Each coarse cell's quadrature directions (for the mean clamped cosine per bin).
         let cells: Vec<_> = (0..cu * cv)
             .map(|c| {
                 let (a, b) = (c / cu, c % cu);
@@ -245,23 +311,7 @@ impl HemisphereTables {
                     (x / k, (x + 1.0) / k),
                     (y / k, (y + 1.0) / k),
                 );
-                let cos_weighted: Vec<f64> = (cells.iter().zip(&mass))
-                    .map(|(dirs, &m)| {
-                        let cos: f32 = (normals.iter())
-                            .flat_map(|n| dirs.iter().map(|d| n.dot(*d).max(0.0)))
-                            .sum();
-                        m * cos as f64
-                    })
-                    .collect();
-                let cos_total: f64 = cos_weighted.iter().sum();
-                // The defensive mixture: (1 − α) of the samples by radiance × cosine, α by
-                // radiance alone.
-                let weights: Vec<f32> = (cos_weighted.iter().zip(&mass))
-                    .map(|(&c, &m)| match cos_total > 0.0 {
-                        true => ((1.0 - DEFENSIVE) * c / cos_total + DEFENSIVE * m / total) as f32,
-                        false => (m / total) as f32,
-                    })
-                    .collect();
+                let weights = bin_weights(&normals, &cells, &mass, &solid_angle, total);
                 Distribution1D::new(&weights)
             })
             .collect();
@@ -370,6 +420,51 @@ mod tests {
         assert!(seen.iter().all(|&s| s), "every bin holds some normals");
         for bad in [Vec3::ZERO, Vec3::NAN, Vec3::new(f32::INFINITY, 0.0, 0.0)] {
             assert!(NormalBin::of(bad).index().unwrap() < NORMAL_BINS);
+        }
+    }
+
+    /// MIS compensation: under a uniform sky with one bright cell, the bright cell gets a
+    /// larger share of a bin's samples than radiance × cosine gives it, a sky cell a smaller
+    /// one but still the defensive share's; a uniformly lit hemisphere keeps radiance ×
+    /// cosine (nothing stands out, nothing is compensated away; both with the defensive share).
+    #[test]
+    fn compensation_leaves_uniform_light_to_bsdf_sampling() {
+        let normals = [Vec3::Z; QUAD * QUAD];
+        // Eight cells facing up at different angles, equal solid angles.
+        let cells: Vec<[Vec3; QUAD * QUAD]> = (0..8)
+            .map(|i| {
+                let t = 0.1 + 0.18 * i as f32;
+                [Vec3::new(t.sin(), 0.0, t.cos()); QUAD * QUAD]
+            })
+            .collect();
+        let solid_angle = [1.0f64; 8];
+        let plain = |mass: &[f64]| -> Vec<f64> {
+            let w: Vec<f64> = (cells.iter().zip(mass))
+                .map(|(d, m)| d[0].z as f64 * m)
+                .collect();
+            let t: f64 = w.iter().sum();
+            w.iter().map(|v| v / t).collect()
+        };
+        let mut mass = [1.0f64; 8];
+        mass[3] = 30.0;
+        let total: f64 = mass.iter().sum();
+        let w = bin_weights(&normals, &cells, &mass, &solid_angle, total);
+        let p = plain(&mass);
+        assert!(
+            w[3] as f64 > p[3] + 0.01,
+            "bright cell {} vs {}",
+            w[3],
+            p[3]
+        );
+        for i in (0..8).filter(|&i| i != 3) {
+            assert!((w[i] as f64) < p[i], "sky cell {i}: {} vs {}", w[i], p[i]);
+            assert!(w[i] as f64 >= DEFENSIVE * mass[i] / total * 0.999);
+        }
+        let uniform = [2.0f64; 8];
+        let w = bin_weights(&normals, &cells, &uniform, &solid_angle, 16.0);
+        for (a, b) in w.iter().zip(plain(&uniform)) {
+            let b = (1.0 - DEFENSIVE) * b + DEFENSIVE / 8.0;
+            assert!((*a as f64 - b).abs() < 1e-6, "{a} vs {b}");
         }
     }
 }

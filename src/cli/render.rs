@@ -71,8 +71,9 @@ pub struct Args {
     pub spectral_direct_view: bool,
     /// Draw environment light samples by radiance alone over the whole sphere, as Mitsuba
     /// does. By default a surface that only reflects draws them from the hemisphere its normal
-    /// faces (radiance × the largest cosine towards each region of the map, per bin of
-    /// normals): the same expected image, with fewer samples wasted below the horizon.
+    /// faces (per bin of normals: each region of the map by its radiance, less part of the
+    /// hemisphere's mean, which BSDF samples already find, times the mean cosine towards it):
+    /// the same expected image, with fewer samples wasted below the horizon or on even light.
     #[arg(long)]
     pub plain_env_sampling: bool,
     /// Carry four wavelengths also on paths that only reflect off smooth films and coatings

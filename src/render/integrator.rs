@@ -707,7 +707,7 @@ pub(super) fn trace_lanes<C: Carrier>(
                 let escaped = rays.iter().zip(hits.iter()).filter(|(_, h)| h.is_none());
                 escaped_dirs.extend(escaped.map(|(r, _)| r.dir));
                 escaped_uvs.resize(escaped_dirs.len(), Vec2::ZERO);
-                e.uvs_prefetch(escaped_dirs, escaped_uvs);
+                e.uvs_prefetch(escaped_dirs, escaped_uvs, !scene.hemisphere_env_sampling());
             }
             None => scene.lights().prefetch_escaped(rays, hits),
         }

@@ -816,7 +816,7 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
         } else {
             "wavelength sampling of emitters seen directly: off"
         };
-        assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
+        assert_effect_line(&lines, want);
         render(&scene, &options).unwrap().image
     };
     let (closed, sampled) = (run(64, false), run(64, true));
@@ -885,7 +885,7 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
             true => "hemisphere-aware environment sampling: off — radiance-only sampling asked for",
             false => "hemisphere-aware environment sampling: ON",
         };
-        assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
+        assert_effect_line(&lines, want);
         render(&scene, &options).unwrap().image
     };
     let truth = run(4096, 1, true);
@@ -910,15 +910,9 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
         .effects()
         .lines();
     let want = "hemisphere-aware environment sampling: off — the environment map is black";
-    assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
-    // 1024 spp against 4096: what is left is noise (the 1024-spp render's RMSE, over the
-    // square root of the ball's pixel count, bounds the mean), bias included.
-    let (bias, rmse) = error(&run(1024, 3, false));
-    let bound = 4.0 * rmse / (3.0 * ball.len() as f64).sqrt();
-    assert!(
-        bias.abs() < bound,
-        "mean offset {bias} (noise bound {bound})"
-    );
+    assert_effect_line(&lines, want);
+    // 1024 spp against 4096: what is left is noise, bias included.
+    assert_mean_within_noise(&run(1024, 3, false), &truth, &ball);
 }
 
 /// Paths that only reflect off a smooth film carry eight wavelengths to the emitter they meet
@@ -978,10 +972,10 @@ fn specular_chains_keep_the_image_with_less_colour_noise() {
     };
     let (truth, lines) = run(&scene, 4096, 1, true);
     let want = "wavelength supersampling of specular chains: off — four wavelengths asked for";
-    assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
+    assert_effect_line(&lines, want);
     let lines = run(&scene, 1, 1, false).1;
     let want = "wavelength supersampling of specular chains: ON";
-    assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
+    assert_effect_line(&lines, want);
     let ball = ball_pixels();
     let error = |img: &thinfilm::image_io::RgbImage| offset_and_rmse(img, &truth, &ball);
     let pooled = |plain: bool| pooled_rmse(|seed| error(&run(&scene, 64, seed, plain).0).1);
@@ -990,12 +984,7 @@ fn specular_chains_keep_the_image_with_less_colour_noise() {
         rmse_chains < 0.75 * rmse_plain,
         "RMSE over the ball: eight wavelengths {rmse_chains} vs four {rmse_plain}"
     );
-    let (bias, rmse) = error(&run(&scene, 1024, 3, false).0);
-    let bound = 4.0 * rmse / (3.0 * ball.len() as f64).sqrt();
-    assert!(
-        bias.abs() < bound,
-        "mean offset {bias} (noise bound {bound})"
-    );
+    assert_mean_within_noise(&run(&scene, 1024, 3, false).0, &truth, &ball);
     // A gold ball: its reflectance is smooth in wavelength, no chain.
     let mut gold = scene.clone();
     gold.bsdfs[0] = Conductor::new("Au".parse().unwrap(), 0.0, 0.0)
@@ -1003,7 +992,7 @@ fn specular_chains_keep_the_image_with_less_colour_noise() {
         .into();
     let lines = run(&gold, 1, 1, false).1;
     let want = "wavelength supersampling of specular chains: off — no smooth film or coating";
-    assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
+    assert_effect_line(&lines, want);
 }
 
 /// The pixels of a 24² render of the unit ball at the origin seen from 4 units away with a 40°
@@ -1015,6 +1004,27 @@ fn ball_pixels() -> Vec<usize> {
             (x * x + y * y).sqrt() < 0.8 * 8.7
         })
         .collect()
+}
+
+/// Asserts that the mean of `img` over the pixels `at` equals `truth`'s within the noise:
+/// `img`'s RMSE from it, over the square root of the values' count, bounds the mean offset
+/// (bias included; `truth` a render of 4× the samples).
+fn assert_mean_within_noise(
+    img: &thinfilm::image_io::RgbImage,
+    truth: &thinfilm::image_io::RgbImage,
+    at: &[usize],
+) {
+    let (bias, rmse) = offset_and_rmse(img, truth, at);
+    let bound = 4.0 * rmse / (3.0 * at.len() as f64).sqrt();
+    assert!(
+        bias.abs() < bound,
+        "mean offset {bias} (noise bound {bound})"
+    );
+}
+
+/// Asserts that one of the render log's effect lines `lines` starts with `want`.
+fn assert_effect_line(lines: &[String], want: &str) {
+    assert!(lines.iter().any(|l| l.starts_with(want)), "{lines:?}");
 }
 
 /// The RMSE pooled over seeds 2–5 (the root of the mean squared `rmse(seed)`).

@@ -127,6 +127,18 @@ impl Effects {
         on
     }
 
+    /// [`Self::decide`] for an effect that is on unless `off` gives the reason it is not;
+    /// `on()` says what it does.
+    pub(super) fn decide_unless(
+        &mut self,
+        effect: Effect,
+        off: Option<&str>,
+        on: impl FnOnce() -> String,
+    ) -> bool {
+        let reason = off.map_or_else(on, str::to_string);
+        self.decide(effect, off.is_none(), reason)
+    }
+
     /// [`Self::decide`] for an effect that is on when `causes` (the BSDFs that bring it) is
     /// not empty: `off` says why it is off, `on(causes)` what it does.
     fn decide_by(

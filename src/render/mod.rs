@@ -544,18 +544,12 @@ fn env_sampling_decision(
     } else {
         None
     };
-    let reason = off.map_or_else(
-        || format!(
+    effects.decide_unless(effects::Effect::HemisphereEnvSampling, off, || {
+        format!(
             "reflecting surfaces draw environment samples from the hemisphere they face ({} normal bins)",
             env_sampling::NORMAL_BINS
-        ),
-        str::to_string,
-    );
-    effects.decide(
-        effects::Effect::HemisphereEnvSampling,
-        off.is_none(),
-        reason,
-    )
+        )
+    })
 }
 
 /// Whether paths that only reflect off Dirac reflectors, first off a film or coating, carry
@@ -590,18 +584,12 @@ fn specular_chain_decision(
     } else {
         None
     };
-    let reason = off.map_or_else(
-        || format!(
+    effects.decide_unless(effects::Effect::SpecularChainWavelengths, off, || {
+        format!(
             "paths from the camera that only reflect off Dirac reflectors, first off a film or coating ({}), carry 8 wavelengths to the emitter they meet",
             reflectors.join(", ")
-        ),
-        str::to_string,
-    );
-    effects.decide(
-        effects::Effect::SpecularChainWavelengths,
-        off.is_none(),
-        reason,
-    )
+        )
+    })
 }
 
 /// The global sample indices to render: the options' range, else 0..spp.

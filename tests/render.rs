@@ -857,19 +857,7 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
 /// seed before it: on this sky-dominated map compensation moves little).
 #[test]
 fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
-    let (w, h) = (32, 16);
-    let mut sky = thinfilm::image_io::RgbImage::new(w, h);
-    for (i, p) in sky.pixels.iter_mut().enumerate() {
-        let (x, y) = (i % w, i / w);
-        *p = if y >= h / 2 {
-            [0.04, 0.035, 0.03]
-        } else if (5..7).contains(&x) && (4..6).contains(&y) {
-            [20.0, 18.0, 15.0]
-        } else {
-            [0.8, 1.0, 1.6]
-        };
-    }
-    let scene = diffuse_ball_under(sky, glam::Mat4::from_rotation_y(0.4), 0.7);
+    let scene = diffuse_ball_under(studio_sky(), glam::Mat4::from_rotation_y(0.4), 0.7);
     let run = |spp: u32, seed: u64, plain: bool| {
         let options = RenderOptions {
             spp: Some(spp),
@@ -912,6 +900,81 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
     let want = "hemisphere-aware environment sampling: off — the environment map is black";
     assert_effect_line(&lines, want);
     // 1024 spp against 4096: what is left is noise, bias included.
+    assert_mean_within_noise(&run(1024, 3, false), &truth, &ball);
+}
+
+/// A studio-like map: a small bright light, a sky holding most of the light, a dark ground.
+fn studio_sky() -> thinfilm::image_io::RgbImage {
+    let (w, h) = (32, 16);
+    let mut sky = thinfilm::image_io::RgbImage::new(w, h);
+    for (i, p) in sky.pixels.iter_mut().enumerate() {
+        let (x, y) = (i % w, i / w);
+        *p = if y >= h / 2 {
+            [0.04, 0.035, 0.03]
+        } else if (5..7).contains(&x) && (4..6).contains(&y) {
+            [20.0, 18.0, 15.0]
+        } else {
+            [0.8, 1.0, 1.6]
+        };
+    }
+    sky
+}
+
+/// A photo studio's map: four softboxes (~35° × 20°, two high, one at each side near the
+/// horizon) in a dim room.
+fn softbox_sky() -> thinfilm::image_io::RgbImage {
+    let (w, h) = (64, 32);
+    let mut sky = thinfilm::image_io::RgbImage::new(w, h);
+    let boxes = [(4, 5), (22, 8), (38, 13), (52, 6)];
+    for (i, p) in sky.pixels.iter_mut().enumerate() {
+        let (x, y) = (i % w, i / w);
+        let lit =
+            (boxes.iter()).any(|&(bx, by)| (bx..bx + 6).contains(&x) && (by..by + 4).contains(&y));
+        *p = if lit {
+            [6.0, 5.8, 5.2]
+        } else {
+            [0.05, 0.05, 0.06]
+        };
+    }
+    sky
+}
+
+/// Narrow glossy lobes draw environment light samples around their mirror direction: a rough
+/// (GGX α 0.15) metal ball under [`softbox_sky`] renders to the same image as with
+/// radiance-only sampling (1024 spp against 4096 within the noise), with less error at 64 spp
+/// (pooled RMSE over the ball under 0.7× radiance-only's: 0.63× measured; the normal bins
+/// alone, without the lobe's tables, gave 0.79×), and the log names the lobe width.
+#[test]
+fn glossy_lobe_env_sampling_keeps_the_image_with_less_noise() {
+    let mut scene = diffuse_ball_under(softbox_sky(), glam::Mat4::from_rotation_y(0.4), 0.7);
+    scene.bsdfs[0] = Conductor::new("0.2+3.9i".parse().unwrap(), 0.15, 0.15)
+        .unwrap()
+        .into();
+    let run = |spp: u32, seed: u64, plain: bool| {
+        let options = RenderOptions {
+            spp: Some(spp),
+            seed: Some(seed),
+            plain_env_sampling: plain,
+            ..Default::default()
+        };
+        if !plain {
+            let lines = (thinfilm::render::prepare(&scene, &options).unwrap())
+                .effects()
+                .lines();
+            let want = "hemisphere-aware environment sampling: ON — reflecting surfaces draw environment samples from the hemisphere they face (256 normal bins); glossy lobes of α 0.15 around their mirror direction";
+            assert_effect_line(&lines, want);
+        }
+        render(&scene, &options).unwrap().image
+    };
+    let truth = run(4096, 1, true);
+    let ball = ball_pixels();
+    let error = |img: &thinfilm::image_io::RgbImage| offset_and_rmse(img, &truth, &ball);
+    let pooled = |plain: bool| pooled_rmse(|seed| error(&run(64, seed, plain)).1);
+    let (rmse_plain, rmse_lobe) = (pooled(true), pooled(false));
+    assert!(
+        rmse_lobe < 0.7 * rmse_plain,
+        "RMSE over the ball: lobe bins {rmse_lobe} vs radiance-only {rmse_plain}"
+    );
     assert_mean_within_noise(&run(1024, 3, false), &truth, &ball);
 }
 

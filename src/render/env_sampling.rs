@@ -20,6 +20,14 @@
 //! precision), uniformly within it. The density of every direction is exact
 //! ([`HemisphereTables::pdf`]): the MIS weight of a BSDF-sampled ray that escapes uses the
 //! bin of the vertex it left. Same expected image as radiance-only sampling.
+//!
+//! A narrow glossy lobe (a rough metal or film, GGX α ≤ [`LOBE_MAX_ALPHA`]) receives light
+//! from a small cone around its mirror direction, not from its whole hemisphere: for each
+//! such lobe width the tables hold a second family of bins, of mirror directions r
+//! ([`NormalBin::of_lobe`]), whose cells are weighted by the GGX density at the half-angle
+//! between r and the cell ([`lobe_shape`]) instead of the cosine — a tabulated product of
+//! lobe and map (as in product importance sampling, Clarberg et al. 2005, with the lobe
+//! binned instead of factored), compensated and made defensive the same way.
 
 use super::lights::Distribution1D;
 use glam::{Mat3, Vec2, Vec3};
@@ -49,6 +57,52 @@ const DEFENSIVE: f64 = 0.02;
 const COMPENSATION: f64 = 0.75;
 /// Points per side of a bin's and of a cell's quadrature of the mean clamped cosine.
 const QUAD: usize = 2;
+/// Glossy lobes up to this GGX roughness get tables of their own, binned by mirror direction
+/// ([`lobe_families`]); wider lobes see most of a hemisphere and keep the normal bins. (A
+/// rough metal ball in a softbox studio, RMSE against radiance-only sampling: α 0.15 0.58×
+/// with its tables vs 0.79× with the normal bins, α 0.3 0.52× vs 0.65×, α 0.45 0.61× vs
+/// 0.55×.)
+pub const LOBE_MAX_ALPHA: f32 = 0.4;
+/// At most this many lobe widths per map (the tables grow by 1.5 MB per width).
+const MAX_LOBE_FAMILIES: usize = 4;
+/// Added in quadrature to a lobe's α for its tables: a lobe bin's weights are those of its
+/// centre direction, while the mirror directions it holds spread over ~0.2 rad, and the
+/// cells' quadrature (QUAD² points) must not fall between the peaks of a narrow lobe. (0.05 /
+/// 0.1 / 0.2 left the rough-film teapot's RMSE the same within 3 %; the centre alone instead
+/// of QUAD² points per bin: the same RMSE there, 0.63× → 0.58× in the softbox test, a
+/// quarter of the tables' set-up time.)
+const LOBE_WIDENING: f32 = 0.1;
+
+/// The lobe widths (GGX α, √(α_u α_v) for an anisotropic lobe) that get tables of their own:
+/// the distinct values of `alphas` up to [`LOBE_MAX_ALPHA`], the first
+/// [`MAX_LOBE_FAMILIES`] in ascending order.
+pub fn lobe_families(alphas: impl Iterator<Item = f32>) -> Vec<f32> {
+    let mut out: Vec<f32> = alphas
+        .filter(|a| *a > 0.0 && *a <= LOBE_MAX_ALPHA)
+        .collect();
+    out.sort_by(f32::total_cmp);
+    out.dedup();
+    out.truncate(MAX_LOBE_FAMILIES);
+    out
+}
+
+/// The family of a lobe of width `alpha` in `families` ([`lobe_families`]), if it has one.
+pub fn lobe_family(families: &[f32], alpha: f32) -> Option<usize> {
+    families.iter().position(|&a| a == alpha)
+}
+
+/// The GGX density of half-vectors, D(θh), at the half-angle between a mirror direction
+/// and a direction whose dot product with it is `c`: the shape of a glossy lobe of width
+/// `alpha` around its mirror direction (zero behind it).
+fn lobe_shape(c: f32, alpha: f32) -> f32 {
+    if c <= 0.0 {
+        return 0.0;
+    }
+    let mu2 = 0.5 * (1.0 + c);
+    let a2 = alpha * alpha;
+    let t = mu2 * (a2 - 1.0) + 1.0;
+    a2 / (PI * t * t)
+}
 
 /// Which distribution an environment light sample is drawn from: a surface's normal bin, or
 /// [`NormalBin::WHOLE_SPHERE`] (radiance alone — a medium vertex, a surface that transmits).
@@ -68,6 +122,13 @@ impl NormalBin {
         let x = (p.x as usize).min(BINS_PER_SIDE - 1);
         let y = (p.y as usize).min(BINS_PER_SIDE - 1);
         NormalBin((y * BINS_PER_SIDE + x) as u16)
+    }
+
+    /// The bin of a glossy lobe's mirror direction `r` (world, unit) in lobe family `family`
+    /// (an index into the `lobes` the tables were built for; see [`lobe_family`]).
+    #[inline]
+    pub fn of_lobe(family: usize, r: Vec3) -> Self {
+        NormalBin(Self::of(r).0 + (NORMAL_BINS * (1 + family)) as u16)
     }
 
     /// The bin's index, or None for [`NormalBin::WHOLE_SPHERE`].
@@ -197,55 +258,62 @@ pub struct HemisphereTables {
     bins: Vec<Distribution1D>,
 }
 
-/// A normal bin's sampling weights over the coarse cells: its normals' quadrature points
-/// `normals`, each cell's directions `cells`, radiance-only mass `mass` (`total` in all) and
-/// solid angle `solid_angle` (in the units of `mass` per unit radiance). A cell's weight is
-/// its compensated mass, (mass − δ · solid angle)⁺ with δ [`COMPENSATION`] × the bin's
-/// cosine-weighted mean radiance, times the mean of max(0, n · ω) over the bin's normals and
-/// the cell's directions, normalised and mixed with the [`DEFENSIVE`] share of radiance-only
-/// weights (which keeps every direction a positive density).
-fn bin_weights(
-    normals: &[Vec3],
-    cells: &[[Vec3; QUAD * QUAD]],
-    mass: &[f64],
-    solid_angle: &[f64],
-    total: f64,
-) -> Vec<f32> {
-    let cos: Vec<f64> = (cells.iter())
-        .map(|dirs| {
-            let cos: f32 = (normals.iter())
-                .flat_map(|n| dirs.iter().map(|d| n.dot(*d).max(0.0)))
-                .sum();
-            cos as f64
-        })
-        .collect();
-    let lit: f64 = cos.iter().zip(mass).map(|(c, m)| c * m).sum();
-    let area: f64 = cos.iter().zip(solid_angle).map(|(c, o)| c * o).sum();
+/// A bin's sampling weights over the coarse cells: `kernel[c]`, the mean over the bin's
+/// directions and cell `c`'s of how much light from there counts (max(0, n · ω) for a normal
+/// bin, [`lobe_shape`] for a lobe bin), each cell's radiance-only mass `mass` (`total` in
+/// all) and solid angle `solid_angle` (in the units of `mass` per unit radiance). A cell's
+/// weight is its compensated mass, (mass − δ · solid angle)⁺ with δ [`COMPENSATION`] × the
+/// bin's kernel-weighted mean radiance, times its kernel, normalised and mixed with the
+/// [`DEFENSIVE`] share of radiance-only weights (which keeps every direction a positive
+/// density).
+fn bin_weights(kernel: &[f64], mass: &[f64], solid_angle: &[f64], total: f64) -> Vec<f32> {
+    let lit: f64 = kernel.iter().zip(mass).map(|(c, m)| c * m).sum();
+    let area: f64 = kernel.iter().zip(solid_angle).map(|(c, o)| c * o).sum();
     let delta = if area > 0.0 {
         COMPENSATION * lit / area
     } else {
         0.0
     };
-    let mut cos_weighted: Vec<f64> = (cos.iter().zip(mass).zip(solid_angle))
+    let mut weighted: Vec<f64> = (kernel.iter().zip(mass).zip(solid_angle))
         .map(|((&c, &m), &o)| (m - delta * o).max(0.0) * c)
         .collect();
-    if cos_weighted.iter().sum::<f64>() <= 0.0 {
-        // A uniformly lit hemisphere: nothing stands out, radiance × cosine.
-        cos_weighted = cos.iter().zip(mass).map(|(c, m)| c * m).collect();
+    if weighted.iter().sum::<f64>() <= 0.0 {
+        // Uniform light over the kernel: nothing stands out, radiance × kernel.
+        weighted = kernel.iter().zip(mass).map(|(c, m)| c * m).collect();
     }
-    let cos_total: f64 = cos_weighted.iter().sum();
-    (cos_weighted.iter().zip(mass))
-        .map(|(&c, &m)| match cos_total > 0.0 {
-            true => ((1.0 - DEFENSIVE) * c / cos_total + DEFENSIVE * m / total) as f32,
+    let kernel_total: f64 = weighted.iter().sum();
+    (weighted.iter().zip(mass))
+        .map(|(&c, &m)| match kernel_total > 0.0 {
+            true => ((1.0 - DEFENSIVE) * c / kernel_total + DEFENSIVE * m / total) as f32,
             false => (m / total) as f32,
+        })
+        .collect()
+}
+
+/// Per cell, the sum of `f(d, ω)` over a bin's directions `dirs` and the cell's directions
+/// (a mean up to the constant factor the weights are normalised by).
+fn cell_kernel(
+    dirs: &[Vec3],
+    cells: &[[Vec3; QUAD * QUAD]],
+    f: impl Fn(Vec3, Vec3) -> f32,
+) -> Vec<f64> {
+    (cells.iter())
+        .map(|omegas| {
+            let sum: f32 = (dirs.iter())
+                .flat_map(|&d| omegas.iter().map(move |&w| (d, w)))
+                .map(|(d, w)| f(d, w))
+                .sum();
+            sum as f64
         })
         .collect()
 }
 
 impl HemisphereTables {
     /// Tables for the sampling weights `func` (`nu` × `nv`, row-major: the map's
-    /// radiance-only distribution's) of a map turned by `to_world`; None if the map is black.
-    pub fn new(func: &[f32], nu: usize, nv: usize, to_world: Mat3) -> Option<Self> {
+    /// radiance-only distribution's) of a map turned by `to_world`, with the normal bins and
+    /// a family of mirror-direction bins per lobe width in `lobes` ([`lobe_families`]); None
+    /// if the map is black.
+    pub fn new(func: &[f32], nu: usize, nv: usize, to_world: Mat3, lobes: &[f32]) -> Option<Self> {
         let total: f64 = func.iter().map(|&f| f as f64).sum();
         if !(total > 0.0 && total.is_finite()) || func.len() != nu * nv {
             return None;
@@ -302,17 +370,27 @@ impl HemisphereTables {
             })
             .collect();
         let k = BINS_PER_SIDE as f32;
-        let bins = (0..NORMAL_BINS)
+        let bins = (0..NORMAL_BINS * (1 + lobes.len()))
             .into_par_iter()
-            .map(|bin| {
+            .map(|index| {
+                let bin = index % NORMAL_BINS;
                 let (x, y) = ((bin % BINS_PER_SIDE) as f32, (bin / BINS_PER_SIDE) as f32);
-                let normals = quadrature_points(
-                    |u, v| octahedral_inverse(Vec2::new(u, v)),
-                    (x / k, (x + 1.0) / k),
-                    (y / k, (y + 1.0) / k),
-                );
-                let weights = bin_weights(&normals, &cells, &mass, &solid_angle, total);
-                Distribution1D::new(&weights)
+                let kernel = match (index / NORMAL_BINS).checked_sub(1) {
+                    None => {
+                        let normals = quadrature_points(
+                            |u, v| octahedral_inverse(Vec2::new(u, v)),
+                            (x / k, (x + 1.0) / k),
+                            (y / k, (y + 1.0) / k),
+                        );
+                        cell_kernel(&normals, &cells, |n, w| n.dot(w).max(0.0))
+                    }
+                    Some(family) => {
+                        let alpha = lobes[family].hypot(LOBE_WIDENING);
+                        let r = octahedral_inverse(Vec2::new((x + 0.5) / k, (y + 0.5) / k));
+                        cell_kernel(&[r], &cells, |r, w| lobe_shape(r.dot(w), alpha))
+                    }
+                };
+                Distribution1D::new(&bin_weights(&kernel, &mass, &solid_angle, total))
             })
             .collect();
         Some(HemisphereTables {
@@ -448,7 +526,8 @@ mod tests {
         let mut mass = [1.0f64; 8];
         mass[3] = 30.0;
         let total: f64 = mass.iter().sum();
-        let w = bin_weights(&normals, &cells, &mass, &solid_angle, total);
+        let cosine = cell_kernel(&normals, &cells, |n, w| n.dot(w).max(0.0));
+        let w = bin_weights(&cosine, &mass, &solid_angle, total);
         let p = plain(&mass);
         assert!(
             w[3] as f64 > p[3] + 0.01,
@@ -461,7 +540,7 @@ mod tests {
             assert!(w[i] as f64 >= DEFENSIVE * mass[i] / total * 0.999);
         }
         let uniform = [2.0f64; 8];
-        let w = bin_weights(&normals, &cells, &uniform, &solid_angle, 16.0);
+        let w = bin_weights(&cosine, &uniform, &solid_angle, 16.0);
         for (a, b) in w.iter().zip(plain(&uniform)) {
             let b = (1.0 - DEFENSIVE) * b + DEFENSIVE / 8.0;
             assert!((*a as f64 - b).abs() < 1e-6, "{a} vs {b}");

@@ -943,7 +943,7 @@ fn vertex<C: Carrier>(
         frame,
         wi: frame.to_local(-ray.dir),
         wi_world: -ray.dir,
-        normal_bin: env_normal_bin(scene, bsdf, &frame, -ray.dir),
+        normal_bin: env_normal_bin(scene, bsdf, &frame, -ray.dir, si.shape),
     };
     let ctx = shading_ctx(wl, &si, bsdf);
 
@@ -1061,11 +1061,19 @@ fn request_infinite_lights<C: Carrier>(
 /// The environment-sampling bin of a vertex with BSDF `bsdf` in shading frame `frame`, seen
 /// from `wi_world` ([`super::env_sampling`]): the bin of the normal on the side the path
 /// arrives from, where a surface without a non-Dirac transmission lobe receives all the light
-/// that light sampling can find; radiance-only sampling elsewhere, in scenes with media (their
-/// light samples are drawn whole-sphere) and where hemisphere sampling is off. (A vertex with
-/// Dirac lobes only makes no light sample, and its rays' emitters count in full.)
+/// that light sampling can find — or, for a narrow glossy lobe with tables of its own (on
+/// `shape`), the bin of its mirror direction; radiance-only sampling elsewhere, in scenes with
+/// media (their light samples are drawn whole-sphere) and where hemisphere sampling is off.
+/// (A vertex with Dirac lobes only makes no light sample, and its rays' emitters count in
+/// full.)
 #[inline]
-fn env_normal_bin(scene: &PreparedScene, bsdf: &Bsdf, frame: &Frame, wi_world: Vec3) -> NormalBin {
+fn env_normal_bin(
+    scene: &PreparedScene,
+    bsdf: &Bsdf,
+    frame: &Frame,
+    wi_world: Vec3,
+    shape: u32,
+) -> NormalBin {
     let flags = bsdf.flags();
     let transmits = BsdfFlags::DIFFUSE_TRANSMISSION | BsdfFlags::GLOSSY_TRANSMISSION;
     if !scene.hemisphere_env_sampling()
@@ -1074,8 +1082,12 @@ fn env_normal_bin(scene: &PreparedScene, bsdf: &Bsdf, frame: &Frame, wi_world: V
     {
         return NormalBin::WHOLE_SPHERE;
     }
-    let n = frame.n;
-    NormalBin::of(if n.dot(wi_world) >= 0.0 { n } else { -n })
+    let cos = frame.n.dot(wi_world);
+    let n = if cos >= 0.0 { frame.n } else { -frame.n };
+    match scene.lobe_family_of(shape) {
+        Some(family) => NormalBin::of_lobe(family, 2.0 * cos.abs() * n - wi_world),
+        None => NormalBin::of(n),
+    }
 }
 
 /// Adds what the area light `light` under hit `si` emits towards branch `b`'s ray: its

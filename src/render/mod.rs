@@ -119,6 +119,8 @@ pub const DEFAULT_FRESNEL_SPLITS: u32 = 3;
 pub const MAX_SPP: u32 = 1 << 20;
 /// Deepest a path may go without Russian roulette (see `prepare`).
 const MAX_UNROULETTED_DEPTH: i32 = 1024;
+/// A BSDF without a glossy lobe family ([`glossy_lobes`]).
+const NO_LOBE: u8 = u8::MAX;
 /// Upper bound on `fresnel_splits`: 2^16 branches per camera sample at worst.
 pub const MAX_FRESNEL_SPLITS: u32 = 16;
 
@@ -178,6 +180,8 @@ pub struct PreparedScene {
     bsdfs: Vec<Bsdf>,
     /// BSDF index per shape.
     shape_bsdf: Vec<u32>,
+    /// Per shape, its BSDF's glossy lobe family ([`glossy_lobes`]) or [`NO_LOBE`].
+    shape_lobe: Vec<u8>,
     camera: camera::Camera,
     settings: IntegratorSettings,
     width: u32,
@@ -239,6 +243,13 @@ impl std::ops::Deref for Interaction<'_> {
 }
 
 impl PreparedScene {
+    /// The glossy lobe family of `shape`'s BSDF ([`glossy_lobes`]), if it has one.
+    #[inline]
+    pub(crate) fn lobe_family_of(&self, shape: u32) -> Option<usize> {
+        let f = self.shape_lobe[shape as usize];
+        (f != NO_LOBE).then_some(f as usize)
+    }
+
     /// The BSDF of shape `shape`.
     #[inline]
     pub(crate) fn shape_bsdf_of(&self, shape: u32) -> &Bsdf {
@@ -418,8 +429,9 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     // (for camera rays from one pinhole: `lights` hook, not for lens cameras) need only the
     // triangles: binned beside the BVH build, then given its ids.
     let pinhole = camera.pinhole();
+    let (lobe_families, bsdf_lobe) = glossy_lobes(scene, options);
     let (built, emitters) = std::thread::scope(|s| {
-        let emitters = s.spawn(|| lights::LightSet::emitter_lights(scene));
+        let emitters = s.spawn(|| lights::LightSet::emitter_lights(scene, &lobe_families));
         let built = accel::Accel::build_beside(scene, samples, |tris| {
             pinhole.and_then(|c| primary::PrimaryBins::build(tris, c, width, height, samples))
         });
@@ -445,7 +457,9 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     );
     let lights = lights::LightSet::build(scene, &accel, emitters?)?;
     let closed_form_direct_view = direct_view_decision(scene, options, &lights, &mut effects);
-    let hemisphere_env_sampling = env_sampling_decision(scene, options, &lights, &mut effects);
+    let hemisphere_env_sampling =
+        env_sampling_decision(scene, options, &lights, &lobe_families, &mut effects);
+    let shape_lobe = (scene.shapes.iter()).map(|s| bsdf_lobe[s.bsdf]).collect();
     let shape_bsdf = scene.shapes.iter().map(|s| s.bsdf as u32).collect();
     let polarized = if effects.polarization || options.force_polarization {
         if let Some(r) = scene.bsdfs.iter().find_map(|b| b.polarized().err()) {
@@ -465,6 +479,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         lights,
         bsdfs: scene.bsdfs.clone(),
         shape_bsdf,
+        shape_lobe,
         camera,
         settings,
         width,
@@ -529,6 +544,7 @@ fn env_sampling_decision(
     scene: &Scene,
     options: &RenderOptions,
     lights: &lights::LightSet,
+    lobe_families: &[f32],
     effects: &mut Effects,
 ) -> bool {
     let has_tables =
@@ -545,11 +561,40 @@ fn env_sampling_decision(
         None
     };
     effects.decide_unless(effects::Effect::HemisphereEnvSampling, off, || {
+        let lobes = if lobe_families.is_empty() {
+            String::new()
+        } else {
+            let alphas: Vec<String> = lobe_families.iter().map(|a| format!("{a}")).collect();
+            format!(
+                "; glossy lobes of α {} around their mirror direction",
+                alphas.join(", ")
+            )
+        };
         format!(
-            "reflecting surfaces draw environment samples from the hemisphere they face ({} normal bins)",
+            "reflecting surfaces draw environment samples from the hemisphere they face ({} normal bins){lobes}",
             env_sampling::NORMAL_BINS
         )
     })
+}
+
+/// The glossy lobe widths whose environment light samples get tables of their own
+/// ([`env_sampling::lobe_families`]; none with `--plain-env-sampling`), and each BSDF's
+/// family in them ([`NO_LOBE`] if none).
+fn glossy_lobes(scene: &Scene, options: &RenderOptions) -> (Vec<f32>, Vec<u8>) {
+    let alpha = |b: &bsdf::Bsdf| b.glossy_lobe().map(|m| (m.alpha_u * m.alpha_v).sqrt());
+    let families = if options.plain_env_sampling || scene.media.is_some() {
+        Vec::new()
+    } else {
+        env_sampling::lobe_families(scene.bsdfs.iter().filter_map(alpha))
+    };
+    let of_bsdf = (scene.bsdfs.iter())
+        .map(|b| {
+            alpha(b)
+                .and_then(|a| env_sampling::lobe_family(&families, a))
+                .map_or(NO_LOBE, |f| f as u8)
+        })
+        .collect();
+    (families, of_bsdf)
 }
 
 /// Whether paths that only reflect off Dirac reflectors, first off a film or coating, carry

@@ -166,6 +166,13 @@ impl BsdfModel for Conductor {
         )
     }
 
+    fn glossy_lobe(&self) -> Option<Microfacet> {
+        match self.roughness {
+            Roughness::Constant(m) => m,
+            Roughness::Textured { .. } => None,
+        }
+    }
+
     fn describe(&self) -> String {
         let spec = self.specular.describe("specular_reflectance");
         if self.roughness.is_rough() {

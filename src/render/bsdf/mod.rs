@@ -180,6 +180,14 @@ pub trait BsdfModel {
         let _ = si;
         Vec3::Z
     }
+
+    /// The microfacet distribution of a model whose only lobe is one glossy reflection about
+    /// its shading normal, the same at every shading point (not textured); None otherwise.
+    /// Environment light samples at such a surface are drawn around its mirror direction
+    /// ([`super::env_sampling`]).
+    fn glossy_lobe(&self) -> Option<microfacet::Microfacet> {
+        None
+    }
 }
 
 /// A model's polarised form: the Mueller-matrix versions of `eval` and `sample`, with the same
@@ -408,6 +416,11 @@ impl Bsdf {
     /// The default BSDF (Mitsuba: diffuse, reflectance 0.5).
     pub fn default_diffuse() -> Self {
         diffuse::Diffuse::constant(0.5).into()
+    }
+
+    /// [`BsdfModel::glossy_lobe`].
+    pub fn glossy_lobe(&self) -> Option<microfacet::Microfacet> {
+        self.model().glossy_lobe()
     }
 
     /// Whether the BSDF has a non-delta lobe (worth light sampling).

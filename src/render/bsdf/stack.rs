@@ -142,6 +142,10 @@ impl BsdfModel for StackBsdf {
         reflection_lobe(self.ggx) | BsdfFlags::MULTILAYER
     }
 
+    fn glossy_lobe(&self) -> Option<Ggx> {
+        self.ggx
+    }
+
     fn describe(&self) -> String {
         let rough = self
             .ggx

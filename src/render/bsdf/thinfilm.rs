@@ -170,6 +170,10 @@ impl BsdfModel for ThinFilmBsdf {
             | BsdfFlags::NONE.with(BsdfFlags::THICKNESS_MAP, self.thickness_nm.is_varying())
     }
 
+    fn glossy_lobe(&self) -> Option<Ggx> {
+        self.ggx
+    }
+
     fn describe(&self) -> String {
         let rough = self
             .ggx

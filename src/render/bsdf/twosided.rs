@@ -143,6 +143,11 @@ impl BsdfModel for TwoSided {
     fn perturbed_normal(&self, si: &SurfaceInteraction) -> glam::Vec3 {
         self.inner.perturbed_normal(si)
     }
+
+    /// The inner model's lobe, about the normal on the side the light arrives from.
+    fn glossy_lobe(&self) -> Option<super::microfacet::Microfacet> {
+        self.inner.glossy_lobe()
+    }
 }
 
 impl PolarizedBsdf for TwoSided {

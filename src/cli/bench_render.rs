@@ -71,7 +71,8 @@ pub struct Args {
     #[arg(long)]
     pub spectral_direct_view: bool,
     /// Our renderer draws environment light samples by radiance alone over the whole sphere
-    /// (as Mitsuba does), instead of from the hemisphere a reflecting surface faces.
+    /// (as Mitsuba does), instead of from the hemisphere a reflecting surface faces (or the
+    /// cone around a narrow glossy lobe's mirror direction).
     #[arg(long)]
     pub plain_env_sampling: bool,
     /// Our renderer carries four wavelengths also on specular reflection chains (as Mitsuba

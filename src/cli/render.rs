@@ -72,8 +72,10 @@ pub struct Args {
     /// Draw environment light samples by radiance alone over the whole sphere, as Mitsuba
     /// does. By default a surface that only reflects draws them from the hemisphere its normal
     /// faces (per bin of normals: each region of the map by its radiance, less part of the
-    /// hemisphere's mean, which BSDF samples already find, times the mean cosine towards it):
-    /// the same expected image, with fewer samples wasted below the horizon or on even light.
+    /// hemisphere's mean, which BSDF samples already find, times the mean cosine towards it),
+    /// and a narrow glossy lobe (rough metal or film, GGX α ≤ 0.4) from around its mirror
+    /// direction: the same expected image, with fewer samples wasted below the horizon, on
+    /// even light or outside the lobe.
     #[arg(long)]
     pub plain_env_sampling: bool,
     /// Carry four wavelengths also on paths that only reflect off smooth films and coatings

@@ -501,6 +501,25 @@ mod tests {
         }
     }
 
+    /// Lobe families: the distinct widths up to [`LOBE_MAX_ALPHA`], ascending, at most
+    /// [`MAX_LOBE_FAMILIES`]; a width's family is its place among them, and a wide lobe, a
+    /// mirror (α 0) or a width beyond the first four has none.
+    #[test]
+    fn lobe_families_are_the_distinct_narrow_widths() {
+        let families = lobe_families([0.3, 0.15, 0.3, 0.5, 0.0, 0.2, 0.25, 0.35].into_iter());
+        assert_eq!(families, [0.15, 0.2, 0.25, 0.3]);
+        assert_eq!(lobe_family(&families, 0.25), Some(2));
+        for alpha in [0.5, 0.0, 0.35] {
+            assert_eq!(lobe_family(&families, alpha), None);
+        }
+        // Mirror-direction bins follow the normal bins, family by family.
+        let r = Vec3::new(0.2, -0.5, 0.8).normalize();
+        assert_eq!(
+            NormalBin::of_lobe(1, r).index(),
+            Some(2 * NORMAL_BINS + NormalBin::of(r).index().unwrap())
+        );
+    }
+
     /// MIS compensation: under a uniform sky with one bright cell, the bright cell gets a
     /// larger share of a bin's samples than radiance × cosine gives it, a sky cell a smaller
     /// one but still the defensive share's; a uniformly lit hemisphere keeps radiance ×

@@ -564,7 +564,9 @@ fn env_sampling_decision(
         let lobes = if lobe_families.is_empty() {
             String::new()
         } else {
-            let alphas: Vec<String> = lobe_families.iter().map(|a| format!("{a}")).collect();
+            let alphas: Vec<String> = (lobe_families.iter())
+                .map(|a| format!("{}", (a * 1000.0).round() / 1000.0))
+                .collect();
             format!(
                 "; glossy lobes of α {} around their mirror direction",
                 alphas.join(", ")

@@ -62,7 +62,7 @@ const QUAD: usize = 2;
 /// rough metal ball in a softbox studio, RMSE against radiance-only sampling: α 0.15 0.58×
 /// with its tables vs 0.79× with the normal bins, α 0.3 0.52× vs 0.65×, α 0.45 0.61× vs
 /// 0.55×.)
-pub const LOBE_MAX_ALPHA: f32 = 0.4;
+const LOBE_MAX_ALPHA: f32 = 0.4;
 /// At most this many lobe widths per map (the tables grow by 1.5 MB per width).
 const MAX_LOBE_FAMILIES: usize = 4;
 /// Added in quadrature to a lobe's α for its tables: a lobe bin's weights are those of its

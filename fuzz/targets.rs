@@ -160,6 +160,7 @@ fn render_info(sample_range: (u32, u32)) -> thinfilm::render::provenance::Render
         seed: 7,
         sampler: "independent".into(),
         filter: "box".into(),
+        adaptive: false,
         image_hash: 0xdead_beef,
         version: "0".into(),
     }

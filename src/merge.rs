@@ -84,6 +84,14 @@ pub fn merge_renders(mut pieces: Vec<RenderPiece>) -> Result<MergedRender> {
         bail!("nothing to merge");
     }
     pieces.sort_by_key(|p| p.info.sample_range);
+    if let Some(p) = pieces.iter().find(|p| p.info.adaptive) {
+        bail!(
+            "{} was rendered with adaptive sample counts (its pixels hold different numbers of \
+             samples) and cannot be merged: render the pieces with --sample-range or --part, \
+             or with --uniform-samples",
+            p.path.display()
+        );
+    }
     let first = &pieces[0];
     for p in &pieces[1..] {
         if p.info.image_hash != first.info.image_hash {

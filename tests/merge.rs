@@ -72,7 +72,9 @@ fn render_range(dir: &Path, name: &str, extra: &[&str], range: Option<&str>) -> 
 fn four_sample_range_renders_merge_to_the_single_render_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let full = render_range(d, "full.exr", &[], None);
+    // Pieces hold every pixel's samples of their range: the single render they equal is the
+    // one with the same count in every pixel.
+    let full = render_range(d, "full.exr", &["--uniform-samples"], None);
     let pieces: Vec<PathBuf> = ["0:8", "8:16", "16:32", "32:64"]
         .iter()
         .enumerate()
@@ -97,7 +99,7 @@ fn four_sample_range_renders_merge_to_the_single_render_bit_for_bit() {
 fn unaligned_splits_merge_to_rounding_and_say_so() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let full = render_range(d, "full.exr", &[], None);
+    let full = render_range(d, "full.exr", &["--uniform-samples"], None);
     let a = render_range(d, "a.exr", &[], Some("0:24"));
     let b = render_range(d, "b.exr", &[], Some("24:64"));
     let merged = d.join("m.exr");
@@ -118,6 +120,35 @@ fn unaligned_splits_merge_to_rounding_and_say_so() {
             assert!((x - y).abs() <= 1e-6 * y.abs().max(1e-3), "{x} vs {y}");
         }
     }
+}
+
+/// A render with adaptive sample counts (pixels hold different numbers of samples) says so in
+/// its header, and merge refuses it, naming the file; its sample-range pieces merge.
+#[test]
+fn adaptive_renders_are_refused_by_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let adaptive = render_range(d, "adaptive.exr", &[], None);
+    let header = read_exr(&adaptive).unwrap().attributes;
+    let counts = header.get("thinfilm.sampleCounts").map(String::as_str);
+    assert_eq!(counts, Some("adaptive"), "{header:?}");
+    let more = render_range(d, "more.exr", &[], Some("64:128"));
+    let e = failure(thinfilm(&[
+        "merge",
+        adaptive.to_str().unwrap(),
+        more.to_str().unwrap(),
+        "-o",
+        d.join("m.exr").to_str().unwrap(),
+    ]));
+    assert!(
+        e.contains("adaptive.exr") && e.contains("--uniform-samples"),
+        "{e}"
+    );
+    assert!(!d.join("m.exr").exists());
+    let piece = render_range(d, "piece.exr", &[], Some("0:64"));
+    let header = read_exr(&piece).unwrap().attributes;
+    let counts = header.get("thinfilm.sampleCounts").map(String::as_str);
+    assert_eq!(counts, Some("uniform"), "{header:?}");
 }
 
 #[test]
@@ -374,7 +405,9 @@ fn ctrl_c_saves_the_completed_passes_and_prints_exact_resume_commands() {
     let full = d.join("full.exr");
     let mut full_args = args.to_vec();
     full_args[3] = full.to_str().unwrap();
-    full_args.push("--quiet");
+    // The resumed pieces are sample ranges: the render they finish has the same count in
+    // every pixel.
+    full_args.extend(["--quiet", "--uniform-samples"]);
     ok(thinfilm(&full_args));
     assert_eq!(result.status.code(), Some(130), "{stderr}");
     assert!(!out.exists(), "the partial render took the output's name");

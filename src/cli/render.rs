@@ -84,6 +84,14 @@ pub struct Args {
     /// expected image with less colour noise on interference films.
     #[arg(long)]
     pub plain_specular_chains: bool,
+    /// Give every pixel the same number of samples, as Mitsuba does. By default (box filter,
+    /// 8 or more samples, a whole render rather than a --sample-range piece) every pixel
+    /// first takes half of them, and the work the other half would take goes to the pixels
+    /// whose neighbours' samples spread most — edges of lights, glints, caustics — up to 8×
+    /// the sample count more in one pixel: about the same time, the same expected image, less
+    /// error where it is largest, at most √2 × the noise where the neighbourhood was quiet.
+    #[arg(long)]
+    pub uniform_samples: bool,
     /// Environment replacing the scene's own: a lat-long EXR/HDR file (Mitsuba `envmap`
     /// layout), `constant:V` (D65 of luminance V) or `constant:R,G,B` (RGB illuminant).
     #[arg(long, value_name = "FILE|constant:V|constant:R,G,B")]
@@ -236,6 +244,7 @@ pub fn run(args: Args, report: Output) -> Result<()> {
     let mut out = out.with_context(|| format!("rendering {}", args.scene.display()))?;
     let mut info = info.map_err(|_| anyhow::anyhow!("hashing the scene failed"))?;
     info.sample_range = out.sample_range;
+    info.adaptive = out.adaptive;
     out.stats.setup_seconds = setup;
     report.log(format_args!("effects:\n{}", out.effects));
     let path = if out.interrupted {
@@ -302,6 +311,7 @@ fn options(args: &Args, scene_spp: u32, report: Output) -> Result<RenderOptions>
         spectral_direct_view: args.spectral_direct_view,
         plain_env_sampling: args.plain_env_sampling,
         plain_specular_chains: args.plain_specular_chains,
+        uniform_samples: args.uniform_samples,
     })
 }
 

@@ -46,6 +46,9 @@ pub enum Effect {
     /// first off a smooth film or coating, whose directions every wavelength shares
     /// (`integrator::specular_chain`).
     SpecularChainWavelengths,
+    /// Half the samples in every pixel, the other half's work where the neighbouring pixels'
+    /// samples spread most ([`super::adaptive`]).
+    AdaptiveSampleCounts,
 }
 
 impl Effect {
@@ -63,6 +66,7 @@ impl Effect {
             Effect::SpectralDirectView => "wavelength sampling of emitters seen directly",
             Effect::HemisphereEnvSampling => "hemisphere-aware environment sampling",
             Effect::SpecularChainWavelengths => "wavelength supersampling of specular chains",
+            Effect::AdaptiveSampleCounts => "adaptive sample counts",
         }
     }
 }

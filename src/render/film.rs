@@ -101,6 +101,15 @@ impl Filter {
         })
     }
 
+    /// Mitsuba's name of the filter (`rfilter type`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Filter::Box => "box",
+            Filter::Tent { .. } => "tent",
+            Filter::Gaussian { .. } => "gaussian",
+        }
+    }
+
     pub fn radius(&self) -> f32 {
         match *self {
             Filter::Box => 0.5,

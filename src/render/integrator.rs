@@ -373,6 +373,12 @@ impl<C: Carrier> Lane<C> {
     pub fn colour(&self) -> [f32; 3] {
         self.colour
     }
+
+    /// Vertices the path reached (its last branch's), a measure of the work it took.
+    #[inline]
+    pub fn vertices(&self) -> u32 {
+        self.branch.path.depth + 1
+    }
 }
 
 /// An infinite light seen by an escaped ray: `factor` · Le(`dir`) joins lane `lane`'s

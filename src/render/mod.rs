@@ -13,6 +13,7 @@
 //! the number of threads, and `sample_range` splits merge exactly (see [`film`]).
 
 pub mod accel;
+pub mod adaptive;
 pub mod batch;
 pub mod bsdf;
 mod bvh_collapse;
@@ -84,6 +85,10 @@ pub struct RenderOptions {
     /// that only reflects off smooth films and coatings, and metals after them, carries eight:
     /// [`effects::Effect::SpecularChainWavelengths`]).
     pub plain_specular_chains: bool,
+    /// The same number of samples in every pixel, as Mitsuba (by default half of the work
+    /// goes where neighbouring pixels are noisy:
+    /// [`effects::Effect::AdaptiveSampleCounts`]).
+    pub uniform_samples: bool,
     /// Asked before each row whether to stop (a Ctrl-C handler's flag); see
     /// [`render_prepared`].
     pub cancel: Option<Cancel>,
@@ -167,6 +172,8 @@ pub struct RenderOutput {
     pub requested_range: (u32, u32),
     /// Set when the render was cancelled and holds only a prefix of the asked-for samples.
     pub interrupted: bool,
+    /// Pixels hold different numbers of samples ([`adaptive`]).
+    pub adaptive: bool,
     /// Per-pixel sum of reconstruction-filter weights (tent and Gaussian filters only; the
     /// box filter's weight is the sample count). Needed to merge split renders exactly.
     pub filter_weights: Option<Vec<f32>>,
@@ -209,6 +216,9 @@ pub struct PreparedScene {
     /// Paths that only reflect off Dirac reflectors carry eight wavelengths
     /// ([`effects::Effect::SpecularChainWavelengths`]).
     specular_chains: bool,
+    /// With adaptive sample counts, the end of the pilot (every pixel's samples
+    /// `[s0, pilot_end)`; [`adaptive`]).
+    pilot_end: Option<u32>,
 }
 
 /// A surface point of a prepared scene: its geometry (a [`SurfaceInteraction`], by `Deref`)
@@ -474,6 +484,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     }
     let specular_chains =
         specular_chain_decision(scene, options, polarized.is_some(), &mut effects);
+    let pilot_end = adaptive_decision(options, &filter, sample_range, &mut effects);
     Ok(PreparedScene {
         accel,
         lights,
@@ -497,7 +508,47 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         closed_form_direct_view,
         hemisphere_env_sampling,
         specular_chains,
+        pilot_end,
     })
+}
+
+/// Whether half of the samples' work goes where pixels are noisy (the
+/// [`effects::Effect::AdaptiveSampleCounts`] decision, added to `effects`): the pilot's end,
+/// or None when every pixel gets the whole range.
+fn adaptive_decision(
+    options: &RenderOptions,
+    filter: &Filter,
+    (s0, s1): (u32, u32),
+    effects: &mut Effects,
+) -> Option<u32> {
+    let spp = s1 - s0;
+    let off = if options.uniform_samples {
+        Some("the same count in every pixel asked for (--uniform-samples)".to_string())
+    } else if options.sample_range.is_some() {
+        Some("a sample range (pieces to merge hold the same samples of every pixel)".into())
+    } else if !matches!(filter, Filter::Box) {
+        Some(format!(
+            "the {} filter mixes neighbouring pixels' samples (box filter only)",
+            filter.name()
+        ))
+    } else if spp < adaptive::MIN_SPP {
+        Some(format!(
+            "{spp} samples per pixel (at least {} for the pilot's spread)",
+            adaptive::MIN_SPP
+        ))
+    } else {
+        None
+    };
+    let pilot = adaptive::pilot_samples(spp);
+    effects
+        .decide_unless(effects::Effect::AdaptiveSampleCounts, off.as_deref(), || {
+            format!(
+                "{pilot} samples in every pixel, then the work of {} more where the neighbouring pixels' samples spread most (at most {} more in one pixel)",
+                spp - pilot,
+                adaptive::MAX_EXTRA_PER_SPP * spp
+            )
+        })
+        .then_some(s0 + pilot)
 }
 
 /// Whether camera rays that see an emitter directly — the environment, where they escape,
@@ -759,7 +810,7 @@ fn trace_batches<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
     jobs: &[BatchSpan],
-    out: &mut [(Vec2, [f32; 3])],
+    out: &mut [FilmSample],
     scratch: &mut WaveScratch<C>,
 ) {
     debug_assert!(jobs.len() <= WAVEFRONT_JOBS);
@@ -934,7 +985,7 @@ fn start_batch<C: Carrier>(
 fn finish_batch<C: Carrier>(
     s: &StartedBatch,
     lanes: &[integrator::Lane<C>],
-    out: &mut [(Vec2, [f32; 3])],
+    out: &mut [FilmSample],
 ) {
     let mut radiance = s.radiance;
     let mut pdf = s.cam.pdf;
@@ -967,10 +1018,27 @@ fn finish_batch<C: Carrier>(
             }
         }
     }
-    for (i, o) in out.iter_mut().enumerate() {
-        let rgb = finite_rgb(rgb[i]);
-        *o = (Vec2::new(s.cam.pos[0][i], s.cam.pos[1][i]), rgb);
+    let mut vertices = [0u32; BATCH];
+    for (&i, lane) in s.hit_index.iter().zip(&lanes[s.lanes.clone()]) {
+        vertices[i] = lane.vertices();
     }
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = FilmSample {
+            pos: Vec2::new(s.cam.pos[0][i], s.cam.pos[1][i]),
+            rgb: finite_rgb(rgb[i]),
+            vertices: vertices[i],
+        };
+    }
+}
+
+/// A traced camera sample: its film position, its finite linear sRGB value and the path
+/// vertices it reached (0 when the camera ray saw no surface; [`adaptive`] weighs a pixel's
+/// samples by this work).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct FilmSample {
+    pos: Vec2,
+    rgb: [f32; 3],
+    vertices: u32,
 }
 
 /// The number u ∈ [0, 1) whose hero set {u + k/4 mod 1} are a sample's four wavelengths,
@@ -1124,26 +1192,88 @@ fn row_batches(width: u32, y: u32, (p0, p1): (u32, u32)) -> impl Iterator<Item =
     })
 }
 
-/// Row `y`: samples `[p0, p1)` of every pixel, [`BATCH`] at a time, several batches per
-/// wavefront ([`trace_batches`]), carrying `C`. Returns the row's buffer
-/// ([`Accumulation`]) and this thread's work counters for it.
+/// The camera batches of row `y` when pixel `x` takes samples `[start, start + counts[x])`:
+/// each pixel's samples [`BATCH`] at a time.
+fn pixel_batches(counts: &[u32], y: u32, start: u32) -> impl Iterator<Item = BatchSpan> + '_ {
+    (counts.iter().enumerate()).flat_map(move |(x, &n)| {
+        (start..start + n)
+            .step_by(BATCH)
+            .map(move |first| BatchSpan {
+                x0: x as u32,
+                y,
+                pixels: 1,
+                first,
+                len: (BATCH as u32).min(start + n - first),
+            })
+    })
+}
+
+/// Which samples a pass renders.
+#[derive(Clone, Copy)]
+enum PassSamples<'a> {
+    /// Samples `[p0, p1)` of every pixel.
+    Every((u32, u32)),
+    /// Samples `[start, start + counts[i])` of pixel `i` (row-major; box filter only).
+    PerPixel { start: u32, counts: &'a [u32] },
+}
+
+impl PassSamples<'_> {
+    /// Samples of row `y` (of `width` pixels), for the progress bar.
+    fn in_row(&self, y: usize, width: usize) -> u64 {
+        match *self {
+            PassSamples::Every((p0, p1)) => width as u64 * (p1 - p0) as u64,
+            PassSamples::PerPixel { counts, .. } => counts[y * width..(y + 1) * width]
+                .iter()
+                .map(|&n| n as u64)
+                .sum(),
+        }
+    }
+}
+
+/// Per pixel of a row (when asked for, else empty): the samples'
+/// [`adaptive::sum_squared_deviations`] and their summed [`adaptive::sample_cost`].
+#[derive(Default)]
+struct RowSpread {
+    m2: Vec<f32>,
+    work_done: Vec<f32>,
+}
+
+/// What [`render_row`] hands back: its buffer ([`Accumulation`]), this thread's work counters
+/// for it and its [`RowSpread`].
+type RowResult = (Vec<[f32; 4]>, Counters, RowSpread);
+
+/// Row `y`: the pass's samples of every pixel, [`BATCH`] at a time, several batches per
+/// wavefront ([`trace_batches`]), carrying `C`. With `spread` (box filter, every pixel's
+/// samples `[p0, p1)`), also each pixel's spread for [`adaptive`].
 fn render_row<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
     acc: &Accumulation,
-    (p0, p1): (u32, u32),
+    work: PassSamples,
     y: usize,
-) -> (Vec<[f32; 4]>, Counters) {
+    spread: bool,
+) -> RowResult {
     counters::take();
     let (w, reach) = (acc.width, acc.reach);
-    let n = (p1 - p0) as usize;
+    let (p0, n) = match work {
+        PassSamples::Every((p0, p1)) => (p0, (p1 - p0) as usize),
+        // Summed batch by batch (the extra samples' sums need not merge exactly).
+        PassSamples::PerPixel { start, .. } => (start, BATCH),
+    };
     // One pixel's samples, summed in order once its last one is in (box filter).
     let mut samples = vec![[0.0f32; 3]; n];
     let rows = (2 * reach + 1) as usize;
     let mut buf = vec![[0.0f32; 4]; if reach == 0 { w } else { rows * w }];
-    let mut out = [(Vec2::ZERO, [0.0f32; 3]); WAVEFRONT_SAMPLES];
+    let mut m2 = if spread { vec![0.0f32; w] } else { Vec::new() };
+    let mut work_done = if spread { vec![0.0f32; w] } else { Vec::new() };
+    let mut out = [FilmSample::default(); WAVEFRONT_SAMPLES];
     let mut scratch = WaveScratch::<C>::default();
-    let jobs = row_batches(w as u32, y as u32, (p0, p1));
+    let jobs: Box<dyn Iterator<Item = BatchSpan>> = match work {
+        PassSamples::Every(range) => Box::new(row_batches(w as u32, y as u32, range)),
+        PassSamples::PerPixel { start, counts } => {
+            Box::new(pixel_batches(&counts[y * w..(y + 1) * w], y as u32, start))
+        }
+    };
     let mut wave = Vec::with_capacity(WAVEFRONT_JOBS);
     let mut jobs = jobs.peekable();
     while jobs.peek().is_some() {
@@ -1158,56 +1288,104 @@ fn render_row<C: Carrier>(
         trace_batches(scene, setup, &wave, &mut out[..lanes], &mut scratch);
         let mut done = out[..lanes].iter();
         for job in &wave {
-            for ((j, k), &(pos, rgb)) in job.lane_samples().zip(done.by_ref()) {
+            if let PassSamples::PerPixel { .. } = work {
+                let k = job.lanes();
+                for (s, sample) in samples.iter_mut().zip(done.by_ref().take(k)) {
+                    *s = sample.rgb;
+                }
+                let sum = tree_sum_in_place(&mut samples[..k]);
+                let cell = &mut buf[job.x0 as usize];
+                *cell = [
+                    cell[0] + sum[0],
+                    cell[1] + sum[1],
+                    cell[2] + sum[2],
+                    cell[3] + k as f32,
+                ];
+                continue;
+            }
+            for ((j, k), sample) in job.lane_samples().zip(done.by_ref()) {
                 if reach != 0 {
-                    acc.splat(&mut buf, y, pos, rgb);
+                    acc.splat(&mut buf, y, sample.pos, sample.rgb);
                     continue;
                 }
                 let i = (job.first - p0 + k) as usize;
-                samples[i] = rgb;
+                let x = (job.x0 + j) as usize;
+                samples[i] = sample.rgb;
+                if spread {
+                    work_done[x] += adaptive::sample_cost(sample.vertices);
+                }
                 if i + 1 == n {
+                    if spread {
+                        m2[x] = adaptive::sum_squared_deviations(&samples);
+                    }
                     let sum = tree_sum_in_place(&mut samples);
-                    buf[(job.x0 + j) as usize] = [sum[0], sum[1], sum[2], n as f32];
+                    buf[x] = [sum[0], sum[1], sum[2], n as f32];
                 }
             }
         }
     }
-    (buf, counters::take())
+    (buf, counters::take(), RowSpread { m2, work_done })
 }
 
-/// Samples `[p0, p1)` of every pixel carrying `C`: the pass's accumulator and work counters,
-/// or None when `cancelled()` turned true before every row was done. One row per task: rows
-/// cost very different amounts (background vs object), and rayon's adaptive splitting
-/// otherwise left one of two threads idle ~10 % of a teapot render (measured: 2-thread
-/// speed-up 1.77× → 1.94×).
+/// The pass's samples of every pixel carrying `C`: the pass's accumulator, work counters and
+/// (with `spread`) per-pixel spread, or None when `cancelled()` turned true before every row
+/// was done. One row per task: rows cost very different amounts (background vs object), and
+/// rayon's adaptive splitting otherwise left one of two threads idle ~10 % of a teapot render
+/// (measured: 2-thread speed-up 1.77× → 1.94×).
 fn render_pass<C: Carrier>(
     scene: &PreparedScene,
     setup: &C::Setup,
     acc: &Accumulation,
-    pass: (u32, u32),
+    work: PassSamples,
+    spread: bool,
     pb: &indicatif::ProgressBar,
     cancelled: &(dyn Fn() -> bool + Sync),
-) -> Option<(Accum, Counters)> {
-    let rows: Vec<Option<(Vec<[f32; 4]>, Counters)>> = (0..acc.height)
+) -> Option<(Accum, Counters, RowSpread)> {
+    let rows: Vec<Option<RowResult>> = (0..acc.height)
         .into_par_iter()
         .with_max_len(1)
         .map(|y| {
             if cancelled() {
                 return None;
             }
-            let row = render_row::<C>(scene, setup, acc, pass, y);
-            pb.inc((pass.1 - pass.0) as u64);
+            let row = render_row::<C>(scene, setup, acc, work, y, spread);
+            pb.inc(work.in_row(y, acc.width) / acc.width as u64);
             Some(row)
         })
         .collect();
     let mut counters = Counters::default();
     let mut buffers = Vec::with_capacity(rows.len());
+    let mut spread = RowSpread::default();
     for row in rows {
-        let (buf, c) = row?;
+        let (buf, c, row_spread) = row?;
         counters.add(&c);
         buffers.push(buf);
+        spread.m2.extend(row_spread.m2);
+        spread.work_done.extend(row_spread.work_done);
     }
-    Some((acc.merge(&buffers), counters))
+    Some((acc.merge(&buffers), counters, spread))
+}
+
+/// [`render_pass`] with the scene's carrier (Stokes vectors when polarised), in `pool`.
+fn render_pass_in(
+    scene: &PreparedScene,
+    acc: &Accumulation,
+    work: PassSamples,
+    spread: bool,
+    pb: &indicatif::ProgressBar,
+    cancelled: &(dyn Fn() -> bool + Sync),
+    pool: Option<&rayon::ThreadPool>,
+) -> Option<(Accum, Counters, RowSpread)> {
+    let pass = || match scene.polarized() {
+        None => render_pass::<Spec>(scene, &(), acc, work, spread, pb, cancelled),
+        Some(setup) => {
+            render_pass::<stokes::StokesPath>(scene, setup, acc, work, spread, pb, cancelled)
+        }
+    };
+    match pool {
+        Some(pool) => pool.install(pass),
+        None => pass(),
+    }
 }
 
 /// What the passes of a render produced: its blocks' sums, or the completed prefix of an
@@ -1219,41 +1397,38 @@ struct Passes {
     prefix: Option<(Accum, u32)>,
     interrupted: bool,
     counters: Counters,
+    /// With adaptive sample counts, the pilot's per-pixel spread.
+    spread: Option<adaptive::Spread>,
 }
 
 /// Runs the passes of [`passes::plan`] in order, stopping between passes (and rows) when
-/// `cancelled()` turns true.
+/// `cancelled()` turns true; with `spread`, keeps every pixel's spread for [`adaptive`].
 fn run_passes(
     scene: &PreparedScene,
     plan: &[passes::Block],
+    spread: bool,
     pb: &indicatif::ProgressBar,
     cancelled: &(dyn Fn() -> bool + Sync),
     pool: Option<&rayon::ThreadPool>,
 ) -> Passes {
     let acc = Accumulation::of(scene);
     let (s0, s1) = scene.sample_range;
+    let end = plan.last().map_or(s1, |b| b.range.1);
     let mut out = Passes {
         blocks: Vec::new(),
         prefix: None,
         interrupted: false,
         counters: Counters::default(),
+        spread: spread.then(adaptive::Spread::default),
     };
     'blocks: for block in plan {
         let mut sum: Option<Accum> = None;
         let mut done = block.range.0;
         for &(p0, p1) in &block.passes {
             pb.set_message(format!("{p0}:{p1} of {s0}:{s1}"));
-            let pass = || match scene.polarized() {
-                None => render_pass::<Spec>(scene, &(), &acc, (p0, p1), pb, cancelled),
-                Some(setup) => {
-                    render_pass::<stokes::StokesPath>(scene, setup, &acc, (p0, p1), pb, cancelled)
-                }
-            };
-            let result = match pool {
-                Some(pool) => pool.install(pass),
-                None => pass(),
-            };
-            let Some((pass_acc, c)) = result else {
+            let work = PassSamples::Every((p0, p1));
+            let result = render_pass_in(scene, &acc, work, spread, pb, cancelled, pool);
+            let Some((pass_acc, c, pass_spread)) = result else {
                 out.interrupted = true;
                 if out.blocks.is_empty() {
                     // The first block's running sum is the power-of-two prefix [s0, done).
@@ -1262,6 +1437,9 @@ fn run_passes(
                 break 'blocks;
             };
             out.counters.add(&c);
+            if let Some(spread) = &mut out.spread {
+                spread.add_pass(&pass_spread.m2, &pass_spread.work_done, p1 - p0);
+            }
             match &mut sum {
                 None => sum = Some(pass_acc),
                 Some(s) => add_accum(s, &pass_acc),
@@ -1269,7 +1447,7 @@ fn run_passes(
             done = p1;
         }
         out.blocks.extend(sum);
-        if cancelled() && block.range.1 < s1 {
+        if cancelled() && block.range.1 < end {
             out.interrupted = true;
             break;
         }
@@ -1277,8 +1455,36 @@ fn run_passes(
     out
 }
 
-/// Renders a prepared scene, pass by pass ([`passes`]). When `options.cancel` is raised the
-/// render stops between rows, drops the unfinished pass and returns the longest completed
+/// The extra samples of an adaptive render (the pilot's `spread` done): per pixel, counts from
+/// [`adaptive::extra_counts`] after the pilot's end. Their accumulator, counters and the number
+/// of samples, or None when cancelled.
+fn run_extra_samples(
+    scene: &PreparedScene,
+    pilot_end: u32,
+    spread: &adaptive::Spread,
+    pb: &indicatif::ProgressBar,
+    cancelled: &(dyn Fn() -> bool + Sync),
+    pool: Option<&rayon::ThreadPool>,
+) -> Option<(Accum, Counters, u64)> {
+    let (w, h) = (scene.width as usize, scene.height as usize);
+    let (s0, s1) = scene.sample_range;
+    let cap = adaptive::MAX_EXTRA_PER_SPP * (s1 - s0);
+    let counts = adaptive::extra_counts(spread, w, h, s1 - pilot_end, cap);
+    pb.set_message(format!(
+        "{pilot_end}:… where pixels are noisy, of {s0}:{s1}"
+    ));
+    let work = PassSamples::PerPixel {
+        start: pilot_end,
+        counts: &counts,
+    };
+    let acc = Accumulation::of(scene);
+    let (sum, counters, _) = render_pass_in(scene, &acc, work, false, pb, cancelled, pool)?;
+    Some((sum, counters, counts.iter().map(|&n| n as u64).sum()))
+}
+
+/// Renders a prepared scene, pass by pass ([`passes`]); with adaptive sample counts, the pilot
+/// first, then the extra samples ([`adaptive`]). When `options.cancel` is raised the render
+/// stops between rows, drops the unfinished pass and returns the longest completed
 /// power-of-two prefix of its samples (`interrupted` set, `sample_range` saying which), or an
 /// error when not even the first pass was complete.
 pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result<RenderOutput> {
@@ -1306,15 +1512,29 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         ),
         None => None,
     };
-    let plan = passes::plan(scene.sample_range);
+    let plan = passes::plan((s0, scene.pilot_end.unwrap_or(s1)));
     let Passes {
         mut blocks,
         mut prefix,
-        interrupted,
-        counters,
-    } = run_passes(scene, &plan, &pb, &cancelled, pool.as_ref());
+        mut interrupted,
+        mut counters,
+        spread,
+    } = run_passes(
+        scene,
+        &plan,
+        scene.pilot_end.is_some(),
+        &pb,
+        &cancelled,
+        pool.as_ref(),
+    );
+    let mut extra = None;
+    if let (Some(pilot_end), Some(spread), false) = (scene.pilot_end, &spread, interrupted) {
+        extra = run_extra_samples(scene, pilot_end, spread, &pb, &cancelled, pool.as_ref());
+        // Cancelled among the extra samples: the pilot's power-of-two prefix, as below.
+        interrupted = extra.is_none();
+    }
     pb.finish_and_clear();
-    let (acc, range) = if interrupted {
+    let (mut acc, range) = if interrupted {
         if prefix.is_none() && !blocks.is_empty() {
             let first = blocks.swap_remove(0);
             prefix = Some((first, plan[0].range.1));
@@ -1339,6 +1559,12 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
             .context("no samples rendered")?;
         (acc, (s0, s1))
     };
+    let mut samples = (w * h) as u64 * (range.1 - range.0) as u64;
+    if let (Some((sum, c, n)), false) = (&extra, interrupted) {
+        add_accum(&mut acc, sum);
+        counters.add(c);
+        samples = (w * h) as u64 * (scene.pilot_end.unwrap_or(s1) - s0) as u64 + n;
+    }
     let mut image = RgbImage::new(w, h);
     for (dst, p) in image.pixels.iter_mut().zip(&acc) {
         *dst = if p[3] > 0.0 {
@@ -1356,7 +1582,7 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         stats: RenderStats {
             seconds,
             setup_seconds: 0.0,
-            samples: (w * h) as u64 * (range.1 - range.0) as u64,
+            samples,
             rays: counters.rays,
             shadow_rays: counters.shadow_rays,
             film_evals: counters.film_evals,
@@ -1370,6 +1596,7 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         sample_range: range,
         requested_range: scene.sample_range,
         interrupted,
+        adaptive: extra.is_some() && !interrupted,
     })
 }
 
@@ -1462,21 +1689,22 @@ mod tests {
         let mut scratch = WaveScratch::<Spec>::default();
         for wave in &waves {
             let n = wave.iter().map(|j| j.lanes()).sum();
-            let mut out = vec![(Vec2::ZERO, [0.0f32; 3]); n];
+            let mut out = vec![FilmSample::default(); n];
             counters::take();
             trace_batches(&p, &(), wave, &mut out, &mut scratch);
             let c_wave = counters::take();
             let singles = wave
                 .iter()
                 .flat_map(|b| b.lane_samples().map(move |jk| (b, jk)));
-            for (&(pos, rgb), (b, (j, k))) in out.iter().zip(singles) {
+            for (sample, (b, (j, k))) in out.iter().zip(singles) {
                 let (x, s) = (b.x0 + j, b.first + k);
-                let mut one = [(Vec2::ZERO, [0.0f32; 3])];
+                let mut one = [FilmSample::default()];
                 trace_batches(&p, &(), &[job((x, b.y), s, 1)], &mut one, &mut scratch);
-                assert_eq!(pos, one[0].0);
+                assert_eq!(sample.pos, one[0].pos);
+                assert_eq!(sample.vertices, one[0].vertices);
                 assert_eq!(
-                    rgb.map(f32::to_bits),
-                    one[0].1.map(f32::to_bits),
+                    sample.rgb.map(f32::to_bits),
+                    one[0].rgb.map(f32::to_bits),
                     "pixel ({x}, {}), sample {s}",
                     b.y
                 );

@@ -13,6 +13,7 @@
 //! | `thinfilm.seed` | sampler seed |
 //! | `thinfilm.sampler` | `independent` or `sobol` |
 //! | `thinfilm.filter` | reconstruction filter (`box`, `tent`, `gaussian`) |
+//! | `thinfilm.sampleCounts` | `uniform`, or `adaptive` when pixels hold different numbers of samples ([`super::adaptive`]; not mergeable) |
 //! | `thinfilm.imageHash` | 64-bit hash (hex) of the loaded scene and of every setting that changes a sample's value |
 //! | `thinfilm.version` | thinfilm version |
 //!
@@ -38,6 +39,7 @@ const REQUESTED_RANGE: &str = "thinfilm.requestedRange";
 const SEED: &str = "thinfilm.seed";
 const SAMPLER: &str = "thinfilm.sampler";
 const FILTER: &str = "thinfilm.filter";
+const SAMPLE_COUNTS: &str = "thinfilm.sampleCounts";
 const IMAGE_HASH: &str = "thinfilm.imageHash";
 pub const VERSION: &str = "thinfilm.version";
 /// Channel holding the per-pixel sum of filter weights (tent / Gaussian filters only).
@@ -51,6 +53,8 @@ pub struct RenderInfo {
     pub seed: u64,
     pub sampler: String,
     pub filter: String,
+    /// Pixels hold different numbers of samples ([`super::adaptive`]).
+    pub adaptive: bool,
     /// See the module documentation.
     pub image_hash: u64,
     pub version: String,
@@ -64,7 +68,8 @@ impl RenderInfo {
             requested_range: prepared.sample_range,
             seed: prepared.seed,
             sampler: prepared.sampler.name().to_string(),
-            filter: filter_name(&prepared.filter).to_string(),
+            filter: prepared.filter.name().to_string(),
+            adaptive: false,
             image_hash: image_hash(scene, prepared),
             version: env!("CARGO_PKG_VERSION").to_string(),
         }
@@ -85,6 +90,10 @@ impl RenderInfo {
             (SEED.into(), self.seed.to_string()),
             (SAMPLER.into(), self.sampler.clone()),
             (FILTER.into(), self.filter.clone()),
+            (
+                SAMPLE_COUNTS.into(),
+                if self.adaptive { "adaptive" } else { "uniform" }.into(),
+            ),
             (IMAGE_HASH.into(), format!("{:016x}", self.image_hash)),
             (VERSION.into(), self.version.clone()),
         ]
@@ -112,6 +121,12 @@ impl RenderInfo {
                 .with_context(|| format!("{what}: attribute '{SEED}'"))?,
             sampler: get(SAMPLER)?.to_string(),
             filter: get(FILTER)?.to_string(),
+            // Absent in files from before adaptive sample counts: uniform.
+            adaptive: match attrs.get(SAMPLE_COUNTS).map(String::as_str) {
+                None | Some("uniform") => false,
+                Some("adaptive") => true,
+                Some(v) => bail!("{what}: '{SAMPLE_COUNTS}' is '{v}', not 'uniform' or 'adaptive'"),
+            },
             image_hash: u64::from_str_radix(get(IMAGE_HASH)?, 16)
                 .with_context(|| format!("{what}: attribute '{IMAGE_HASH}' is not hex"))?,
             version: get(VERSION)?.to_string(),
@@ -171,14 +186,6 @@ pub fn parse_range(s: &str) -> Result<(u32, u32)> {
         bail!("range '{s}' is empty: START must be < END");
     }
     Ok((a, b))
-}
-
-fn filter_name(f: &super::film::Filter) -> &'static str {
-    match f {
-        super::film::Filter::Box => "box",
-        super::film::Filter::Tent { .. } => "tent",
-        super::film::Filter::Gaussian { .. } => "gaussian",
-    }
 }
 
 /// 64-bit FNV-1a over text written into it (a fingerprint to tell renders of different
@@ -248,6 +255,7 @@ mod tests {
             seed: u64::MAX,
             sampler: "sobol".into(),
             filter: "box".into(),
+            adaptive: true,
             image_hash: 0x0123_4567_89ab_cdef,
             version: "9.9.9".into(),
         };
@@ -257,6 +265,17 @@ mod tests {
         bad.insert(SPP.into(), "31".into());
         let e = RenderInfo::from_attributes(&bad, "x.exr").unwrap_err();
         assert!(format!("{e:#}").contains("thinfilm.spp"), "{e:#}");
+        let mut older = map.clone();
+        older.remove(SAMPLE_COUNTS);
+        assert!(
+            !RenderInfo::from_attributes(&older, "x.exr")
+                .unwrap()
+                .adaptive
+        );
+        let mut odd = map.clone();
+        odd.insert(SAMPLE_COUNTS.into(), "some".into());
+        let e = RenderInfo::from_attributes(&odd, "x.exr").unwrap_err();
+        assert!(format!("{e:#}").contains("sampleCounts"), "{e:#}");
         let mut missing = map;
         missing.remove(IMAGE_HASH);
         let e = RenderInfo::from_attributes(&missing, "x.exr").unwrap_err();

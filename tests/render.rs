@@ -1186,8 +1186,8 @@ fn area_light_seen_directly_takes_its_closed_form_colour() {
 /// Adaptive sample counts on the Cornell box, whose error at uniform counts lies almost all
 /// along the outline of the light seen directly: a 1024-spp adaptive render keeps the mean of
 /// an 8192-spp uniform one within the noise, and at 64 spp the pooled RMSE falls below 0.6× the
-/// uniform render's (measured: 0.43×) for about the same work (rays traced within ±25 %;
-/// measured 0.93×).
+/// uniform render's (measured: 0.50×) for at most 30 % more work (rays traced: measured
+/// 1.23×: every pixel's 64 samples and extra ones).
 #[test]
 fn adaptive_sample_counts_keep_the_mean_and_cut_the_error_at_a_lights_edge() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.xml");
@@ -1209,6 +1209,8 @@ fn adaptive_sample_counts_keep_the_mean_and_cut_the_error_at_a_lights_edge() {
         assert_effect_line(&lines, want);
         let out = render(&scene, &options).unwrap();
         assert_eq!(out.adaptive, !uniform);
+        let every_pixel = out.image.pixels.len() as u64 * spp as u64;
+        assert!(out.stats.samples > every_pixel || uniform && out.stats.samples == every_pixel);
         out
     };
     let truth = run(8192, 1, true).image;
@@ -1228,7 +1230,7 @@ fn adaptive_sample_counts_keep_the_mean_and_cut_the_error_at_a_lights_edge() {
     assert!(adaptive < 0.6 * uniform, "RMSE {adaptive} vs {uniform}");
     let work = traced[0].get() / traced[1].get();
     assert!(
-        (0.75..1.25).contains(&work),
+        (1.0..1.3).contains(&work),
         "rays {work}× the uniform render's"
     );
 }
@@ -1244,7 +1246,10 @@ fn adaptive_sample_counts_say_why_they_are_off() {
             .lines()
     };
     let on = lines(RenderOptions::default());
-    assert_effect_line(&on, "adaptive sample counts: ON — 8 samples in every pixel");
+    assert_effect_line(
+        &on,
+        "adaptive sample counts: ON — 16 samples in every pixel",
+    );
     let range = lines(RenderOptions {
         sample_range: Some((0, 16)),
         ..Default::default()

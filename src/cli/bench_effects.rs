@@ -219,6 +219,8 @@ pub fn run(args: &EffectsArgs) -> Result<()> {
             seed: Some(args.seed),
             threads: args.threads,
             resolution: Some((args.resolution, args.resolution)),
+            // The cost of a camera sample of each material, not where the samples go.
+            uniform_samples: true,
             ..Default::default()
         };
         let prepared = prepare(&scene, &options)?;

@@ -79,6 +79,10 @@ pub struct Args {
     /// does), instead of eight.
     #[arg(long)]
     pub plain_specular_chains: bool,
+    /// Our renderer gives every pixel the same number of samples (as Mitsuba does), instead
+    /// of adding the work of a quarter more where neighbouring pixels are noisy.
+    #[arg(long)]
+    pub uniform_samples: bool,
     /// Runs per spp, for both renderers, run j with seed `--seed` + j. Each row reports the
     /// fastest run's time (Mitsuba's first render at a new spp can include JIT compilation of
     /// its kernels — seen: 0.42 s instead of 0.14 s for a 64-spp teapot on a cold kernel
@@ -249,6 +253,7 @@ fn render_ours(
                 spectral_direct_view: args.spectral_direct_view,
                 plain_env_sampling: args.plain_env_sampling,
                 plain_specular_chains: args.plain_specular_chains,
+                uniform_samples: args.uniform_samples,
                 ..Default::default()
             };
             let out = render(scene, &options)?;

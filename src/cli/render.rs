@@ -85,11 +85,11 @@ pub struct Args {
     #[arg(long)]
     pub plain_specular_chains: bool,
     /// Give every pixel the same number of samples, as Mitsuba does. By default (box filter,
-    /// 8 or more samples, a whole render rather than a --sample-range piece) every pixel
-    /// first takes half of them, and the work the other half would take goes to the pixels
-    /// whose neighbours' samples spread most — edges of lights, glints, caustics — up to 8×
-    /// the sample count more in one pixel: about the same time, the same expected image, less
-    /// error where it is largest, at most √2 × the noise where the neighbourhood was quiet.
+    /// 8 or more samples, a whole render rather than a --sample-range piece) every pixel takes
+    /// its samples, and then the work of a quarter more goes to the pixels whose neighbours'
+    /// samples spread most — edges of lights, glints, caustics — up to 8× the sample count
+    /// more in one pixel: the same expected image, nowhere noisier, far less error where it
+    /// is largest, for at most ~25 % more time.
     #[arg(long)]
     pub uniform_samples: bool,
     /// Environment replacing the scene's own: a lat-long EXR/HDR file (Mitsuba `envmap`

@@ -1,40 +1,40 @@
-//! Adaptive sample counts: the same work, spent where pixels are noisy.
+//! Adaptive sample counts: every pixel its `spp` samples, then more where pixels are noisy.
 //!
-//! A render of `spp` samples per pixel first takes [`pilot_samples`] (half) of them in every
-//! pixel, keeping each pixel's spread (the sum of squared deviations of its samples from their
-//! mean, over the three channels) and the work its samples took ([`sample_cost`]: the path
-//! vertices they reached). The other half of the budget — the work that half the samples in
-//! every pixel would have taken — then goes to the pixels by Neyman's allocation for unequal
-//! costs ([`extra_counts`]): nᵢ ∝ σᵢ / √cᵢ minimises the summed variance of the pixel means,
-//! Σ σᵢ² / nᵢ, for a fixed total work Σ cᵢ nᵢ. Pixel errors are far from even: wherever a pixel
-//! sees the edge of a light, a sun's glint or a caustic a few very bright samples dominate it
-//! (in the Cornell box 97 % of the squared error at 64 spp lies in the 0.5 % of pixels along
-//! the light's outline), and these pixels get up to [`MAX_EXTRA_PER_SPP`] × `spp` more, while a
-//! pixel whose neighbourhood was quiet keeps the pilot's half (at most √2 × the noise of
-//! `spp` uniform samples there).
+//! While a render of `spp` samples per pixel runs, each pixel keeps its spread (the sum of
+//! squared deviations of its samples from their mean, over the three channels) and the work
+//! its samples took ([`sample_cost`]: the path vertices they reached). Then extra samples —
+//! the work of a quarter of `spp` more in every pixel ([`extra_budget`]) — go to the pixels by
+//! Neyman's allocation for unequal costs ([`extra_counts`]): nᵢ ∝ σᵢ / √cᵢ minimises the
+//! summed variance of the pixel means, Σ σᵢ² / nᵢ, for a fixed total work Σ cᵢ nᵢ. Pixel errors
+//! are far from even: wherever a pixel sees the edge of a light, a sun's glint or a caustic a
+//! few very bright samples dominate it (in the Cornell box 97 % of the squared error at 64 spp
+//! lies in the 0.5 % of pixels along the light's outline), and these pixels get up to
+//! [`MAX_EXTRA_PER_SPP`] × `spp` more. No pixel gets fewer than `spp`: nowhere is the image
+//! noisier than the uniform render, for up to a quarter more work.
 //!
-//! **Unbiased.** A pixel's count is decided by its eight neighbours' pilot samples, never by its
+//! **Unbiased.** A pixel's count is decided by its eight neighbours' samples, never by its
 //! own: every sample stream is keyed by its own pixel ([`super::sampler`]), so given the counts
 //! a pixel's samples are still independent draws and their mean is unbiased. (Choosing by a
-//! pixel's own spread would favour pixels whose pilot happened to be far from their mean and
-//! dilute exactly those deviations.) The price: a bright detail one pixel wide is found only
-//! through its neighbours' spread.
+//! pixel's own spread would favour pixels whose first samples happened to be far from their
+//! mean and dilute exactly those deviations.) The price: a bright detail one pixel wide is
+//! found only through its neighbours' spread.
 //!
 //! Only for the box filter (a wider filter mixes the samples of pixels with different counts)
 //! and for whole renders (`--sample-range` pieces must each hold the same samples of every
 //! pixel to merge exactly).
 
-/// Below this many samples per pixel every pixel gets the same count: the pilot's spread would
-/// rest on too few samples.
+/// Below this many samples per pixel every pixel gets the same count: the spread would rest
+/// on too few samples.
 pub const MIN_SPP: u32 = 8;
 
 /// A pixel gets at most this many times `spp` extra samples, so that a few extreme pixels
 /// cannot take the whole budget.
 pub const MAX_EXTRA_PER_SPP: u32 = 8;
 
-/// Samples every pixel gets before the counts are decided: half of `spp` (rounded up).
-pub fn pilot_samples(spp: u32) -> u32 {
-    spp - spp / 2
+/// The extra samples' work, in samples per pixel: that of a quarter of `spp` more in every
+/// pixel.
+pub fn extra_budget(spp: u32) -> u32 {
+    spp / 4
 }
 
 /// The work of one camera sample, in units of one path vertex (its ray, shading, light
@@ -52,9 +52,9 @@ pub fn sample_cost(vertices: u32) -> f32 {
     }
 }
 
-/// The pilot's per pixel (row-major): the sums of squared deviations from each pass's mean,
-/// over the three channels, with their degrees of freedom (Σ over passes of count − 1), and
-/// the summed [`sample_cost`] of its `samples` samples.
+/// Per pixel (row-major), over the render's passes: the sums of squared deviations from each
+/// pass's mean, over the three channels, with their degrees of freedom (Σ over passes of
+/// count − 1), and the summed [`sample_cost`] of its `samples` samples.
 #[derive(Debug, Clone, Default)]
 pub struct Spread {
     pub m2: Vec<f32>,
@@ -101,6 +101,14 @@ pub fn sum_squared_deviations(samples: &[[f32; 3]]) -> f32 {
         }
     }
     m2
+}
+
+/// A number in [0, 1) from a pixel index (splitmix64's finaliser).
+fn threshold(i: usize) -> f64 {
+    let mut z = (i as u64).wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    (z >> 11) as f64 / (1u64 << 53) as f64
 }
 
 /// Pixel k's 8-neighbourhood summed up: how many, their summed cost, the
@@ -168,9 +176,12 @@ impl Neighbourhood {
 /// Extra samples per pixel (row-major, `width × height`) for the work of `extra` more samples
 /// in every pixel: Neyman's allocation for unequal costs, nᵢ ∝ σᵢ / √cᵢ under Σ cᵢ nᵢ = the
 /// work of `extra` samples in every pixel (so the extra samples take about the time uniform
-/// ones would), where σᵢ is the largest pilot standard deviation among pixel i's
+/// ones would), where σᵢ is the largest standard deviation among pixel i's
 /// eight neighbours and cᵢ their mean [`sample_cost`]. At most `cap` per pixel (a capped
-/// pixel's share is not passed on), rounded down.
+/// pixel's share is not passed on), in multiples of `granule`: a share is rounded down or up
+/// by a threshold hashed from the pixel's index (so the rounding neither depends on the
+/// samples nor loses budget on average). A Sobol' pixel keeps its samples in whole blocks of
+/// a power of two that way, each block stratified.
 ///
 /// Pixel i's count depends on no value of its own: its score and cost are its neighbours', and
 /// the two sums that normalise the allocation are taken with pixel i's terms replaced by what
@@ -178,10 +189,10 @@ impl Neighbourhood {
 /// a subtraction). Deterministic.
 pub fn extra_counts(
     spread: &Spread,
-    width: usize,
-    height: usize,
+    (width, height): (usize, usize),
     extra: u32,
     cap: u32,
+    granule: u32,
 ) -> Vec<u32> {
     use rayon::prelude::*;
     let size = (width, height);
@@ -236,7 +247,11 @@ pub fn extra_counts(
                 return 0;
             }
             let share = extra as f64 * (work / d) * s_i / c_i.sqrt();
-            share.min(cap as f64).floor() as u32
+            let g = granule.max(1);
+            let blocks = (share / g as f64 + threshold(i))
+                .floor()
+                .min((cap / g) as f64);
+            blocks as u32 * g
         })
         .collect()
 }
@@ -245,7 +260,7 @@ pub fn extra_counts(
 mod tests {
     use super::*;
 
-    /// A pilot of 16 samples per pixel, each of cost `cost`.
+    /// 16 samples per pixel, each of cost `cost`.
     fn spread(m2: Vec<f32>, cost: f32) -> Spread {
         let work_done = vec![16.0 * cost; m2.len()];
         Spread {
@@ -271,7 +286,7 @@ mod tests {
         // looked at), the rest nothing.
         let mut m2 = vec![0.0; 25];
         m2[12] = 100.0;
-        let c = extra_counts(&spread(m2, 3.0), 5, 5, 32, 1000);
+        let c = extra_counts(&spread(m2, 3.0), (5, 5), 32, 1000, 1);
         for y in 0..5 {
             for x in 0..5 {
                 let neighbour = (x as i32 - 2).abs() <= 1 && (y as i32 - 2).abs() <= 1;
@@ -287,7 +302,7 @@ mod tests {
         // Proportional to the neighbours' standard deviation, rounded down.
         let mut m2 = vec![1.0; 9];
         m2[0] = 4.0; // σ 2 beside σ 1: pixels next to (0, 0) score 2, the others 1
-        let c = extra_counts(&spread(m2, 1.0), 3, 3, 100, 1000);
+        let c = extra_counts(&spread(m2, 1.0), (3, 3), 100, 1000, 1);
         // (Rounded down from values within 1e-12 of the integers.)
         let want = [100, 150, 75, 150, 150, 75, 75, 75, 75];
         assert!(
@@ -305,7 +320,7 @@ mod tests {
         for i in [2, 3, 6, 7] {
             s.work_done[i] *= 4.0;
         }
-        let c = extra_counts(&s, 4, 2, 64, 1000);
+        let c = extra_counts(&s, (4, 2), 64, 1000, 1);
         // Far from the boundary (x = 0 sees only cost 1, x = 3 only cost 4): half the samples.
         // (Each pixel's normalisation leaves its own terms out, so the ratio is not exact.)
         let ratio = c[0] as f64 / c[3] as f64;
@@ -321,14 +336,14 @@ mod tests {
     fn a_pixels_own_values_do_not_change_its_count() {
         let base: Vec<f32> = (0..48).map(|i| ((i * 7) % 11) as f32).collect();
         let s0 = spread(base, 2.0);
-        let a = extra_counts(&s0, 8, 6, 16, 1000);
+        let a = extra_counts(&s0, (8, 6), 16, 1000, 1);
         assert!(a.iter().any(|&n| n > 0));
         for i in 0..48 {
             for (m2, work) in [(50.0, 1.0), (0.0, 1.0), (1.0, 7.0), (f32::NAN, 0.0)] {
                 let mut s = s0.clone();
                 s.m2[i] *= m2;
                 s.work_done[i] *= work;
-                let b = extra_counts(&s, 8, 6, 16, 1000);
+                let b = extra_counts(&s, (8, 6), 16, 1000, 1);
                 assert_eq!(b[i], a[i], "pixel {i}, m2 × {m2}, work × {work}");
             }
         }
@@ -338,31 +353,38 @@ mod tests {
     fn the_cap_holds() {
         let mut m2 = vec![0.01; 9];
         m2[0] = 1e6;
-        let c = extra_counts(&spread(m2, 1.0), 9, 1, 100, 10);
+        let c = extra_counts(&spread(m2, 1.0), (9, 1), 100, 10, 1);
         assert_eq!(c[1], 10);
         assert!(c.iter().all(|&n| n <= 10));
     }
 
     #[test]
     fn no_spread_or_non_finite_spread_gives_no_extra_samples() {
-        let c = extra_counts(&spread(vec![0.0; 16], 1.0), 4, 4, 100, 10);
+        let c = extra_counts(&spread(vec![0.0; 16], 1.0), (4, 4), 100, 10, 1);
         assert!(c.iter().all(|&n| n == 0));
         let mut m2 = vec![0.0; 16];
         m2[5] = f32::INFINITY;
         m2[6] = f32::NAN;
-        let c = extra_counts(&spread(m2, 1.0), 4, 4, 100, 10);
+        let c = extra_counts(&spread(m2, 1.0), (4, 4), 100, 10, 1);
         assert!(c.iter().all(|&n| n == 0));
         // A one-pixel image has no neighbours.
         assert_eq!(
-            extra_counts(&spread(vec![5.0], 1.0), 1, 1, 100, 10),
+            extra_counts(&spread(vec![5.0], 1.0), (1, 1), 100, 10, 1),
             vec![0]
         );
     }
 
     #[test]
-    fn the_pilot_is_half() {
-        assert_eq!(pilot_samples(64), 32);
-        assert_eq!(pilot_samples(16), 8);
-        assert_eq!(pilot_samples(9), 5);
+    fn rounding_to_granules_keeps_the_budget_on_average() {
+        // Every pixel's share is 10 samples: in blocks of 16, 3/8 of the pixels get none and
+        // 5/8 one block (the hashed thresholds), 10 per pixel on average.
+        let n = 64 * 64;
+        let c = extra_counts(&spread(vec![1.0; n], 1.0), (64, 64), 10, 1000, 16);
+        assert!(c.iter().all(|&k| k == 0 || k == 16));
+        let mean = c.iter().sum::<u32>() as f64 / n as f64;
+        assert!((mean / 10.0 - 1.0).abs() < 0.05, "{mean}");
+        // The cap is respected in whole blocks.
+        let c = extra_counts(&spread(vec![1.0; n], 1.0), (64, 64), 100, 40, 16);
+        assert!(c.iter().all(|&k| k == 32), "{:?}", &c[..8]);
     }
 }

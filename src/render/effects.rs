@@ -46,7 +46,7 @@ pub enum Effect {
     /// first off a smooth film or coating, whose directions every wavelength shares
     /// (`integrator::specular_chain`).
     SpecularChainWavelengths,
-    /// Half the samples in every pixel, the other half's work where the neighbouring pixels'
+    /// After every pixel's samples, the work of a quarter more where the neighbouring pixels'
     /// samples spread most ([`super::adaptive`]).
     AdaptiveSampleCounts,
 }

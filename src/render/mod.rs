@@ -85,8 +85,8 @@ pub struct RenderOptions {
     /// that only reflects off smooth films and coatings, and metals after them, carries eight:
     /// [`effects::Effect::SpecularChainWavelengths`]).
     pub plain_specular_chains: bool,
-    /// The same number of samples in every pixel, as Mitsuba (by default half of the work
-    /// goes where neighbouring pixels are noisy:
+    /// The same number of samples in every pixel, as Mitsuba (by default the work of a
+    /// quarter more goes where neighbouring pixels are noisy:
     /// [`effects::Effect::AdaptiveSampleCounts`]).
     pub uniform_samples: bool,
     /// Asked before each row whether to stop (a Ctrl-C handler's flag); see
@@ -216,9 +216,8 @@ pub struct PreparedScene {
     /// Paths that only reflect off Dirac reflectors carry eight wavelengths
     /// ([`effects::Effect::SpecularChainWavelengths`]).
     specular_chains: bool,
-    /// With adaptive sample counts, the end of the pilot (every pixel's samples
-    /// `[s0, pilot_end)`; [`adaptive`]).
-    pilot_end: Option<u32>,
+    /// Extra samples after `sample_range` where neighbouring pixels are noisy ([`adaptive`]).
+    adaptive: bool,
 }
 
 /// A surface point of a prepared scene: its geometry (a [`SurfaceInteraction`], by `Deref`)
@@ -484,7 +483,7 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
     }
     let specular_chains =
         specular_chain_decision(scene, options, polarized.is_some(), &mut effects);
-    let pilot_end = adaptive_decision(options, &filter, sample_range, &mut effects);
+    let adaptive = adaptive_decision(options, &filter, sample_range, &mut effects);
     Ok(PreparedScene {
         accel,
         lights,
@@ -508,19 +507,18 @@ pub fn prepare(scene: &Scene, options: &RenderOptions) -> Result<PreparedScene> 
         closed_form_direct_view,
         hemisphere_env_sampling,
         specular_chains,
-        pilot_end,
+        adaptive,
     })
 }
 
-/// Whether half of the samples' work goes where pixels are noisy (the
-/// [`effects::Effect::AdaptiveSampleCounts`] decision, added to `effects`): the pilot's end,
-/// or None when every pixel gets the whole range.
+/// Whether extra samples go where pixels are noisy after every pixel's `spp` (the
+/// [`effects::Effect::AdaptiveSampleCounts`] decision, added to `effects`).
 fn adaptive_decision(
     options: &RenderOptions,
     filter: &Filter,
     (s0, s1): (u32, u32),
     effects: &mut Effects,
-) -> Option<u32> {
+) -> bool {
     let spp = s1 - s0;
     let off = if options.uniform_samples {
         Some("the same count in every pixel asked for (--uniform-samples)".to_string())
@@ -533,22 +531,19 @@ fn adaptive_decision(
         ))
     } else if spp < adaptive::MIN_SPP {
         Some(format!(
-            "{spp} samples per pixel (at least {} for the pilot's spread)",
+            "{spp} samples per pixel (at least {} for their spread)",
             adaptive::MIN_SPP
         ))
     } else {
         None
     };
-    let pilot = adaptive::pilot_samples(spp);
-    effects
-        .decide_unless(effects::Effect::AdaptiveSampleCounts, off.as_deref(), || {
-            format!(
-                "{pilot} samples in every pixel, then the work of {} more where the neighbouring pixels' samples spread most (at most {} more in one pixel)",
-                spp - pilot,
-                adaptive::MAX_EXTRA_PER_SPP * spp
-            )
-        })
-        .then_some(s0 + pilot)
+    effects.decide_unless(effects::Effect::AdaptiveSampleCounts, off.as_deref(), || {
+        format!(
+            "{spp} samples in every pixel, then the work of {} more where the neighbouring pixels' samples spread most (at most {} more in one pixel)",
+            adaptive::extra_budget(spp),
+            adaptive::MAX_EXTRA_PER_SPP * spp
+        )
+    })
 }
 
 /// Whether camera rays that see an emitter directly — the environment, where they escape,
@@ -1397,7 +1392,7 @@ struct Passes {
     prefix: Option<(Accum, u32)>,
     interrupted: bool,
     counters: Counters,
-    /// With adaptive sample counts, the pilot's per-pixel spread.
+    /// With adaptive sample counts, every pixel's spread.
     spread: Option<adaptive::Spread>,
 }
 
@@ -1455,12 +1450,11 @@ fn run_passes(
     out
 }
 
-/// The extra samples of an adaptive render (the pilot's `spread` done): per pixel, counts from
-/// [`adaptive::extra_counts`] after the pilot's end. Their accumulator, counters and the number
-/// of samples, or None when cancelled.
+/// The extra samples of an adaptive render (every pixel's `spread` over the range known): per
+/// pixel, counts from [`adaptive::extra_counts`] after the range. Their accumulator, counters
+/// and the number of samples, or None when cancelled.
 fn run_extra_samples(
     scene: &PreparedScene,
-    pilot_end: u32,
     spread: &adaptive::Spread,
     pb: &indicatif::ProgressBar,
     cancelled: &(dyn Fn() -> bool + Sync),
@@ -1468,13 +1462,18 @@ fn run_extra_samples(
 ) -> Option<(Accum, Counters, u64)> {
     let (w, h) = (scene.width as usize, scene.height as usize);
     let (s0, s1) = scene.sample_range;
-    let cap = adaptive::MAX_EXTRA_PER_SPP * (s1 - s0);
-    let counts = adaptive::extra_counts(spread, w, h, s1 - pilot_end, cap);
-    pb.set_message(format!(
-        "{pilot_end}:… where pixels are noisy, of {s0}:{s1}"
-    ));
+    let spp = s1 - s0;
+    let cap = adaptive::MAX_EXTRA_PER_SPP * spp;
+    // Sobol' pixels take whole blocks of a power of two (each a stratified set).
+    let granule = match scene.sampler {
+        sampler::SamplerKind::Sobol => 1 << (u32::BITS - 1 - spp.leading_zeros()),
+        sampler::SamplerKind::Independent => 1,
+    };
+    let extra = adaptive::extra_budget(spp);
+    let counts = adaptive::extra_counts(spread, (w, h), extra, cap, granule);
+    pb.set_message(format!("{s1}:… where pixels are noisy, after {s0}:{s1}"));
     let work = PassSamples::PerPixel {
-        start: pilot_end,
+        start: s1,
         counts: &counts,
     };
     let acc = Accumulation::of(scene);
@@ -1482,8 +1481,8 @@ fn run_extra_samples(
     Some((sum, counters, counts.iter().map(|&n| n as u64).sum()))
 }
 
-/// Renders a prepared scene, pass by pass ([`passes`]); with adaptive sample counts, the pilot
-/// first, then the extra samples ([`adaptive`]). When `options.cancel` is raised the render
+/// Renders a prepared scene, pass by pass ([`passes`]); with adaptive sample counts, then the
+/// extra samples ([`adaptive`]). When `options.cancel` is raised the render
 /// stops between rows, drops the unfinished pass and returns the longest completed
 /// power-of-two prefix of its samples (`interrupted` set, `sample_range` saying which), or an
 /// error when not even the first pass was complete.
@@ -1512,25 +1511,18 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
         ),
         None => None,
     };
-    let plan = passes::plan((s0, scene.pilot_end.unwrap_or(s1)));
+    let plan = passes::plan(scene.sample_range);
     let Passes {
         mut blocks,
         mut prefix,
         mut interrupted,
         mut counters,
         spread,
-    } = run_passes(
-        scene,
-        &plan,
-        scene.pilot_end.is_some(),
-        &pb,
-        &cancelled,
-        pool.as_ref(),
-    );
+    } = run_passes(scene, &plan, scene.adaptive, &pb, &cancelled, pool.as_ref());
     let mut extra = None;
-    if let (Some(pilot_end), Some(spread), false) = (scene.pilot_end, &spread, interrupted) {
-        extra = run_extra_samples(scene, pilot_end, spread, &pb, &cancelled, pool.as_ref());
-        // Cancelled among the extra samples: the pilot's power-of-two prefix, as below.
+    if let (Some(spread), false) = (&spread, interrupted) {
+        extra = run_extra_samples(scene, spread, &pb, &cancelled, pool.as_ref());
+        // Cancelled among the extra samples: the power-of-two prefix, as below.
         interrupted = extra.is_none();
     }
     pb.finish_and_clear();
@@ -1563,7 +1555,7 @@ pub fn render_prepared(scene: &PreparedScene, options: &RenderOptions) -> Result
     if let (Some((sum, c, n)), false) = (&extra, interrupted) {
         add_accum(&mut acc, sum);
         counters.add(c);
-        samples = (w * h) as u64 * (scene.pilot_end.unwrap_or(s1) - s0) as u64 + n;
+        samples += n;
     }
     let mut image = RgbImage::new(w, h);
     for (dst, p) in image.pixels.iter_mut().zip(&acc) {

@@ -15,9 +15,10 @@ mkdir -p "$OUT"
 cargo build --release --quiet --example teapot_ply
 ROOT=$(pwd)
 
-# One render: prints "wall_s cpu_s setup_s render_s peak_MB".
+# One render: prints "wall_s cpu_s setup_s render_s peak_MB". Uniform sample counts: these
+# tables measure throughput per sample, not where the samples go.
 run() {
-    /usr/bin/time -f "TIME %e %U %S %M" "$BIN" render "$@" -o "$OUT/out.exr" >"$OUT/log" 2>&1
+    /usr/bin/time -f "TIME %e %U %S %M" "$BIN" render "$@" --uniform-samples -o "$OUT/out.exr" >"$OUT/log" 2>&1
     awk '/^rendered/ { for (i = 1; i <= NF; i++) { if ($i == "in") r = $(i + 1); if ($i ~ /^\(\+/) { s = substr($i, 3) } } }
          /^TIME/ { printf "%.2f %.2f %s %s %.0f\n", $2, $3 + $4, s, r, $5 / 1024 }' "$OUT/log"
 }

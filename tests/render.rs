@@ -244,7 +244,8 @@ fn bits(img: &thinfilm::image_io::RgbImage) -> Vec<u32> {
         .collect()
 }
 
-/// Same seed and spp: bit-identical images with 1 and 2 threads, for both samplers.
+/// Same seed and spp: bit-identical images with 1 and 2 threads, for both samplers (with
+/// adaptive sample counts, on by default).
 #[test]
 fn deterministic_across_thread_counts() {
     for sampler in [SamplerKind::Independent, SamplerKind::Sobol] {
@@ -272,6 +273,8 @@ fn deterministic_across_thread_counts_with(sampler: SamplerKind) {
     )
     .unwrap();
     assert_eq!(bits(&one.image), bits(&two.image));
+    // With adaptive counts: they come from every pixel's samples, the same on any thread.
+    assert!(one.adaptive && two.adaptive);
     let other_seed = render(
         &scene,
         &RenderOptions {

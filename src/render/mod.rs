@@ -1284,6 +1284,7 @@ fn render_row<C: Carrier>(
         let mut done = out[..lanes].iter();
         for job in &wave {
             if let PassSamples::PerPixel { .. } = work {
+                debug_assert_eq!(reach, 0, "per-pixel counts need the box filter");
                 let k = job.lanes();
                 for (s, sample) in samples.iter_mut().zip(done.by_ref().take(k)) {
                     *s = sample.rgb;
@@ -1408,7 +1409,6 @@ fn run_passes(
 ) -> Passes {
     let acc = Accumulation::of(scene);
     let (s0, s1) = scene.sample_range;
-    let end = plan.last().map_or(s1, |b| b.range.1);
     let mut out = Passes {
         blocks: Vec::new(),
         prefix: None,
@@ -1442,7 +1442,7 @@ fn run_passes(
             done = p1;
         }
         out.blocks.extend(sum);
-        if cancelled() && block.range.1 < end {
+        if cancelled() && block.range.1 < s1 {
             out.interrupted = true;
             break;
         }
@@ -1471,6 +1471,9 @@ fn run_extra_samples(
     };
     let extra = adaptive::extra_budget(spp);
     let counts = adaptive::extra_counts(spread, (w, h), extra, cap, granule);
+    let total: u64 = counts.iter().map(|&n| n as u64).sum();
+    // The bar counts rows × samples per pixel.
+    pb.inc_length(total / w as u64);
     pb.set_message(format!("{s1}:… where pixels are noisy, after {s0}:{s1}"));
     let work = PassSamples::PerPixel {
         start: s1,
@@ -1478,7 +1481,7 @@ fn run_extra_samples(
     };
     let acc = Accumulation::of(scene);
     let (sum, counters, _) = render_pass_in(scene, &acc, work, false, pb, cancelled, pool)?;
-    Some((sum, counters, counts.iter().map(|&n| n as u64).sum()))
+    Some((sum, counters, total))
 }
 
 /// Renders a prepared scene, pass by pass ([`passes`]); with adaptive sample counts, then the

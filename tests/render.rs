@@ -821,10 +821,7 @@ fn closed_form_background_keeps_the_expectation_without_colour_noise() {
             uniform_samples: true,
             ..Default::default()
         };
-        let lines = thinfilm::render::prepare(&scene, &options)
-            .unwrap()
-            .effects()
-            .lines();
+        let lines = effect_lines(&scene, &options);
         let want = if spectral {
             "wavelength sampling of emitters seen directly: ON — asked for"
         } else {
@@ -887,9 +884,7 @@ fn hemisphere_env_sampling_keeps_the_image_with_less_noise() {
         to_world: glam::Mat4::IDENTITY,
         path: None,
     }];
-    let lines = (thinfilm::render::prepare(&dark, &RenderOptions::default()).unwrap())
-        .effects()
-        .lines();
+    let lines = effect_lines(&dark, &RenderOptions::default());
     let want = "hemisphere-aware environment sampling: off — the environment map is black";
     assert_effect_line(&lines, want);
 }
@@ -908,9 +903,7 @@ fn env_sampling_against_radiance_only(scene: &Scene, want_on: &str) -> (f64, f64
             plain_env_sampling: plain,
             ..Default::default()
         };
-        let lines = (thinfilm::render::prepare(scene, &options).unwrap())
-            .effects()
-            .lines();
+        let lines = effect_lines(scene, &options);
         let want = match plain {
             true => "hemisphere-aware environment sampling: off — radiance-only sampling asked for",
             false => want_on,
@@ -1031,9 +1024,7 @@ fn specular_chains_keep_the_image_with_less_colour_noise() {
             plain_specular_chains: plain,
             ..Default::default()
         };
-        let lines = (thinfilm::render::prepare(scene, &options).unwrap())
-            .effects()
-            .lines();
+        let lines = effect_lines(scene, &options);
         (render(scene, &options).unwrap().image, lines)
     };
     let (truth, lines) = run(&scene, 4096, 1, true);
@@ -1086,6 +1077,12 @@ fn assert_mean_within_noise(
         bias.abs() < bound,
         "mean offset {bias} (noise bound {bound})"
     );
+}
+
+/// The render log's effect lines for `scene` prepared with `options`.
+fn effect_lines(scene: &Scene, options: &RenderOptions) -> Vec<String> {
+    let prepared = thinfilm::render::prepare(scene, options).unwrap();
+    prepared.effects().lines()
 }
 
 /// Asserts that one of the render log's effect lines `lines` starts with `want`.
@@ -1202,9 +1199,7 @@ fn adaptive_sample_counts_keep_the_mean_and_cut_the_error_at_a_lights_edge() {
             uniform_samples: uniform,
             ..Default::default()
         };
-        let lines = (thinfilm::render::prepare(&scene, &options).unwrap())
-            .effects()
-            .lines();
+        let lines = effect_lines(&scene, &options);
         let want = match uniform {
             true => "adaptive sample counts: off — the same count in every pixel asked for",
             false => "adaptive sample counts: ON",
@@ -1243,11 +1238,7 @@ fn adaptive_sample_counts_keep_the_mean_and_cut_the_error_at_a_lights_edge() {
 #[test]
 fn adaptive_sample_counts_say_why_they_are_off() {
     let scene = film_scene(8, 16);
-    let lines = |options: RenderOptions| {
-        (thinfilm::render::prepare(&scene, &options).unwrap())
-            .effects()
-            .lines()
-    };
+    let lines = |options: RenderOptions| effect_lines(&scene, &options);
     let on = lines(RenderOptions::default());
     assert_effect_line(
         &on,
@@ -1265,9 +1256,7 @@ fn adaptive_sample_counts_say_why_they_are_off() {
     assert_effect_line(&few, "adaptive sample counts: off — 4 samples per pixel");
     let mut gaussian = scene.clone();
     gaussian.film.filter = ReconstructionFilter::Gaussian { stddev: 0.5 };
-    let wide = (thinfilm::render::prepare(&gaussian, &RenderOptions::default()).unwrap())
-        .effects()
-        .lines();
+    let wide = effect_lines(&gaussian, &RenderOptions::default());
     assert_effect_line(&wide, "adaptive sample counts: off — the gaussian filter");
     // Off, every pixel holds the same count: the image is that of the explicit range 0:16.
     let uniform = RenderOptions {
